@@ -1,0 +1,1 @@
+"""MJCF pieces (pan, support, shearer) that twin.model assembles with mujoco.MjSpec."""

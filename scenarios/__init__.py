@@ -1,0 +1,1 @@
+"""Scenario files shipped with longwall-twin; `default.toml` is what `longwall run` uses with no argument."""

@@ -1,0 +1,96 @@
+"""`longwall` command line: run a scenario, view a recording.
+
+Errors are one line on stderr ("longwall: error: ...") with exit code 2; no tracebacks for bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from importlib import resources
+from pathlib import Path
+
+from tqdm import tqdm
+
+from estimators.logformat import STREAMS, LogError, make_table, write_stream
+from twin.rundir import RunDirError, atomic_run_dir, check_target
+from twin.scenario import ScenarioError, load_scenario, scenario_to_toml
+
+EXIT_BAD_INPUT = 2
+
+
+def default_scenario() -> Path:
+    return Path(str(resources.files("twin.scenarios") / "default.toml"))
+
+
+def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: bool = False) -> Path:
+    """Simulate a scenario into a run directory; returns its path."""
+    from twin.recording import write_recording
+    from twin.report import format_summary, twin_summary
+    from twin.simulate import simulate
+
+    scn = load_scenario(scenario, seed)
+    out = Path(out) if out is not None else Path("runs") / f"{scn.name}-seed{scn.seed}"
+    check_target(out, force)
+    start = time.perf_counter()
+    stages = {"face": 0.45, "ride": 0.3, "truth": 0.1, "write": 0.1, "recording": 0.05}
+    bar = tqdm(total=100, desc=f"longwall run {scn.name}", disable=quiet, leave=False,
+               bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}")
+    done = {k: 0.0 for k in stages}
+
+    def progress(stage: str, frac: float) -> None:
+        done[stage] = frac
+        bar.n = round(100 * sum(stages[k] * v for k, v in done.items()))
+        bar.set_description(f"longwall run {scn.name} ({stage})")
+
+    with atomic_run_dir(out, force) as staging:
+        result = simulate(scn, progress)
+        tables = {name: make_table(STREAMS[name], cols) for name, cols in result.tables.items()}
+        for name, table in tables.items():
+            write_stream(staging, STREAMS[name], table)
+        (staging / "scenario.toml").write_text(scenario_to_toml(scn))
+        progress("write", 1.0)
+        write_recording(staging / "run.rrd", scn, tables, result.floor_grid.mesh_t(result.frame))
+        progress("recording", 1.0)
+        bar.close()
+        summary = twin_summary(scn, result.tables, time.perf_counter() - start)
+        (staging / "metrics.json").write_text(json.dumps({"twin": summary, "estimators": {}}, indent=2) + "\n")
+    if not quiet:
+        print(format_summary(summary))
+        print(f"\nrun directory: {out}")
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="longwall", description="Longwall face digital twin")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p_run = sub.add_parser("run", help="simulate a scenario and write a run directory")
+    p_run.add_argument("scenario", nargs="?", type=Path, help="scenario TOML (default: the shipped default.toml)")
+    p_run.add_argument("--out", type=Path, help="run directory (default: runs/NAME-seedN)")
+    p_run.add_argument("--seed", type=int, help="override the scenario's random seed")
+    p_run.add_argument("--force", action="store_true", help="replace an existing non-empty run directory")
+    p_run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p_view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
+    p_view.add_argument("run_dir", type=Path)
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "run":
+            if args.seed is not None and args.seed < 0:
+                raise ScenarioError(f"--seed: must be >= 0 (got {args.seed})")
+            run(args.scenario or default_scenario(), args.out, args.seed, args.force, args.quiet)
+        elif args.command == "view":
+            from twin.recording import open_viewer
+            open_viewer(args.run_dir)
+    except (ScenarioError, RunDirError, LogError, FileNotFoundError) as err:
+        print(f"longwall: error: {err}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("longwall: interrupted; nothing was written", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

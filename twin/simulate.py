@@ -1,0 +1,182 @@
+"""Orchestration: scenario in, truth tables out.
+
+Multi-rate (DESIGN "Simulation strategy"): the haulage timeline gives the shearer's arc length s(t); the
+push-advance controller turns each pan crossing of the shearer's trailing end into ram targets, and the face
+simulator moves the window of pans and supports that event touches; the shearer then rides the resulting
+pan line at the truth rate in one batched rollout, and the truth splines are fitted through its samples.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators import logformat as lf
+from estimators.rotations import euler_to_quat, mat_to_quat, quat_mul
+from twin.face import WINDOW_MARGIN_PANS, FaceSimulator, FaceState
+from twin.haulage import Timeline
+from twin.layout import FaceFrame, Floor, bend_angles, initial_pans, support_stations
+from twin.model import FloorGrid
+from twin.pushadvance import PushAdvanceController
+from twin.ride import ride_targets_t, shoe_pans, simulate_ride
+from twin.scenario import Scenario
+from twin.truth import shearer_truth
+
+SET_TIME_S = 6.0
+"""Time a support takes to lower and set again around its advance (added to the ram travel time)."""
+
+RAM_DEADBAND_M = 1e-3
+"""A ram whose target moves less than this is left alone in an event."""
+
+Progress = Callable[[str, float], None]
+"""Callback (stage, fraction done in 0..1)."""
+
+
+@dataclass
+class SimResult:
+    tables: dict[str, dict[str, np.ndarray]]
+    floor_grid: FloorGrid
+    frame: FaceFrame
+    duration_s: float
+    events: int
+
+
+class _FaceRecorder:
+    """Collects pan and support rows whenever they change, and the pan-line versions for the ride."""
+
+    def __init__(self, scn: Scenario, frame: FaceFrame, state: FaceState):
+        self.scn, self.frame = scn, frame
+        self.pans0 = state.pans.copy()
+        self.sup_x0 = state.sup_x.copy()
+        self.pan_rows: list[dict[str, np.ndarray]] = []
+        self.sup_rows: list[dict[str, np.ndarray]] = []
+        self.versions: list[tuple[float, np.ndarray]] = []
+        self.record(0.0, state, np.arange(state.pans.shape[0]), np.arange(state.sup_x.size))
+
+    def record(self, t: float, state: FaceState, pans: np.ndarray, sups: np.ndarray,
+               lowered: np.ndarray | None = None) -> None:
+        """Rows for `pans` and `sups` at time t; supports in `lowered` are logged lowered (canopy down)."""
+        mat_tf = self.frame.mat_tf
+        st = state.pans[pans]
+        bend_h, bend_v = bend_angles(state.pans)
+        pad = np.append(bend_h, np.nan), np.append(bend_v, np.nan)
+        q_fp = euler_to_quat(st[:, 4], st[:, 5], st[:, 3])
+        q_tp = quat_mul(np.broadcast_to(mat_to_quat(mat_tf), q_fp.shape), q_fp)
+        p_t = st[:, :3] @ mat_tf.T
+        self.pan_rows.append({
+            "t": np.full(pans.size, t), "pan": pans, **_split(p_t, "p_t", "enu"), **_split(q_tp, "q_tp", "wxyz"),
+            "bend_h": pad[0][pans], "bend_v": pad[1][pans], "advance": st[:, 0] - self.pans0[pans, 0]})
+        is_lowered = np.zeros(sups.size, bool) if lowered is None else np.isin(sups, lowered)
+        y = (self.scn.face.pan_length_m * (support_stations(self.scn)[sups] + 0.5))
+        p_f = np.column_stack([state.sup_x[sups], y, state.sup_z[sups]])
+        self.sup_rows.append({
+            "t": np.full(sups.size, t), "support": sups, **_split(p_f @ mat_tf.T, "p_t", "enu"),
+            "advance": state.sup_x[sups] - self.sup_x0[sups], "ram": state.ram[sups],
+            "canopy": state.sup_leg[sups] - np.where(is_lowered, self.scn.supports.lower_m, 0.0),
+            "set": (~is_lowered).astype(np.int8)})
+        if pans.size:
+            self.versions.append((t, state.pans.copy()))
+
+    def tables(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        return _concat(self.pan_rows), _concat(self.sup_rows)
+
+
+def _split(arr: np.ndarray, prefix: str, axes: str) -> dict[str, np.ndarray]:
+    return {f"{prefix}_{a}": arr[:, i] for i, a in enumerate(axes)}
+
+
+def _concat(rows: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    out = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
+    order = np.lexsort((out[next(k for k in out if k in ("pan", "support"))], out["t"]))
+    return {k: v[order] for k, v in out.items()}
+
+
+def window_pans(scn: Scenario) -> int:
+    """Pans an event may touch: the snake, the lags and the shearer's length at a face end, with margins."""
+    p = scn.pattern
+    end_zone = p.snake_length_pans + p.push_lag_pans + scn.supports.advance_lag_pans + int(
+        np.ceil(scn.shearer.length_m / scn.face.pan_length_m)) + 2
+    return min(scn.face.pan_count, end_zone + 2 * WINDOW_MARGIN_PANS)
+
+
+def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
+    """Run the twin for a scenario: the face events, the shearer ride and the truth."""
+    report = progress or (lambda stage, frac: None)
+    rng = np.random.default_rng(scn.seed)
+    frame = FaceFrame(np.radians(scn.face.azimuth_deg))
+    floor = Floor.from_scenario(scn, rng)
+    timeline = Timeline(scn)
+    sim = FaceSimulator(scn, floor, window_pans(scn))
+    state = sim.initial_supports(initial_pans(scn, floor, rng))
+    sim.settle(state)
+    ram0, sup_x0 = state.ram.copy(), state.sup_x.copy()
+    recorder = _FaceRecorder(scn, frame, state)
+    ctrl = PushAdvanceController(scn)
+    length, ram_speed = scn.face.pan_length_m, scn.supports.ram_speed_m_s
+    events, t_done = 0, 0.0
+
+    def event(t: float, s_trail: float | None) -> None:
+        nonlocal events, t_done
+        pan_target, advancing = ctrl.update(s_trail)
+        # Ram stroke for the pan's target from where the support actually stands; an advancing support
+        # then pulls itself up to the set length.
+        push = ram0 + pan_target - (state.sup_x - sup_x0)
+        target = np.where(advancing, ram0, push)
+        moved = np.flatnonzero((np.abs(push - state.ram_target) > RAM_DEADBAND_M) | advancing)
+        if moved.size == 0:
+            return
+        pans = sim.stations[moved]
+        first = sim.window_start(int(pans.min()), int(pans.max()))
+        lowered = np.flatnonzero(advancing)
+        if lowered.size:
+            recorder.record(max(t, t_done), state, np.zeros(0, int), lowered, lowered)
+        travel = np.abs(push - state.ram_target).max() + np.abs(target - push).max()
+        sim.step_event(state, first, push, target, advancing)
+        t_done = max(t_done, t + travel / ram_speed + (SET_TIME_S if lowered.size else 0.0))
+        in_window = np.arange(first, first + sim.count)
+        sups = np.flatnonzero((sim.stations >= first) & (sim.stations < first + sim.count))
+        recorder.record(t_done, state, in_window, sups)
+        events += 1
+
+    half = scn.shearer.length_m / 2
+    for plan in timeline.cycles:
+        ctrl.begin_cycle(plan.direction)
+        times, marks = timeline.crossings(plan.cycle, -plan.direction * half, length)
+        for t, mark in zip(times, marks):
+            event(float(t), float(mark))
+        event(plan.t_sump_end, None)
+        event(plan.t_sump_end, None)  # re-push what the end supports' advance pulled back
+        report("face", (plan.cycle + 1) / len(timeline.cycles))
+
+    rate = scn.rates.truth_hz
+    t = np.arange(int(np.floor(timeline.duration * rate)) + 1) / rate
+    haul = timeline.sample(t)
+    pos_tgt, quat_tgt = ride_targets_t(recorder.versions, t, haul["s"], scn)
+    chunk_t = [p.t_start + scn.haulage.reversal_stop_s / 2 for p in timeline.cycles[1:]
+               if scn.haulage.reversal_stop_s >= 1.0]
+    chunks = np.unique(np.concatenate([[0], np.searchsorted(t, chunk_t)])).astype(int)
+    pos, quat = simulate_ride(scn, pos_tgt, quat_tgt, chunks)
+    report("ride", 1.0)
+    site = scn.site
+    truth = shearer_truth(t, pos, quat, mat_to_quat(frame.mat_tf), np.radians(site.lat_deg),
+                          np.radians(site.lon_deg), site.height_m)
+    rear, front = shoe_pans(haul["s"], scn)
+    shearer = {
+        "t": t, "lat": truth.lat, "lon": truth.lon, "h": truth.h, **_split(truth.p_t, "p_t", "enu"),
+        **_split(truth.v_n, "v_n", "enu"), **_split(truth.q_nb, "q_nb", "wxyz"),
+        **_split(truth.w_ib_b, "w_ib_b", "xyz"), **_split(truth.w_nb_b, "w_nb_b", "xyz"),
+        **_split(truth.f_b, "f_b", "xyz"), "s": haul["s"], "pan_rear": rear, "pan_front": front,
+        "cycle": haul["cycle"], "phase": haul["phase"]}
+    report("truth", 1.0)
+    pans_tab, sups_tab = recorder.tables()
+    cycles = {
+        "cycle": np.array([p.cycle for p in timeline.cycles]), "direction": np.array([p.direction for p in timeline.cycles]),
+        "t": np.array([p.t_start for p in timeline.cycles]), "t_cut_end": np.array([p.t_cut_end for p in timeline.cycles]),
+        "t_sump_end": np.array([p.t_sump_end for p in timeline.cycles]),
+        "t_push_end": np.array([p.t_push_end for p in timeline.cycles]),
+        "t_end": np.array([p.t_end for p in timeline.cycles]), "s_sump": np.array([p.s_sump for p in timeline.cycles])}
+    tables = {lf.TRUTH_SHEARER.name: shearer, lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab,
+              lf.TRUTH_CYCLES.name: cycles}
+    return SimResult(tables, sim.grid, frame, timeline.duration, events)
