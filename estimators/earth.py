@@ -204,6 +204,14 @@ def ecef_to_lla(xyz):
     return lat, lon, h
 
 
+def quat_en(lat, lon):
+    """Quaternion of ``C_n^e`` (ENU -> ECEF), shape ``(...,4)``: ``Rz(lon + pi/2) Rx(pi/2 - lat)``."""
+    lat, lon = np.broadcast_arrays(np.asarray(lat, float), np.asarray(lon, float))
+    half_z, half_x = 0.5 * (lon + 0.5 * np.pi), 0.5 * (0.5 * np.pi - lat)
+    cz, sz, cx, sx = np.cos(half_z), np.sin(half_z), np.cos(half_x), np.sin(half_x)
+    return np.stack([cz * cx, cz * sx, sz * sx, sz * cx], axis=-1)
+
+
 def mat_en(lat, lon):
     """Rotation ``C_n^e`` (ENU -> ECEF), shape ``(...,3,3)``.
 

@@ -9,21 +9,24 @@ over a fixed number of steps, then the supports set and the window settles) and 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
-from twin.layout import PAN_WIDTH_M, FaceFrame, Floor, joint_ends, support_stations
-from twin.model import (SUPPORT_FRICTION_LOWERED_N, SUPPORT_FRICTION_SET_N, FloorGrid, build_face_spec,
-                        index_face_model)
+from twin.layout import FaceFrame, Floor, joint_ends, pan_axes, support_stations
+from twin.model import (SUPPORT_FRICTION_LOWERED_N, SUPPORT_FRICTION_SET_N, FaceIndex, FloorGrid,
+                        build_face_spec, index_face_model)
 from twin.scenario import Scenario
 
-MOVE_STEPS = 40
-"""Steps over which the rams travel to their targets in one event (quasi-static)."""
-MAX_PUSH_PER_PHASE_M = 0.15
-"""A longer push (the end pans during snake sumping) is spread over several move phases."""
-SETTLE_STEPS = 40
+QS_RAM_SPEED_M_S = 1.2
+"""Ram speed of the quasi-static event simulation (faster than the real rams, slow enough that inertia
+neither drags nor overshoots the pans)."""
+MIN_MOVE_STEPS = 10
+"""Fewest steps of a ram move."""
+RAM_STILL_M = 1e-4
+"""A ram commanded less than this is not pushing."""
+SETTLE_STEPS = 20
 """Steps after the supports are set again, for the window to come to rest."""
 WINDOW_MARGIN_PANS = 2
 """Pans kept dynamic on each side of the pans an event touches."""
@@ -38,149 +41,186 @@ SKID_OFFSET_X_M = -1.5
 
 @dataclass
 class FaceState:
-    """The whole face in F: pan states (N, 6), support base x and z, canopy leg, ram length and target."""
+    """The whole face in F: pan states (N, 6), support base x and z, canopy leg and ram length."""
 
     pans: np.ndarray
     sup_x: np.ndarray
     sup_z: np.ndarray
     sup_leg: np.ndarray
     ram: np.ndarray
-    ram_target: np.ndarray
-    sup_set: np.ndarray = field(default=None)
 
-    def copy(self) -> "FaceState":
-        return FaceState(*(np.array(getattr(self, k)) for k in
-                           ("pans", "sup_x", "sup_z", "sup_leg", "ram", "ram_target", "sup_set")))
+
+@dataclass
+class _Window:
+    """One compiled window model of `count` pans, its index and data, moved along the face."""
+
+    count: int
+    model: mujoco.MjModel
+    data: mujoco.MjData
+    index: FaceIndex
+    pan_body: np.ndarray
+    pan_mass: np.ndarray
+    pan_inertia: np.ndarray
+    sup_body: np.ndarray
+
+    @classmethod
+    def compile(cls, scn: Scenario, grid: FloorGrid, count: int) -> "_Window":
+        model = build_face_spec(scn, grid, 0, count, anchors=True).compile()
+        index = index_face_model(model, scn, 0, count)
+        pan_body = np.array([model.body(f"pan{i}_pan").id for i in index.pans], int)
+        sup_body = np.array([model.body(f"sup{j}_support").id for j in index.supports], int)
+        return cls(count, model, mujoco.MjData(model), index, pan_body, model.body_mass[pan_body].copy(),
+                   model.body_inertia[pan_body].copy(), sup_body)
 
 
 class FaceSimulator:
-    """Steps windows of the face model; one compiled model moved along the face."""
+    """Steps windows of the face model: compiled once per window size, moved along the face."""
 
-    def __init__(self, scn: Scenario, floor: Floor, window_pans: int):
+    def __init__(self, scn: Scenario, floor: Floor, window_sizes: list[int]):
         self.scn = scn
         self.floor = floor
         self.frame = FaceFrame(np.radians(scn.face.azimuth_deg))
         self.grid = FloorGrid.from_scenario(scn, floor)
         self.stations = support_stations(scn)
-        k = scn.supports.pans_per_support
-        n = scn.face.pan_count
-        count = min(n, int(np.ceil(window_pans / k)) * k)
-        self.count = count
-        first = 0
-        self.model = build_face_spec(scn, self.grid, first, count, anchors=True).compile()
-        self.index = index_face_model(self.model, scn, first, count)
-        self.data = mujoco.MjData(self.model)
-        self.pan_body = np.array([self.model.body(f"pan{i}_pan").id for i in self.index.pans], int)
-        self.pan_mass = self.model.body_mass[self.pan_body].copy()
-        self.pan_inertia = self.model.body_inertia[self.pan_body].copy()
-        self.sup_body = np.array([self.model.body(f"sup{j}_support").id for j in self.index.supports], int)
-        self.ram_site_local = np.array(self.model.site("pan0_ram").pos)
-        self.sup_site_local = np.array(self.model.site(f"sup{self.index.supports[0]}_ram").pos)
+        k, n = scn.supports.pans_per_support, scn.face.pan_count
+        counts = sorted({min(n, int(np.ceil(c / k)) * k) for c in window_sizes})
+        self.windows = [_Window.compile(scn, self.grid, c) for c in counts]
+        model = self.windows[0].model
+        self.ram_site_local = np.array(model.site("pan0_ram").pos)
+        self.sup_site_local = np.array(model.site(f"sup{self.windows[0].index.supports[0]}_ram").pos)
 
-    # -- geometry helpers -------------------------------------------------------------------------------
+    # -- geometry ---------------------------------------------------------------------------------------
     def initial_supports(self, pans: np.ndarray) -> FaceState:
-        """Supports set behind their pans with the rams at their set length, skids on the floor."""
+        """Supports set behind their pans with the rams at their set length, bases on the floor."""
         sup = self.scn.supports
         st = self.stations
-        ram_pan = self._pan_ram_points(pans)[st]
-        # Ram from the support site (base x, z + site height) to the pan's ram site, horizontal in x.
-        sup_x = ram_pan[:, 0] - sup.ram_length_set_m
+        sup_x = self._pan_ram_points(pans)[st, 0] - sup.ram_length_set_m
         y = (st + 0.5) * self.scn.face.pan_length_m
         sup_z = self.floor.height(sup_x + SKID_OFFSET_X_M, y)
-        ram = np.linalg.norm(ram_pan - np.column_stack([sup_x, y, sup_z + self.sup_site_local[2]]), axis=1)
-        leg = np.full(st.size, sup.canopy_height_m)
-        return FaceState(pans.copy(), sup_x, sup_z, leg, ram, ram.copy(), np.ones(st.size, bool))
+        state = FaceState(pans.copy(), sup_x, sup_z, np.full(st.size, sup.canopy_height_m), np.zeros(st.size))
+        state.ram = self.ram_lengths(state, np.zeros(st.size), sup_x)
+        return state
 
     def _pan_ram_points(self, pans: np.ndarray) -> np.ndarray:
-        from twin.layout import pan_axes
         return pans[:, :3] + pan_axes(pans) @ self.ram_site_local
 
-    # -- window stepping --------------------------------------------------------------------------------
-    def window_start(self, lo: int, hi: int) -> int:
-        """First pan of a window covering pans lo..hi (inclusive) with margins, on a support boundary."""
-        n, k = self.scn.face.pan_count, self.scn.supports.pans_per_support
-        if hi - lo + 1 + 2 * WINDOW_MARGIN_PANS > self.count and self.count < n:
-            raise ValueError(f"event spans pans {lo}..{hi}, more than the {self.count}-pan window")
-        centre = (lo + hi) // 2
-        first = int(np.clip(centre - self.count // 2, 0, n - self.count))
-        return first - first % k
+    def ram_lengths(self, state: FaceState, pan_shift: np.ndarray, sup_x: np.ndarray) -> np.ndarray:
+        """Ram lengths (per support) that put each support's pan `pan_shift` further towards the coal wall
+        with the support base at `sup_x` (on the floor there): the stroke a push or an advance commands."""
+        y = (self.stations + 0.5) * self.scn.face.pan_length_m
+        pan_site = self._pan_ram_points(state.pans)[self.stations]
+        pan_site[:, 0] += pan_shift
+        sup_z = self.floor.height(sup_x + SKID_OFFSET_X_M, y)
+        sup_site = np.column_stack([sup_x, y, sup_z]) + self.sup_site_local
+        return np.linalg.norm(pan_site - sup_site, axis=1)
 
-    def _load(self, state: FaceState, first: int) -> np.ndarray:
-        m, d, ix = self.model, self.data, self.index
+    # -- window stepping --------------------------------------------------------------------------------
+    def _window_for(self, lo: int, hi: int) -> tuple[_Window, int]:
+        """The smallest window covering pans lo..hi (inclusive) with margins, and its first pan."""
+        n, k = self.scn.face.pan_count, self.scn.supports.pans_per_support
+        need = hi - lo + 1 + 2 * WINDOW_MARGIN_PANS
+        win = next((w for w in self.windows if w.count >= min(need, n)), None)
+        if win is None:
+            raise ValueError(f"event spans pans {lo}..{hi}, more than the largest window "
+                             f"({self.windows[-1].count} pans)")
+        first = int(np.clip((lo + hi) // 2 - win.count // 2, 0, n - win.count))
+        return win, first - first % k
+
+    def _load(self, win: _Window, state: FaceState, first: int) -> tuple[np.ndarray, np.ndarray]:
+        m, d, ix = win.model, win.data, win.index
         n, length = self.scn.face.pan_count, self.scn.face.pan_length_m
-        pans = np.arange(first, first + self.count)
-        sups = np.flatnonzero((self.stations >= first) & (self.stations < first + self.count))
+        pans = np.arange(first, first + win.count)
+        sups = np.flatnonzero((self.stations >= first) & (self.stations < first + win.count))
         mujoco.mj_resetData(m, d)
         d.qpos[ix.pan_qpos] = state.pans[pans]
         scale = np.where((pans == 0) | (pans == n - 1), DRIVE_FRAME_MASS_SCALE, 1.0)
-        m.body_mass[self.pan_body] = self.pan_mass * scale
-        m.body_inertia[self.pan_body] = self.pan_inertia * scale[:, None]
+        m.body_mass[win.pan_body] = win.pan_mass * scale
+        m.body_inertia[win.pan_body] = win.pan_inertia * scale[:, None]
         d.qpos[ix.sup_qpos[:, 0]] = state.sup_x[sups]
         d.qpos[ix.sup_qpos[:, 1]] = state.sup_leg[sups]
         d.act[m.actuator_actadr[ix.ram_act]] = state.ram[sups]
         d.ctrl[ix.leg_act] = state.sup_leg[sups]
         y = (self.stations[sups] + 0.5) * length
-        z = state.sup_z[sups]
-        m.body_pos[self.sup_body] = np.column_stack([np.zeros_like(y), y, z]) @ self.frame.mat_tf.T
+        m.body_pos[win.sup_body] = np.column_stack([np.zeros_like(y), y, state.sup_z[sups]]) @ self.frame.mat_tf.T
         start, end = joint_ends(state.pans, length)
-        for side, (other, point) in enumerate(((first - 1, end), (first + self.count, start))):
+        for side, (other, point) in enumerate(((first - 1, end), (first + win.count, start))):
             active = 0 <= other < n
             d.eq_active[ix.anchor_eq[side]] = active
             if active:
                 d.mocap_pos[ix.anchor_mocap[side]] = self.frame.mat_tf @ point[other]
-        return sups
+        return pans, sups
 
-    def _store(self, state: FaceState, first: int, sups: np.ndarray) -> None:
-        d, ix = self.data, self.index
-        pans = np.arange(first, first + self.count)
+    def _store(self, win: _Window, state: FaceState, pans: np.ndarray, sups: np.ndarray) -> None:
+        d, ix = win.data, win.index
         state.pans[pans] = d.qpos[ix.pan_qpos]
         state.sup_x[sups] = d.qpos[ix.sup_qpos[:, 0]]
         state.sup_leg[sups] = d.qpos[ix.sup_qpos[:, 1]]
         state.ram[sups] = d.ten_length[ix.ram_tendon]
-
-    def step_event(self, state: FaceState, first: int, push_target: np.ndarray, final_target: np.ndarray,
-                   advancing: np.ndarray) -> None:
-        """One push-advance event on the window starting at pan `first` (targets are global, per support).
-
-        Push: every support set, the rams travel to `push_target`, pushing their pans. Advance: supports
-        flagged in `advancing` are lowered and released and their rams travel to `final_target`, pulling
-        them up to their pans. Then every support sets and the window settles. Rams move over a fixed
-        number of steps (quasi-static); the caller times the event from the ram speed.
-        """
-        m, d, ix = self.model, self.data, self.index
-        sups = self._load(state, first)
-        sup = self.scn.supports
-        dofs = ix.sup_dof[:, 0]
-        duration = MOVE_STEPS * m.opt.timestep
-        m.dof_frictionloss[dofs] = SUPPORT_FRICTION_SET_N
-        push = push_target[sups] - state.ram[sups]
-        phases = max(1, int(np.ceil(np.abs(push).max(initial=0.0) / MAX_PUSH_PER_PHASE_M)))
-        d.ctrl[ix.ram_act] = push / (phases * duration)
-        for _ in range(phases):
-            mujoco.mj_step(m, d, nstep=MOVE_STEPS)
-        adv = advancing[sups]
-        if adv.any():
-            m.dof_frictionloss[dofs] = np.where(adv, SUPPORT_FRICTION_LOWERED_N, SUPPORT_FRICTION_SET_N)
-            m.dof_frictionloss[ix.pan_dof[:, :2]] = AFC_HOLD_N
-            d.ctrl[ix.leg_act] = np.where(adv, sup.canopy_height_m - sup.lower_m, sup.canopy_height_m)
-            d.ctrl[ix.ram_act] = (final_target[sups] - push_target[sups]) / duration
-            mujoco.mj_step(m, d, nstep=MOVE_STEPS)
-            d.ctrl[ix.ram_act] = 0.0
-            mujoco.mj_step(m, d, nstep=SETTLE_STEPS)  # the released supports come up to their rams
-            m.dof_frictionloss[dofs] = SUPPORT_FRICTION_SET_N
-            m.dof_frictionloss[ix.pan_dof[:, :2]] = 0.0
-            d.ctrl[ix.leg_act] = sup.canopy_height_m
-        d.ctrl[ix.ram_act] = 0.0
-        mujoco.mj_step(m, d, nstep=SETTLE_STEPS)
-        self._store(state, first, sups)
-        state.ram_target[sups] = final_target[sups]
         y = (self.stations[sups] + 0.5) * self.scn.face.pan_length_m
         state.sup_z[sups] = self.floor.height(state.sup_x[sups] + SKID_OFFSET_X_M, y)
 
+    def step_event(self, state: FaceState, moved: np.ndarray, push_target: np.ndarray,
+                   final_target: np.ndarray, advancing: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One push-advance event for the supports in `moved` (global per-support arrays).
+
+        Push: every support set, the rams travel to `push_target`, pushing their pans. Advance: supports
+        flagged in `advancing` are lowered and released, their rams travel to `final_target` pulling them
+        up to their pans while the AFC is held, and then set, each ram keeping the stroke it reached.
+        Rams move over a fixed number of steps (quasi-static); the caller times the event from the ram
+        speed. Returns the pans and supports of the window that was simulated.
+        """
+        moved_pans = self.stations[moved]
+        win, first = self._window_for(int(moved_pans.min()), int(moved_pans.max()))
+        m, d, ix = win.model, win.data, win.index
+        pans, sups = self._load(win, state, first)
+        push = np.where(moved[sups], push_target[sups] - state.ram[sups], 0.0)
+        pull = np.where(advancing[sups] & moved[sups], final_target[sups] - push_target[sups], 0.0)
+        adv = pull != 0.0
+        # A support that is pushed and advanced in one event pushes first; otherwise pushes and advances
+        # run together (the advancing supports' pans are already home, and only they are held).
+        together = not np.any(adv & (np.abs(push) > RAM_STILL_M))
+        self._set_supports(win, adv if together else np.zeros_like(adv))
+        self._move_rams(win, push + pull if together else push)
+        if adv.any():
+            if not together:
+                self._set_supports(win, adv)
+                self._move_rams(win, pull)
+            mujoco.mj_step(m, d, nstep=SETTLE_STEPS)  # the released supports come up to their rams
+            # Setting closes the ram valves: each ram holds the stroke it has, pulling no further.
+            d.act[m.actuator_actadr[ix.ram_act]] = d.ten_length[ix.ram_tendon]
+            self._set_supports(win, np.zeros_like(adv))
+        mujoco.mj_step(m, d, nstep=SETTLE_STEPS)
+        self._store(win, state, pans, sups)
+        return pans, sups
+
+    @staticmethod
+    def _move_rams(win: _Window, travel: np.ndarray) -> None:
+        """Drive the rams by `travel` (window order) at the quasi-static ram speed, then hold."""
+        m, d, ix = win.model, win.data, win.index
+        longest = np.abs(travel).max(initial=0.0)
+        steps = max(MIN_MOVE_STEPS, int(np.ceil(longest / (QS_RAM_SPEED_M_S * m.opt.timestep))))
+        d.ctrl[ix.ram_act] = travel / (steps * m.opt.timestep)
+        mujoco.mj_step(m, d, nstep=steps)
+        d.ctrl[ix.ram_act] = 0.0
+
+    def _set_supports(self, win: _Window, lowered: np.ndarray) -> None:
+        """Set every support of the window but those `lowered` (window order); hold their pans' AFC."""
+        ix, sup = win.index, self.scn.supports
+        win.model.dof_frictionloss[ix.sup_dof[:, 0]] = np.where(lowered, SUPPORT_FRICTION_LOWERED_N,
+                                                                SUPPORT_FRICTION_SET_N)
+        win.data.ctrl[ix.leg_act] = np.where(lowered, sup.canopy_height_m - sup.lower_m, sup.canopy_height_m)
+        held = np.zeros(ix.pans.size, bool)
+        held[self.stations[ix.supports[lowered]] - ix.pans[0]] = True
+        held |= np.roll(held, 1) | np.roll(held, -1)
+        win.model.dof_frictionloss[ix.pan_dof[:, :2]] = np.where(held, AFC_HOLD_N, 0.0)[:, None]
+
     def settle(self, state: FaceState) -> None:
         """Let the whole face come to rest on the floor, window by window from the headgate."""
+        win = self.windows[-1]
         n = self.scn.face.pan_count
-        starts = range(0, max(1, n - self.count + 1), max(1, self.count // 2))
-        for first in list(starts) + [n - self.count]:
-            self.step_event(state, first, state.ram_target, state.ram_target, np.zeros(self.stations.size, bool))
-        state.ram_target[:] = state.ram
+        starts = list(range(0, max(1, n - win.count + 1), max(1, win.count // 2))) + [n - win.count]
+        for first in starts:
+            pans, sups = self._load(win, state, first)
+            self._set_supports(win, np.zeros(win.index.supports.size, bool))
+            mujoco.mj_step(win.model, win.data, nstep=2 * SETTLE_STEPS)
+            self._store(win, state, pans, sups)

@@ -35,7 +35,8 @@ HFIELD_RESOLUTION_M = 0.25
 FLOOR_MARGIN_M = 6.0
 RAM_FORCE_PUSH_N = 4.0e5
 RAM_FORCE_PULL_N = 6.0e5
-RAM_GAIN_N_M = 2.0e7
+RAM_GAIN_N_M = 5.0e7
+RAM_DAMPING_N_S_M = 1.0e6
 SUPPORT_FRICTION_SET_N = 2.0e6
 SUPPORT_FRICTION_LOWERED_N = 1.0e4
 """Base sliding resistance of a lowered support (base lift on) [N]."""
@@ -183,7 +184,7 @@ def build_face_spec(scn: Scenario, grid: FloorGrid, first: int, count: int, anch
         spec.add_actuator(name=f"ram{j}", target=f"ram{j}", trntype=mujoco.mjtTrn.mjTRN_TENDON,
                           dyntype=mujoco.mjtDyn.mjDYN_INTEGRATOR, gaintype=mujoco.mjtGain.mjGAIN_FIXED,
                           biastype=mujoco.mjtBias.mjBIAS_AFFINE, gainprm=[RAM_GAIN_N_M] + [0] * 9,
-                          biasprm=[0, -RAM_GAIN_N_M, -4e5] + [0] * 7, actlimited=True,
+                          biasprm=[0, -RAM_GAIN_N_M, -RAM_DAMPING_N_S_M] + [0] * 7, actlimited=True,
                           actrange=[0.3, sup.ram_length_set_m + 2.0 * f.web_depth_m],
                           forcelimited=True, forcerange=[-RAM_FORCE_PULL_N, RAM_FORCE_PUSH_N],
                           ctrllimited=True, ctrlrange=[-20.0, 20.0])
@@ -230,7 +231,7 @@ def build_ride_spec(scn: Scenario) -> mujoco.MjSpec:
     sh = scn.shearer
     spec = _piece_copy("shearer")
     spec.modelname = "shearer_ride"
-    dt = 1.0 / scn.rates.truth_hz
+    dt = 1.0 / scn.rates.ride_hz
     spec.option.timestep = dt
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     timeconst = max(1.0 / (2 * np.pi * sh.suspension_frequency_hz), 2.0 * dt)

@@ -114,10 +114,15 @@ class Pattern(_Section):
     snake_length_pans: Annotated[int, Field(ge=2, le=40)] = 12
     push_lag_pans: Annotated[int, Field(ge=0, le=20)] = 2
     """Pans between the shearer's trailing end and the first pan of the snake."""
+    push_step_pans: Annotated[int, Field(ge=1, le=4)] = 1
+    """The push-advance controller acts each time the shearer has travelled this many pans."""
 
 
 class Rates(_Section):
     truth_hz: Annotated[float, Field(ge=50, le=2000, allow_inf_nan=False)] = 200.0
+    """Rate of the published shearer truth (samples of the truth splines)."""
+    ride_hz: Annotated[float, Field(ge=50, le=2000, allow_inf_nan=False)] = 100.0
+    """Step rate of the shearer's MuJoCo ride (suspension); the truth splines pass through its samples."""
     face_timestep_s: Annotated[float, Field(ge=0.001, le=0.02, allow_inf_nan=False)] = 0.01
 
 

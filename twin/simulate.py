@@ -30,6 +30,11 @@ SET_TIME_S = 6.0
 RAM_DEADBAND_M = 1e-3
 """A ram whose target moves less than this is left alone in an event."""
 
+MAX_REPUSHES = 8
+"""Most times the end pans are pushed again after the snake sumping (each only where still off target)."""
+SUPPORT_DEADBAND_M = 5e-3
+"""A support this far short of its advance target is advanced again at the next event."""
+
 Progress = Callable[[str, float], None]
 """Callback (stage, fraction done in 0..1)."""
 
@@ -93,12 +98,14 @@ def _concat(rows: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     return {k: v[order] for k, v in out.items()}
 
 
-def window_pans(scn: Scenario) -> int:
-    """Pans an event may touch: the snake, the lags and the shearer's length at a face end, with margins."""
+def window_sizes(scn: Scenario) -> list[int]:
+    """Window sizes (pans) for the events: one over the snake and the advancing supports during the cut,
+    one over the snake, the lags and the shearer's length at a face end; both with margins."""
     p = scn.pattern
-    end_zone = p.snake_length_pans + p.push_lag_pans + scn.supports.advance_lag_pans + int(
+    cut = p.snake_length_pans + p.push_step_pans + scn.supports.advance_lag_pans + 1
+    end = p.snake_length_pans + p.push_lag_pans + scn.supports.advance_lag_pans + int(
         np.ceil(scn.shearer.length_m / scn.face.pan_length_m)) + 2
-    return min(scn.face.pan_count, end_zone + 2 * WINDOW_MARGIN_PANS)
+    return [min(scn.face.pan_count, w + 2 * WINDOW_MARGIN_PANS) for w in (cut, end)]
 
 
 def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
@@ -108,59 +115,77 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
     frame = FaceFrame(np.radians(scn.face.azimuth_deg))
     floor = Floor.from_scenario(scn, rng)
     timeline = Timeline(scn)
-    sim = FaceSimulator(scn, floor, window_pans(scn))
+    sim = FaceSimulator(scn, floor, window_sizes(scn))
     state = sim.initial_supports(initial_pans(scn, floor, rng))
     sim.settle(state)
-    ram0, sup_x0 = state.ram.copy(), state.sup_x.copy()
+    pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
     recorder = _FaceRecorder(scn, frame, state)
     ctrl = PushAdvanceController(scn)
     length, ram_speed = scn.face.pan_length_m, scn.supports.ram_speed_m_s
     events, t_done = 0, 0.0
 
-    def event(t: float, s_trail: float | None) -> None:
-        nonlocal events, t_done
+    last_target = np.zeros(sim.stations.size)
+    last_moved = np.zeros(sim.stations.size, bool)
+
+    def event(t: float, s_trail: float | None, repush: bool = False) -> bool:
+        """One push-advance event; `repush` pushes the last event's pans again to their targets.
+
+        Returns whether any ram moved."""
+        nonlocal events, t_done, last_target, last_moved
         pan_target, advancing = ctrl.update(s_trail)
-        # Ram stroke for the pan's target from where the support actually stands; an advancing support
-        # then pulls itself up to the set length.
-        push = ram0 + pan_target - (state.sup_x - sup_x0)
-        target = np.where(advancing, ram0, push)
-        moved = np.flatnonzero((np.abs(push - state.ram_target) > RAM_DEADBAND_M) | advancing)
-        if moved.size == 0:
-            return
-        pans = sim.stations[moved]
-        first = sim.window_start(int(pans.min()), int(pans.max()))
+        region = (pan_target != last_target) | advancing | (last_moved & repush)
+        if region.any():
+            # A support near the action that is short of its advance (it stuck, or its pan was pulled
+            # back) advances again.
+            near = np.zeros_like(region)
+            near[np.flatnonzero(region).min():np.flatnonzero(region).max() + 1] = True
+            advancing |= near & (ctrl.sup_target - (state.sup_x - sup_x0) > SUPPORT_DEADBAND_M)
+        # Strokes that take each pan from where it is to its target, from where its support stands; an
+        # advancing support then pulls itself up to its own target.
+        shift = pan_target - (state.pans[sim.stations, 0] - pan_x0)
+        push = sim.ram_lengths(state, shift, state.sup_x)
+        target = np.where(advancing, sim.ram_lengths(state, shift, sup_x0 + ctrl.sup_target), push)
+        moved = (region | advancing) & ((np.abs(push - state.ram) > RAM_DEADBAND_M) | advancing)
+        last_target = pan_target
+        last_moved = moved
+        if not moved.any():
+            return False
+        advancing &= moved
         lowered = np.flatnonzero(advancing)
         if lowered.size:
             recorder.record(max(t, t_done), state, np.zeros(0, int), lowered, lowered)
-        travel = np.abs(push - state.ram_target).max() + np.abs(target - push).max()
-        sim.step_event(state, first, push, target, advancing)
+        travel = np.abs(push - state.ram)[moved].max() + np.abs(target - push)[moved].max()
+        pans, sups = sim.step_event(state, moved, push, target, advancing)
         t_done = max(t_done, t + travel / ram_speed + (SET_TIME_S if lowered.size else 0.0))
-        in_window = np.arange(first, first + sim.count)
-        sups = np.flatnonzero((sim.stations >= first) & (sim.stations < first + sim.count))
-        recorder.record(t_done, state, in_window, sups)
+        recorder.record(t_done, state, pans, sups)
         events += 1
+        return True
 
     half = scn.shearer.length_m / 2
     for plan in timeline.cycles:
         ctrl.begin_cycle(plan.direction)
-        times, marks = timeline.crossings(plan.cycle, -plan.direction * half, length)
+        times, marks = timeline.crossings(plan.cycle, -plan.direction * half, length * scn.pattern.push_step_pans)
         for t, mark in zip(times, marks):
             event(float(t), float(mark))
         event(plan.t_sump_end, None)
-        event(plan.t_sump_end, None)  # re-push what the end supports' advance pulled back
+        for _ in range(MAX_REPUSHES):  # what the end supports' advance pulled back, until home
+            if not event(plan.t_sump_end, None, repush=True):
+                break
         report("face", (plan.cycle + 1) / len(timeline.cycles))
 
-    rate = scn.rates.truth_hz
-    t = np.arange(int(np.floor(timeline.duration * rate)) + 1) / rate
-    haul = timeline.sample(t)
-    pos_tgt, quat_tgt = ride_targets_t(recorder.versions, t, haul["s"], scn)
+    t_ride = np.arange(int(np.floor(timeline.duration * scn.rates.ride_hz)) + 1) / scn.rates.ride_hz
+    pos_tgt, quat_tgt = ride_targets_t(recorder.versions, t_ride, timeline.sample(t_ride)["s"], scn)
     chunk_t = [p.t_start + scn.haulage.reversal_stop_s / 2 for p in timeline.cycles[1:]
                if scn.haulage.reversal_stop_s >= 1.0]
-    chunks = np.unique(np.concatenate([[0], np.searchsorted(t, chunk_t)])).astype(int)
+    chunks = np.unique(np.concatenate([[0], np.searchsorted(t_ride, chunk_t)])).astype(int)
     pos, quat = simulate_ride(scn, pos_tgt, quat_tgt, chunks)
+    del pos_tgt, quat_tgt
     report("ride", 1.0)
+    t = np.arange(int(np.floor(timeline.duration * scn.rates.truth_hz)) + 1) / scn.rates.truth_hz
+    t = t[t <= t_ride[-1]]
+    haul = timeline.sample(t)
     site = scn.site
-    truth = shearer_truth(t, pos, quat, mat_to_quat(frame.mat_tf), np.radians(site.lat_deg),
+    truth = shearer_truth(t_ride, pos, quat, t, mat_to_quat(frame.mat_tf), np.radians(site.lat_deg),
                           np.radians(site.lon_deg), site.height_m)
     rear, front = shoe_pans(haul["s"], scn)
     shearer = {

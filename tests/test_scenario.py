@@ -1,0 +1,75 @@
+"""Scenario files: every shipped one loads, the resolved form round-trips, bad input is one clear line."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from twin.scenario import ScenarioError, load_scenario, parse_scenario, scenario_to_toml
+
+from .conftest import SCENARIO_DIR, SCENARIOS
+
+import tomllib
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_shipped_scenarios_load_and_round_trip(name):
+    scn = load_scenario(SCENARIO_DIR / f"{name}.toml")
+    again = parse_scenario(tomllib.loads(scenario_to_toml(scn)))
+    assert again == scn
+
+
+def test_paper_scenarios_match_their_experiments():
+    s1 = load_scenario(SCENARIO_DIR / "seed001.toml")
+    assert s1.cycles == 4 and s1.face.web_depth_m == 1.2
+    assert math.isclose(s1.face.pan_count * s1.face.pan_length_m - s1.shearer.length_m, 44.6)
+    s4 = load_scenario(SCENARIO_DIR / "seed004.toml")
+    assert (s4.face.pan_count, s4.face.pan_length_m, s4.face.web_depth_m, s4.cycles) == (200, 1.8, 1.0, 5)
+    from twin.haulage import Timeline
+    assert 6.2 < Timeline(s4).duration / 3600 < 6.6
+
+
+def base() -> dict:
+    return load_scenario(SCENARIO_DIR / "default.toml").model_dump()
+
+
+def with_value(path: str, value) -> dict:
+    data = base()
+    *sections, key = path.split(".")
+    node = data
+    for sec in sections:
+        node = node[sec]
+    node[key] = value
+    return data
+
+
+@pytest.mark.parametrize("path, value, words", [
+    ("face.pan_lenght_m", 1.75, ["face.pan_lenght_m", "unknown key"]),
+    ("face.pan_length_m", "long", ["face.pan_length_m"]),
+    ("face.pan_length_m", float("nan"), ["face.pan_length_m"]),
+    ("face.web_depth_m", -0.8, ["face.web_depth_m"]),
+    ("shearer.length_m", 0.0, ["shearer.length_m"]),
+    ("face.bend_limit_horizontal_deg", 12.0, ["face.bend_limit_horizontal_deg"]),
+    ("face.bend_limit_vertical_deg", 0.0, ["face.bend_limit_vertical_deg"]),
+    ("cycles", 40, ["cycles", "panel_length_m"]),
+    ("face.pan_count", 20, ["face.pan_count", "too short"]),
+    ("face.initial_bend_horizontal_deg", [0.1, 0.2], ["initial_bend_horizontal_deg", "pan_count - 1"]),
+    ("pattern.snake_length_pans", 4, ["snake_length_pans"]),
+])
+def test_bad_values_name_the_key(path, value, words):
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(with_value(path, value), "bad.toml")
+    message = str(err.value)
+    assert "\n" not in message and message.startswith("bad.toml: ")
+    for word in words:
+        assert word in message
+
+
+def test_missing_and_broken_files(tmp_path):
+    with pytest.raises(ScenarioError, match="not found"):
+        load_scenario(tmp_path / "nope.toml")
+    broken = tmp_path / "broken.toml"
+    broken.write_text("name = \n")
+    with pytest.raises(ScenarioError, match="not valid TOML"):
+        load_scenario(broken)
