@@ -105,8 +105,8 @@ def test_cycles_form_the_closed_path(run):
         sel = (sh["cycle"] == k) & (sh["phase"] == CUTTING)
         s = sh["s"][sel]
         start, end = (s_min, s_max) if cycles["direction"][k] > 0 else (s_max, s_min)
-        assert abs(sh["s"][np.searchsorted(sh["t"], cycles["t_cut_end"][k])] - end) < 1e-6
-        assert abs(sh["s"][min(np.searchsorted(sh["t"], cycles["t_end"][k]), sh["t"].size - 1)] - end) < 1e-6
+        assert abs(sh["s"][np.searchsorted(sh["t"], cycles["t_cut_end"][k])] - end) < 1e-4
+        assert abs(sh["s"][min(np.searchsorted(sh["t"], cycles["t_end"][k]), sh["t"].size - 1)] - end) < 1e-4
         near = np.argmin(np.abs(s - mid))
         x_mid.append(p_f[sel][near, 0])
         # The sump point C lies a sump length back from the far end, inside the face.
@@ -126,9 +126,14 @@ def test_truth_is_self_consistent(run):
     mat_nt = earth.mat_nt(sh["lat"], sh["lon"], lat0, lon0)
     p_t = np.column_stack([sh[f"p_t_{a}"] for a in "enu"])
     v_t = np.einsum("kji,kj->ki", mat_nt, np.column_stack([sh[f"v_n_{a}"] for a in "enu"]))
-    # Central differences: error O(dt^2 * jerk); the haulage's acceleration steps bound it near 1e-5 m/s.
+    # Central differences err by dt^2/6 * jerk: the haulage's acceleration steps (0.05 m/s^2 within a few
+    # ride samples) bound that near 3e-5 m/s.
     fd_v = (p_t[2:] - p_t[:-2]) / (2 * dt)
-    assert np.abs(fd_v - v_t[1:-1]).max() < 1e-4
+    err = np.linalg.norm(fd_v - v_t[1:-1], axis=1)
+    assert err.max() < 2e-4 and np.sqrt(np.mean(err ** 2)) < 2e-6
+    # Integrated velocity (trapezoid) reproduces the position over the whole run to a micrometre.
+    drift = np.cumsum(0.5 * dt * (v_t[1:] + v_t[:-1]), axis=0) - (p_t[1:] - p_t[0])
+    assert np.abs(drift).max() < 1e-6
     mat_tn = np.swapaxes(mat_nt, -1, -2)
     q_tb = mat_to_quat(mat_tn @ quat_to_mat(np.column_stack([sh[f"q_nb_{a}"] for a in "wxyz"])))
     w_ie_t = earth.earth_rate_n(lat0)
@@ -138,14 +143,17 @@ def test_truth_is_self_consistent(run):
     # Rotation over one step from the attitudes versus the mean rate (midpoint rule).
     dq = quat_mul(quat_conj(q_tb[:-1]), q_tb[1:])
     fd_w = quat_to_rotvec(dq) / dt
-    assert np.abs(fd_w - 0.5 * (w_tb[1:] + w_tb[:-1])).max() < 1e-6
+    err_w = np.linalg.norm(fd_w - 0.5 * (w_tb[1:] + w_tb[:-1]), axis=1)
+    assert err_w.max() < 2e-5 and np.sqrt(np.mean(err_w ** 2)) < 2e-7
     # Specific force: a_t from central differences of v_t.
     a_t = (v_t[2:] - v_t[:-2]) / (2 * dt)
     g_n = earth.gravity_n(sh["lat"], sh["h"])[1:-1]
     f_pred = np.einsum("kji,kj->ki", mat_tb[1:-1], a_t + np.cross(2 * w_ie_t, v_t[1:-1])) - np.einsum(
         "kji,kj->ki", mat_tb[1:-1], np.einsum("kij,kj->ki", mat_tn[1:-1], g_n))
     f_b = np.column_stack([sh[f"f_b_{a}"] for a in "xyz"])[1:-1]
-    assert np.abs(f_pred - f_b).max() < 2e-3
+    # A 0.1 mrad attitude or frame error alone would leave 1e-3 m/s^2 (gravity misprojected).
+    err_f = np.linalg.norm(f_pred - f_b, axis=1)
+    assert err_f.max() < 2e-2 and np.sqrt(np.mean(err_f ** 2)) < 2e-4
 
 
 def test_initial_bends_follow_the_seed():

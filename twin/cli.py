@@ -35,7 +35,7 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
     out = Path(out) if out is not None else Path("runs") / f"{scn.name}-seed{scn.seed}"
     check_target(out, force)
     start = time.perf_counter()
-    stages = {"face": 0.45, "ride": 0.3, "truth": 0.1, "write": 0.1, "recording": 0.05}
+    stages = {"face": 0.6, "shearer": 0.25, "write": 0.1, "recording": 0.05}
     bar = tqdm(total=100, desc=f"longwall run {scn.name}", disable=quiet, leave=False,
                bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}")
     done = {k: 0.0 for k in stages}

@@ -99,12 +99,6 @@ def pan_axes(states: np.ndarray) -> np.ndarray:
     return euler_to_mat(states[..., PITCH], states[..., ROLL], states[..., YAW])
 
 
-def running_line_points(states: np.ndarray, pan: np.ndarray, y_local: np.ndarray) -> np.ndarray:
-    """Points on the running lines in F: pan `pan` at local along-pan coordinate y_local (centre = 0)."""
-    st = states[pan]
-    mat = pan_axes(st)
-    return st[..., :3] + mat[..., :, 1] * y_local[..., None]
-
 
 def joint_ends(states: np.ndarray, pan_length: float) -> tuple[np.ndarray, np.ndarray]:
     """Headgate-side and tailgate-side end points of every pan's running line in F, each (N, 3)."""

@@ -9,6 +9,7 @@ pan line at the truth rate in one batched rollout, and the truth splines are fit
 from __future__ import annotations
 
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,10 +21,12 @@ from twin.haulage import Timeline
 from twin.layout import FaceFrame, Floor, bend_angles, initial_pans, support_stations
 from twin.model import FloorGrid
 from twin.pushadvance import PushAdvanceController
-from twin.ride import ride_targets_t, shoe_pans, simulate_ride
+from twin.ride import PanVersion, ride_targets_t, shoe_pans, simulate_ride
 from twin.scenario import Scenario
 from twin.truth import shearer_truth
 
+MIN_EVENT_S = 2.0
+"""Shortest time an event takes (valves, a small correction push)."""
 SET_TIME_S = 6.0
 """Time a support takes to lower and set again around its advance (added to the ram travel time)."""
 
@@ -57,12 +60,14 @@ class _FaceRecorder:
         self.sup_x0 = state.sup_x.copy()
         self.pan_rows: list[dict[str, np.ndarray]] = []
         self.sup_rows: list[dict[str, np.ndarray]] = []
-        self.versions: list[tuple[float, np.ndarray]] = []
+        self.versions: list[PanVersion] = []
         self.record(0.0, state, np.arange(state.pans.shape[0]), np.arange(state.sup_x.size))
 
     def record(self, t: float, state: FaceState, pans: np.ndarray, sups: np.ndarray,
-               lowered: np.ndarray | None = None) -> None:
-        """Rows for `pans` and `sups` at time t; supports in `lowered` are logged lowered (canopy down)."""
+               lowered: np.ndarray | None = None, t_begin: float | None = None) -> None:
+        """Rows for `pans` and `sups` at time t; supports in `lowered` are logged lowered (canopy down).
+
+        Pans that moved started moving at `t_begin` (default t)."""
         mat_tf = self.frame.mat_tf
         st = state.pans[pans]
         bend_h, bend_v = bend_angles(state.pans)
@@ -82,7 +87,7 @@ class _FaceRecorder:
             "canopy": state.sup_leg[sups] - np.where(is_lowered, self.scn.supports.lower_m, 0.0),
             "set": (~is_lowered).astype(np.int8)})
         if pans.size:
-            self.versions.append((t, state.pans.copy()))
+            self.versions.append(PanVersion(t if t_begin is None else t_begin, t, state.pans.copy()))
 
     def tables(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         return _concat(self.pan_rows), _concat(self.sup_rows)
@@ -106,6 +111,34 @@ def window_sizes(scn: Scenario) -> list[int]:
     end = p.snake_length_pans + p.push_lag_pans + scn.supports.advance_lag_pans + int(
         np.ceil(scn.shearer.length_m / scn.face.pan_length_m)) + 2
     return [min(scn.face.pan_count, w + 2 * WINDOW_MARGIN_PANS) for w in (cut, end)]
+
+
+def shearer_chunks(scn: Scenario, timeline: Timeline) -> np.ndarray:
+    """Chunk boundaries [s] of the shearer's ride: the middle of each reversal stop, where it stands still."""
+    stop = scn.haulage.reversal_stop_s
+    inner = [p.t_start + stop / 2 for p in timeline.cycles[1:]] if stop >= 1.0 else []
+    return np.array([0.0, *inner, timeline.duration])
+
+
+def shearer_chunk(scn: Scenario, timeline: Timeline, versions: list[PanVersion], t0: float, t1: float,
+                  last: bool) -> dict[str, np.ndarray]:
+    """Ride and truth columns for times in [t0, t1) ([t0, t1] for the last chunk)."""
+    ride_hz, truth_hz = scn.rates.ride_hz, scn.rates.truth_hz
+    t_ride = np.arange(int(np.ceil(t0 * ride_hz - 1e-9)), int(np.floor(t1 * ride_hz + 1e-9)) + 1) / ride_hz
+    pos, quat = simulate_ride(scn, *ride_targets_t(versions, t_ride, timeline.sample(t_ride)["s"], scn))
+    t = np.arange(int(np.ceil(t0 * truth_hz - 1e-9)), int(np.floor(t1 * truth_hz + 1e-9)) + 1) / truth_hz
+    t = t[(t <= t_ride[-1]) & ((t < t1) | last)]
+    haul = timeline.sample(t)
+    site, frame = scn.site, FaceFrame(np.radians(scn.face.azimuth_deg))
+    truth = shearer_truth(t_ride, pos, quat, t, mat_to_quat(frame.mat_tf), np.radians(site.lat_deg),
+                          np.radians(site.lon_deg), site.height_m)
+    rear, front = shoe_pans(haul["s"], scn)
+    return {
+        "t": t, "lat": truth.lat, "lon": truth.lon, "h": truth.h, **_split(truth.p_t, "p_t", "enu"),
+        **_split(truth.v_n, "v_n", "enu"), **_split(truth.q_nb, "q_nb", "wxyz"),
+        **_split(truth.w_ib_b, "w_ib_b", "xyz"), **_split(truth.w_nb_b, "w_nb_b", "xyz"),
+        **_split(truth.f_b, "f_b", "xyz"), "s": haul["s"], "pan_rear": rear, "pan_front": front,
+        "cycle": haul["cycle"], "phase": haul["phase"]}
 
 
 def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
@@ -151,50 +184,43 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
         if not moved.any():
             return False
         advancing &= moved
+        t_begin = max(t, t_done)
         lowered = np.flatnonzero(advancing)
         if lowered.size:
-            recorder.record(max(t, t_done), state, np.zeros(0, int), lowered, lowered)
+            recorder.record(t_begin, state, np.zeros(0, int), lowered, lowered)
         travel = np.abs(push - state.ram)[moved].max() + np.abs(target - push)[moved].max()
         pans, sups = sim.step_event(state, moved, push, target, advancing)
-        t_done = max(t_done, t + travel / ram_speed + (SET_TIME_S if lowered.size else 0.0))
-        recorder.record(t_done, state, pans, sups)
+        t_done = t_begin + max(MIN_EVENT_S, travel / ram_speed + (SET_TIME_S if lowered.size else 0.0))
+        recorder.record(t_done, state, pans, sups, t_begin=t_begin)
         events += 1
         return True
 
+    # The shearer's ride and truth run chunk by chunk on the other core while the face simulates on:
+    # a chunk needs only the pan line up to its end, and each starts with the shearer at rest.
+    bounds = shearer_chunks(scn, timeline)
+    pending = []
     half = scn.shearer.length_m / 2
-    for plan in timeline.cycles:
-        ctrl.begin_cycle(plan.direction)
-        times, marks = timeline.crossings(plan.cycle, -plan.direction * half, length * scn.pattern.push_step_pans)
-        for t, mark in zip(times, marks):
-            event(float(t), float(mark))
-        event(plan.t_sump_end, None)
-        for _ in range(MAX_REPUSHES):  # what the end supports' advance pulled back, until home
-            if not event(plan.t_sump_end, None, repush=True):
-                break
-        report("face", (plan.cycle + 1) / len(timeline.cycles))
-
-    t_ride = np.arange(int(np.floor(timeline.duration * scn.rates.ride_hz)) + 1) / scn.rates.ride_hz
-    pos_tgt, quat_tgt = ride_targets_t(recorder.versions, t_ride, timeline.sample(t_ride)["s"], scn)
-    chunk_t = [p.t_start + scn.haulage.reversal_stop_s / 2 for p in timeline.cycles[1:]
-               if scn.haulage.reversal_stop_s >= 1.0]
-    chunks = np.unique(np.concatenate([[0], np.searchsorted(t_ride, chunk_t)])).astype(int)
-    pos, quat = simulate_ride(scn, pos_tgt, quat_tgt, chunks)
-    del pos_tgt, quat_tgt
-    report("ride", 1.0)
-    t = np.arange(int(np.floor(timeline.duration * scn.rates.truth_hz)) + 1) / scn.rates.truth_hz
-    t = t[t <= t_ride[-1]]
-    haul = timeline.sample(t)
-    site = scn.site
-    truth = shearer_truth(t_ride, pos, quat, t, mat_to_quat(frame.mat_tf), np.radians(site.lat_deg),
-                          np.radians(site.lon_deg), site.height_m)
-    rear, front = shoe_pans(haul["s"], scn)
-    shearer = {
-        "t": t, "lat": truth.lat, "lon": truth.lon, "h": truth.h, **_split(truth.p_t, "p_t", "enu"),
-        **_split(truth.v_n, "v_n", "enu"), **_split(truth.q_nb, "q_nb", "wxyz"),
-        **_split(truth.w_ib_b, "w_ib_b", "xyz"), **_split(truth.w_nb_b, "w_nb_b", "xyz"),
-        **_split(truth.f_b, "f_b", "xyz"), "s": haul["s"], "pan_rear": rear, "pan_front": front,
-        "cycle": haul["cycle"], "phase": haul["phase"]}
-    report("truth", 1.0)
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        for plan in timeline.cycles:
+            ctrl.begin_cycle(plan.direction)
+            step = length * scn.pattern.push_step_pans
+            for t, mark in zip(*timeline.crossings(plan.cycle, -plan.direction * half, step)):
+                event(float(t), float(mark))
+            event(plan.t_sump_end, None)
+            for _ in range(MAX_REPUSHES):  # what the end supports' advance pulled back, until home
+                if not event(plan.t_sump_end, None, repush=True):
+                    break
+            report("face", (plan.cycle + 1) / len(timeline.cycles))
+            ready = [c for c in range(len(pending), len(bounds) - 1) if bounds[c + 1] <= max(plan.t_end, t_done)
+                     or plan.cycle == len(timeline.cycles) - 1]
+            for c in ready:
+                pending.append(pool.submit(shearer_chunk, scn, timeline, list(recorder.versions), bounds[c],
+                                           bounds[c + 1], c == len(bounds) - 2))
+        chunks = []
+        for k, fut in enumerate(pending):
+            chunks.append(fut.result())
+            report("shearer", (k + 1) / len(pending))
+    shearer = {key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]}
     pans_tab, sups_tab = recorder.tables()
     cycles = {
         "cycle": np.array([p.cycle for p in timeline.cycles]), "direction": np.array([p.direction for p in timeline.cycles]),
