@@ -84,7 +84,9 @@ class Timeline:
         h, sh, f = scn.haulage, scn.shearer, scn.face
         self.s_min = sh.length_m / 2
         self.s_max = f.pan_count * f.pan_length_m - sh.length_m / 2
-        self.sump_m = sh.length_m + (scn.pattern.push_lag_pans + scn.pattern.snake_length_pans + 1) * f.pan_length_m
+        # Back past the snake and one more pan, so the end push (which drags the next pan a little) leaves
+        # the pans under the shearer alone.
+        self.sump_m = sh.length_m + (scn.pattern.push_lag_pans + scn.pattern.snake_length_pans + 2) * f.pan_length_m
         accel = h.acceleration_m_s2
         cut, ret, sump = (v / 60.0 for v in (h.cutting_speed_m_min, h.return_speed_m_min, h.sump_speed_m_min))
         travel = travel_length_m(scn)

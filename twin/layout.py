@@ -24,6 +24,8 @@ PAN_WIDTH_M = 1.0
 """Width of a pan across the face (x), including the coal-side rack; the running line is its centre."""
 PAN_HEIGHT_M = 0.35
 """Height of the running line above the floor (pan feet to rail top)."""
+INITIAL_BEND_FRACTION = 0.25
+"""Share of the horizontal bend limit the random initial face may use (the snake has the rest)."""
 SUPPORT_BASE_LENGTH_M = 3.0
 """Length of a support base from its ram connection (front) to its rear; x extent in F."""
 
@@ -119,14 +121,14 @@ def initial_yaws(scn: Scenario, rng: np.random.Generator) -> np.ndarray:
     if isinstance(f.initial_bend_horizontal_deg, list):
         bends = np.radians(np.asarray(f.initial_bend_horizontal_deg, float))
     else:
-        # AR(1) yaw along the face (correlation 0.9 per pan), then bends clipped to 80 % of the limit.
+        # AR(1) yaw along the face (correlation 0.9 per pan), bends clipped to their share of the limit.
         sigma = np.radians(f.initial_straightness_deg)
         eps = rng.normal(0.0, sigma * np.sqrt(1 - 0.9 ** 2), f.pan_count)
         yaw = np.empty(f.pan_count)
         yaw[0] = rng.normal(0.0, sigma)
         for i in range(1, f.pan_count):
             yaw[i] = 0.9 * yaw[i - 1] + eps[i]
-        bends = np.clip(np.diff(yaw), -0.8 * limit, 0.8 * limit)
+        bends = np.clip(np.diff(yaw), -INITIAL_BEND_FRACTION * limit, INITIAL_BEND_FRACTION * limit)
     yaw = np.concatenate([[0.0], np.cumsum(bends)])
     return yaw - yaw.mean()
 

@@ -155,16 +155,16 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
     recorder = _FaceRecorder(scn, frame, state)
     ctrl = PushAdvanceController(scn)
     length, ram_speed = scn.face.pan_length_m, scn.supports.ram_speed_m_s
-    events, t_done = 0, 0.0
+    events = 0
 
     last_target = np.zeros(sim.stations.size)
     last_moved = np.zeros(sim.stations.size, bool)
 
-    def event(t: float, s_trail: float | None, repush: bool = False) -> bool:
+    def event(t: float, s_trail: float | None, t_next: float, repush: bool = False) -> bool:
         """One push-advance event; `repush` pushes the last event's pans again to their targets.
 
         Returns whether any ram moved."""
-        nonlocal events, t_done, last_target, last_moved
+        nonlocal events, last_target, last_moved
         pan_target, advancing = ctrl.update(s_trail)
         region = (pan_target != last_target) | advancing | (last_moved & repush)
         if region.any():
@@ -184,13 +184,16 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
         if not moved.any():
             return False
         advancing &= moved
-        t_begin = max(t, t_done)
+        t_begin = t
         lowered = np.flatnonzero(advancing)
         if lowered.size:
             recorder.record(t_begin, state, np.zeros(0, int), lowered, lowered)
         travel = np.abs(push - state.ram)[moved].max() + np.abs(target - push)[moved].max()
         pans, sups = sim.step_event(state, moved, push, target, advancing)
-        t_done = t_begin + max(MIN_EVENT_S, travel / ram_speed + (SET_TIME_S if lowered.size else 0.0))
+        # The rams take their stroke at the ram speed, but the controller keeps pace with the shearer: an
+        # event is over before the next one is due (the pans never move under the shearer).
+        duration = max(MIN_EVENT_S, travel / ram_speed + (SET_TIME_S if lowered.size else 0.0))
+        t_done = t_begin + min(duration, 0.9 * (t_next - t_begin))
         recorder.record(t_done, state, pans, sups, t_begin=t_begin)
         events += 1
         return True
@@ -204,15 +207,21 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
         for plan in timeline.cycles:
             ctrl.begin_cycle(plan.direction)
             step = length * scn.pattern.push_step_pans
-            for t, mark in zip(*timeline.crossings(plan.cycle, -plan.direction * half, step)):
-                event(float(t), float(mark))
-            event(plan.t_sump_end, None)
-            for _ in range(MAX_REPUSHES):  # what the end supports' advance pulled back, until home
-                if not event(plan.t_sump_end, None, repush=True):
+            times, marks = timeline.crossings(plan.cycle, -plan.direction * half, step)
+            for t, t_next, mark in zip(times, np.append(times[1:], plan.t_cut_end), marks):
+                event(float(t), float(mark), float(t_next))
+            # Snake sumping: the end pans are pushed while the shearer stands at C, then pushed again where
+            # the end supports' advance pulled them back; all before the shearer moves on.
+            end_events = 1 + MAX_REPUSHES
+            t_slot = (plan.t_push_end - plan.t_sump_end) / end_events
+            for k in range(end_events):
+                if not event(plan.t_sump_end + k * t_slot, None, plan.t_sump_end + (k + 1) * t_slot, repush=k > 0):
                     break
             report("face", (plan.cycle + 1) / len(timeline.cycles))
-            ready = [c for c in range(len(pending), len(bounds) - 1) if bounds[c + 1] <= max(plan.t_end, t_done)
-                     or plan.cycle == len(timeline.cycles) - 1]
+            last = plan.cycle == len(timeline.cycles) - 1
+            # Chunk k ends in the reversal stop after cycle k, before cycle k+1's first push.
+            ready = [plan.cycle] if len(bounds) - 1 == len(timeline.cycles) else (
+                range(len(bounds) - 1) if last else [])
             for c in ready:
                 pending.append(pool.submit(shearer_chunk, scn, timeline, list(recorder.versions), bounds[c],
                                            bounds[c + 1], c == len(bounds) - 2))

@@ -19,9 +19,14 @@ def joint_offsets(snake_pans: int, pan_length_m: float, step_rad: float) -> np.n
     return np.concatenate([[0.0], np.cumsum(pan_length_m * np.sin(step_rad * yaw_steps(snake_pans)))])
 
 
+BEND_FRACTION = 0.75
+"""Share of the bend limit a snake may use; the rest is left for the face's own bends (see
+twin.layout.INITIAL_BEND_FRACTION), so the two together stay within the limit."""
+
+
 def capacity_m(snake_pans: int, pan_length_m: float, bend_limit_rad: float) -> float:
-    """Largest push a snake can take up with its bends at 90 % of the limit."""
-    return float(joint_offsets(snake_pans, pan_length_m, 0.9 * bend_limit_rad)[-1])
+    """Largest push a snake can take up with its bends at BEND_FRACTION of the limit."""
+    return float(joint_offsets(snake_pans, pan_length_m, BEND_FRACTION * bend_limit_rad)[-1])
 
 
 def fractions(snake_pans: int) -> np.ndarray:
