@@ -91,3 +91,17 @@ def test_same_seed_gives_bit_identical_truth_and_another_seed_does_not(tmp_path)
     # Rows at t = 0 are the initial pans; their bends come from the seed.
     bends = [read_stream(run, STREAMS["truth_pans"]).column("bend_h").to_numpy()[:43] for run in (a, c)]
     assert np.abs(bends[0] - bends[1]).max() > 1e-4
+
+
+def test_a_crash_leaves_no_run_directory(tmp_path, monkeypatch):
+    import twin.recording
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(twin.recording, "write_recording", broken)
+    scenario = tmp_path / "short.toml"
+    scenario.write_text((SCENARIO_DIR / "default.toml").read_text().replace("cycles = 2", "cycles = 1"))
+    with pytest.raises(RuntimeError):
+        main(["run", str(scenario), "--out", str(tmp_path / "out"), "--quiet"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["short.toml"]
