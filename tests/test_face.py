@@ -4,7 +4,6 @@ cycle, the closed cutting path of 001 Fig. 3, and self-consistent truth."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from estimators import earth
 from estimators.rotations import mat_to_quat, quat_conj, quat_mul, quat_to_mat, quat_to_rotvec

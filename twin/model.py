@@ -27,7 +27,7 @@ import mujoco
 import numpy as np
 
 from estimators.rotations import mat_to_quat
-from twin.layout import (PAN_HEIGHT_M, PAN_WIDTH_M, FaceFrame, Floor, support_stations)
+from twin.layout import PAN_WIDTH_M, SUPPORT_BASE_LENGTH_M, FaceFrame, Floor, support_stations
 from twin.scenario import Scenario
 
 PAN_JOINTS = ("x", "y", "z", "yaw", "pitch", "roll")
@@ -67,7 +67,7 @@ class FloorGrid:
     @classmethod
     def from_scenario(cls, scn: Scenario, floor: Floor) -> "FloorGrid":
         length = scn.face.pan_count * scn.face.pan_length_m
-        x0 = -(scn.supports.ram_length_set_m + PAN_WIDTH_M + 3.5 + FLOOR_MARGIN_M)
+        x0 = -(scn.supports.ram_length_set_m + PAN_WIDTH_M + SUPPORT_BASE_LENGTH_M + FLOOR_MARGIN_M)
         x1 = scn.face.panel_length_m + FLOOR_MARGIN_M
         y0, y1 = -FLOOR_MARGIN_M, length + FLOOR_MARGIN_M
         nx = int(np.ceil((x1 - x0) / HFIELD_RESOLUTION_M)) + 1
