@@ -17,22 +17,30 @@ from twin.simulate import SimResult, simulate
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 SCENARIOS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
 TEST_CYCLES = 2
+VARIANTS = {"default-before-push": ("default", {"supports": {"sequence": "before_push"}})}
+"""Runs beyond the shipped files: a shipped scenario with some sections changed."""
 
 
 def capped(name: str, **overrides) -> Scenario:
+    """A shipped scenario capped at TEST_CYCLES cycles; `overrides` replace keys, or keys of sections."""
     scn = load_scenario(SCENARIO_DIR / f"{name}.toml")
     data = scn.model_dump()
     data["cycles"] = min(scn.cycles, TEST_CYCLES)
-    data.update(overrides)
+    for key, value in overrides.items():
+        if isinstance(value, dict):
+            data[key].update(value)
+        else:
+            data[key] = value
     return parse_scenario(data, name)
 
 
 @cache
 def simulated(name: str) -> tuple[Scenario, SimResult]:
-    scn = capped(name)
+    base, overrides = VARIANTS.get(name, (name, {}))
+    scn = capped(base, **overrides)
     return scn, simulate(scn)
 
 
-@pytest.fixture(params=SCENARIOS)
+@pytest.fixture(params=SCENARIOS + list(VARIANTS))
 def run(request) -> tuple[Scenario, SimResult]:
     return simulated(request.param)

@@ -90,11 +90,11 @@ class FaceSimulator:
         self.sup_site_local = np.array(model.site(f"sup{self.windows[0].index.supports[0]}_ram").pos)
 
     # -- geometry ---------------------------------------------------------------------------------------
-    def initial_supports(self, pans: np.ndarray) -> FaceState:
-        """Supports set behind their pans with the rams at their set length, bases on the floor."""
+    def initial_supports(self, pans: np.ndarray, ram_extension_m: float = 0.0) -> FaceState:
+        """Supports set behind their pans with the rams at their set length plus `ram_extension_m`."""
         sup = self.scn.supports
         st = self.stations
-        sup_x = self._pan_ram_points(pans)[st, 0] - sup.ram_length_set_m
+        sup_x = self._pan_ram_points(pans)[st, 0] - sup.ram_length_set_m - ram_extension_m
         y = (st + 0.5) * self.scn.face.pan_length_m
         sup_z = self.floor.height(sup_x + SKID_OFFSET_X_M, y)
         state = FaceState(pans.copy(), sup_x, sup_z, np.full(st.size, sup.canopy_height_m), np.zeros(st.size))

@@ -4,10 +4,17 @@ During the straight cut of cycle k the pans behind the shearer's trailing end (a
 pushed along the snake: the fraction of the web a pan joint has been pushed is G(u), u the joint's distance
 behind the snake head in pans, G the normalised offset of an S-curve whose yaw ramps up and down by one
 equal bend per pan (a triangle) so neighbouring pans never exceed the bend limit. A pan's target is the mean
-of its two joints' fractions, never decreasing. A support advances (lowered, pulled up by its ram, set) once
-its pan and the `advance_lag_pans` pans nearer the shearer are fully pushed. At the face end the remaining
-pans are pushed fully while the shearer stands in the new web (snake sumping). Every push adds the
-per-support offset (metres; for face alignment), zero unless set.
+of its two joints' fractions, never decreasing. Supports advance (lowered, pulled up by their rams, set) in
+one of two sequences (`supports.sequence`):
+
+* "after_push" (conventional): once its pan and the `advance_lag_pans` pans nearer the shearer are fully
+  pushed; the rams rest retracted.
+* "before_push" (immediate forward support): as soon as the shearer's trailing end is `advance_lag_pans`
+  pans past it, up to its still unpushed pan, so the fresh roof is supported at once; the rams rest extended
+  by a web, and the push that follows extends them again.
+
+At the face end the remaining pans are pushed fully while the shearer stands in the new web (snake
+sumping). Every push adds the per-support offset (metres; for face alignment), zero unless set.
 """
 
 from __future__ import annotations
@@ -58,14 +65,26 @@ class PushAdvanceController:
         """
         frac = np.ones(self.n) if s_trail is None else self._pan_fraction(s_trail)
         self.pan_target = np.maximum(self.pan_target, self.cycle_start + self.push * frac)
-        full = frac >= 1.0
-        if s_trail is None:
-            ready = full[self.stations]
+        lag = self.scn.supports.advance_lag_pans
+        if self.scn.supports.sequence == "before_push":
+            goal = self.cycle_start[self.stations] + self.support_lag_m()
+            if s_trail is None:
+                ready = np.ones(self.stations.size, bool)
+            else:
+                length = self.scn.face.pan_length_m
+                ready = self.direction * (s_trail - (self.stations + 0.5) * length) >= lag * length
         else:
-            lag = self.scn.supports.advance_lag_pans
-            nearer = np.clip(self.stations + self.direction * lag, 0, self.n - 1)
-            ready = full[self.stations] & full[nearer]
-        pan_at_support = self.pan_target[self.stations]
-        advancing = ready & (pan_at_support > self.sup_target + 1e-12)
-        self.sup_target = np.where(advancing, pan_at_support, self.sup_target)
-        return pan_at_support, advancing
+            goal = self.pan_target[self.stations]
+            full = frac >= 1.0
+            ready = full[self.stations]
+            if s_trail is not None:
+                ready &= full[np.clip(self.stations + self.direction * lag, 0, self.n - 1)]
+        advancing = ready & (goal > self.sup_target + 1e-12)
+        self.sup_target = np.where(advancing, goal, self.sup_target)
+        return self.pan_target[self.stations], advancing
+
+    def support_lag_m(self) -> float:
+        """How far a support stands behind its set position at the start: a web when supports advance
+        before the push (their rams rest extended), none otherwise. Support targets count from there, so
+        after every cycle a support has advanced as far as its pan."""
+        return self.scn.face.web_depth_m if self.scn.supports.sequence == "before_push" else 0.0

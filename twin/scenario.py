@@ -72,8 +72,12 @@ class Supports(_Section):
     ram_length_set_m: Annotated[float, Field(ge=0.5, le=3.0, allow_inf_nan=False)] = 1.2
     """Ram length between a set support and its pan before a push (fully retracted)."""
     ram_speed_m_s: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = 0.1
+    sequence: Literal["after_push", "before_push"] = "after_push"
+    """Support-advance sequence: after the pans are pushed (conventional), or before (immediate forward
+    support, the supports following the shearer); see twin.pushadvance."""
     advance_lag_pans: Annotated[int, Field(ge=0, le=20)] = 2
-    """A support advances once its pan and the pans this many nearer the shearer are fully pushed."""
+    """after_push: a support advances once its pan and the pans this many nearer the shearer are fully
+    pushed. before_push: once the shearer's trailing end is this many pans past it."""
     canopy_height_m: Annotated[float, Field(ge=1.0, le=7.0, allow_inf_nan=False)] = 3.0
     lower_m: Annotated[float, Field(gt=0, le=0.5, allow_inf_nan=False)] = 0.1
     """How far the canopy is lowered from the roof while the support advances."""

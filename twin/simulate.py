@@ -149,11 +149,11 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
     floor = Floor.from_scenario(scn, rng)
     timeline = Timeline(scn)
     sim = FaceSimulator(scn, floor, window_sizes(scn))
-    state = sim.initial_supports(initial_pans(scn, floor, rng))
+    ctrl = PushAdvanceController(scn)
+    state = sim.initial_supports(initial_pans(scn, floor, rng), ctrl.support_lag_m())
     sim.settle(state)
     pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
     recorder = _FaceRecorder(scn, frame, state)
-    ctrl = PushAdvanceController(scn)
     length, ram_speed = scn.face.pan_length_m, scn.supports.ram_speed_m_s
     events = 0
 
