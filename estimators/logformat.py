@@ -25,7 +25,7 @@ class LogError(ValueError):
 class Column:
     name: str
     unit: str
-    dtype: str  # "f8", "i4", "i1"
+    dtype: str  # "f8", "i8", "i4", "i1" or "str"
     doc: str
     nan_ok: bool = False
 
@@ -35,7 +35,7 @@ class Stream:
     name: str
     doc: str
     columns: tuple[Column, ...]
-    time_order: str = "increasing"  # or "nondecreasing" for streams with many rows per time (one per id)
+    time_order: str = "increasing"  # "nondecreasing" for streams with a row per id per time; "none"
 
     @property
     def filename(self) -> str:
@@ -130,7 +130,74 @@ TRUTH_CYCLES = Stream(
     ),
 )
 
-STREAMS = {s.name: s for s in (TRUTH_SHEARER, TRUTH_PANS, TRUTH_SUPPORTS, TRUTH_CYCLES)}
+IMU = Stream(
+    "imu",
+    "Shearer IMU increments over (t - Ts, t] in the IMU sensor frame s (nominally b; the mounting "
+    "misalignment and lever arm are part of the sensor, not of this log).",
+    (T, *_xyz("dtheta", "rad", "angle increment"), *_xyz("dv", "m/s", "velocity increment")),
+)
+
+ODOMETER = Stream(
+    "odometer",
+    "Haulage encoder: cumulative travelled distance (pulses times the nominal metres per pulse, signed by "
+    "the direction of travel) and the pulse count.",
+    (
+        T,
+        Column("distance", "m", "f8", "cumulative signed distance from the start (nominal scale)"),
+        Column("pulses", "1", "i8", "cumulative signed pulse count"),
+        Column("direction", "1", "i1", "+1 towards the tailgate, -1 towards the headgate, 0 standing"),
+    ),
+)
+
+PUSHRAM = Stream(
+    "pushram",
+    "Push-ram stroke sensors, one row per support per sample; invalid readings are flagged, not dropped.",
+    (
+        T,
+        Column("support", "1", "i4", "support index from the headgate"),
+        Column("extension", "m", "f8", "ram length reading", nan_ok=True),
+        Column("valid", "1", "i1", "1 when the sensor reports a reading, 0 on dropout"),
+    ),
+    time_order="nondecreasing",
+)
+
+MAG = Stream(
+    "mag",
+    "Shearer magnetometer: the field in the body frame b (Earth field, hard and soft iron, motor field, "
+    "interference, noise).",
+    (T, *_xyz("b", "T", "magnetic flux density in b")),
+)
+
+SUPPORT_IMU = Stream(
+    "support_imu",
+    "9-axis units on support canopies, one row per unit per sample, in the canopy frame (x towards the coal "
+    "wall, y along the face, z up).",
+    (
+        T,
+        Column("support", "1", "i4", "support index"),
+        *_xyz("gyro", "rad/s", "angular rate"),
+        *_xyz("accel", "m/s^2", "specific force"),
+        *_xyz("mag", "T", "magnetic flux density"),
+    ),
+    time_order="nondecreasing",
+)
+
+FAULTS = Stream(
+    "faults",
+    "The injected fault schedule: ground truth for the detectors.",
+    (
+        Column("kind", "1", "str", "fault kind (twin.sensor_config.FaultKind)"),
+        Column("target", "1", "i4", "support index, or -1 when the fault has no target"),
+        Column("t_start", "s", "f8", "window start"),
+        Column("t_end", "s", "f8", "window end"),
+        Column("value", "1", "f8", "magnitude in the kind's unit (see twin.sensor_config.Fault)"),
+    ),
+    time_order="none",
+)
+
+TRUTH_STREAMS = (TRUTH_SHEARER, TRUTH_PANS, TRUTH_SUPPORTS, TRUTH_CYCLES)
+SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, MAG, SUPPORT_IMU, FAULTS)
+STREAMS = {s.name: s for s in TRUTH_STREAMS + SENSOR_STREAMS}
 
 
 def make_table(stream: Stream, data: dict[str, np.ndarray]) -> pa.Table:
@@ -140,8 +207,10 @@ def make_table(stream: Stream, data: dict[str, np.ndarray]) -> pa.Table:
         raise LogError(f"{stream.name}: missing columns {', '.join(missing)}")
     fields, arrays = [], []
     for c in stream.columns:
-        arr = np.ascontiguousarray(data[c.name], dtype=np.dtype(c.dtype))
-        arrays.append(pa.array(arr))
+        if c.dtype == "str":
+            arrays.append(pa.array([str(v) for v in data[c.name]], pa.string()))
+        else:
+            arrays.append(pa.array(np.ascontiguousarray(data[c.name], dtype=np.dtype(c.dtype))))
         fields.append(pa.field(c.name, arrays[-1].type, metadata={b"unit": c.unit.encode()}))
     return pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata={b"stream": stream.name.encode()}))
 
@@ -164,12 +233,12 @@ def check_table(stream: Stream, table: pa.Table, source: str) -> None:
         unit = meta.get(b"unit", b"").decode()
         if unit != c.unit:
             raise LogError(f"{source}: column '{c.name}' has unit '{unit or '(none)'}', expected '{c.unit}'")
-        values = table.column(c.name).to_numpy()
+        values = table.column(c.name).to_numpy(zero_copy_only=False)
         if values.dtype.kind == "f" and not c.nan_ok:
             bad = np.flatnonzero(~np.isfinite(values))
             if bad.size:
                 raise LogError(f"{source}: column '{c.name}' row {bad[0]}: not a finite number")
-    t = table.column("t").to_numpy() if "t" in names else None
+    t = table.column("t").to_numpy() if "t" in names and stream.time_order != "none" else None
     if t is not None and t.size > 1:
         dt = np.diff(t)
         bad = np.flatnonzero(dt <= 0 if stream.time_order == "increasing" else dt < 0)

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 from twin import snake
+from twin.sensor_config import Fault, Sensors
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -141,6 +142,8 @@ class Scenario(_Section):
     haulage: Haulage = Haulage()
     pattern: Pattern = Pattern()
     rates: Rates = Rates()
+    sensors: Sensors = Sensors()
+    faults: list[Fault] = []
 
     @model_validator(mode="after")
     def _consistent(self) -> "Scenario":
@@ -173,6 +176,17 @@ class Scenario(_Section):
         if f.web_depth_m > max_push:
             raise ValueError(f"pattern.snake_length_pans: {p.snake_length_pans} pans bend at most {max_push:.2f} m "
                              f"within bend_limit_horizontal_deg; web_depth_m {f.web_depth_m} m needs a longer snake")
+        n_supports = len(range(self.supports.pans_per_support // 2, f.pan_count, self.supports.pans_per_support))
+        for k, fault in enumerate(self.faults):
+            if fault.t_end_s <= fault.t_start_s:
+                raise ValueError(f"faults[{k}]: t_end_s {fault.t_end_s} must be after t_start_s {fault.t_start_s}")
+            needs_target = fault.kind.startswith("ram_") or fault.kind == "push_shortfall"
+            if needs_target and (fault.target is None or fault.target >= n_supports):
+                raise ValueError(f"faults[{k}]: {fault.kind} needs a target support 0..{n_supports - 1} "
+                                 f"(got {fault.target})")
+        bad = [j for j in self.sensors.support_imu.supports if j >= n_supports]
+        if bad:
+            raise ValueError(f"sensors.support_imu.supports: no support {bad[0]} (supports 0..{n_supports - 1})")
         for stop in self.haulage.stops:
             if stop.cycle >= self.cycles:
                 raise ValueError(f"haulage.stops: stop in cycle {stop.cycle} but the run has {self.cycles} cycles")

@@ -1,0 +1,127 @@
+"""Scenario sections for the instruments and the injected faults (`[sensors.*]` and `[[faults]]`).
+
+Units as written in the file (deg, Hz, T, m); the sensor models convert once. Every field has the default a
+mining engineer would expect for a modern face; `grade` names a preset of twin.imu_grades.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Rate = Annotated[float, Field(gt=0, le=2000, allow_inf_nan=False)]
+Vector3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+class Imu(_Section):
+    """The shearer's strapdown IMU."""
+
+    grade: str = "mti-g-700"
+    """A preset of twin.imu_grades (mti-g-700, par1 .. par12, nav-004, mti-30, icm-42605, ideal)."""
+    rate_hz: Rate = 200.0
+    lever_arm_m: Vector3 = [0.3, 0.5, 0.2]
+    """IMU position relative to the body reference point, in the body frame b."""
+    misalignment_deg: Vector3 = [0.05, -0.05, 0.1]
+    """Small rotation of the IMU axes relative to b (about x, y, z): C_s^b = I + [m]x to first order."""
+
+
+class VibrationState(_Section):
+    """Vibration of the IMU in one machine state: a drum-rotation tone and pick-impact band, with phase."""
+
+    drum_hz: Annotated[float, Field(ge=0, le=5, allow_inf_nan=False)] = 0.6
+    pick_hz: Annotated[float, Field(ge=0, le=200, allow_inf_nan=False)] = 30.0
+    accel_rms_g: Annotated[float, Field(ge=0, le=5, allow_inf_nan=False)] = 0.0
+    angular_rms_deg_s: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)] = 0.0
+
+
+class Vibration(_Section):
+    enabled: bool = True
+    idle: VibrationState = VibrationState(accel_rms_g=0.02, angular_rms_deg_s=0.02)
+    cutting_coal: VibrationState = VibrationState(accel_rms_g=0.3, angular_rms_deg_s=0.3)
+    cutting_rock: VibrationState = VibrationState(accel_rms_g=0.8, angular_rms_deg_s=0.8, pick_hz=38.0)
+    rock_zones_m: list[Annotated[list[NonNegative], Field(min_length=2, max_length=2)]] = []
+    """Arc-length intervals [from, to] along the face where the drums cut rock (floor or roof bands)."""
+
+
+class Odometer(_Section):
+    """The haulage encoder: pulses of the drive sprocket on the rack."""
+
+    rate_hz: Rate = 50.0
+    metres_per_pulse: Positive = 0.002
+    scale_error: Annotated[float, Field(ge=-0.1, le=0.1, allow_inf_nan=False)] = 0.003
+    """Relative error of the nominal metres per pulse (0.003 = 3 per mille)."""
+    mounting_deg: Vector3 = [0.2, 0.0, -0.3]
+    """Mounting angles of the odometer frame m relative to b (001 eq. 10): about x, y, z."""
+
+
+class PushRam(_Section):
+    """Stroke sensors on the push rams."""
+
+    rate_hz: Rate = 1.0
+    noise_m: NonNegative = 1e-4
+    """Standard deviation of the reading (0.02 m for the sensors of 004 Table 1)."""
+    resolution_m: NonNegative = 1e-4
+
+
+class Magnetometer(_Section):
+    """The shearer's three-axis magnetometer."""
+
+    rate_hz: Rate = 50.0
+    date: Annotated[str, Field(pattern=r"^\d{4}-\d{2}-\d{2}$")] = "2026-06-01"
+    """Date for the geomagnetic model (declination, inclination, intensity at the site)."""
+    noise_t: NonNegative = 1.0e-7
+    hard_iron_t: Vector3 = [2.0e-6, -1.0e-6, 0.5e-6]
+    soft_iron: Annotated[list[Vector3], Field(min_length=3, max_length=3)] = [[1.02, 0.01, 0.0], [0.01, 0.98, 0.0],
+                                                                              [0.0, 0.0, 1.0]]
+    """Soft-iron matrix applied to the Earth field in b (rows)."""
+    motor_disturbance_t: Vector3 = [1.5e-6, 0.5e-6, -1.0e-6]
+    """Field of the haulage and cutting motors in b while the shearer moves (scaled by speed / cutting speed)."""
+
+
+class SupportImu(_Section):
+    """9-axis MEMS units on the canopies of selected supports (002 section 2)."""
+
+    supports: list[Annotated[int, Field(ge=0)]] = []
+    rate_hz: Rate = 50.0
+    grade: str = "icm-42605"
+    shearer_disturbance_t: NonNegative = 5.0e-6
+    """Peak magnetic disturbance at a support while the shearer passes it (falls off over a pan length)."""
+
+
+class Sensors(_Section):
+    imu: Imu = Imu()
+    vibration: Vibration = Vibration()
+    odometer: Odometer = Odometer()
+    pushram: PushRam = PushRam()
+    mag: Magnetometer = Magnetometer()
+    support_imu: SupportImu = SupportImu()
+
+
+FaultKind = Literal["ram_stuck", "ram_offset", "ram_drift", "ram_scale", "ram_dropout", "ram_noise_burst",
+                    "push_shortfall", "rail_deviation", "mag_interference", "odometer_slip"]
+
+
+class Fault(_Section):
+    """A fault injected on a sensor (or, for push_shortfall and rail_deviation, on the face) in a window.
+
+    value: ram_stuck (ignored: the reading freezes), ram_offset [m], ram_drift [m/s], ram_scale (relative
+    error), ram_dropout (ignored: readings invalid), ram_noise_burst (standard deviation [m]), push_shortfall
+    (metres the pan falls short while the sensor reads the full stroke), rail_deviation (horizontal angle
+    [deg] per two chutes, 004 section V), mag_interference (field magnitude [T]), odometer_slip (fraction of
+    travel the encoder misses).
+    """
+
+    kind: FaultKind
+    t_start_s: NonNegative
+    t_end_s: NonNegative
+    target: Annotated[int, Field(ge=0)] | None = None
+    """Support index for ram faults and push_shortfall; None for the others."""
+    value: Finite = 0.0
