@@ -106,7 +106,6 @@ def normal_gravity(lat, h):
     with ``m = omega^2 a^2 b / GM``.
     """
     s2 = np.sin(lat) ** 2
-    h = np.asarray(h, dtype=float)
     gamma0 = GAMMA_E * (1.0 + K * s2) / np.sqrt(1.0 - E2 * s2)
     corr = 1.0 - 2.0 / A * (1.0 + F + M - 2.0 * F * s2) * h + 3.0 * h**2 / A**2
     return gamma0 * corr
