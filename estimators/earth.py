@@ -34,6 +34,7 @@ __all__ = [
     "check_latitude",
     "radii",
     "normal_gravity",
+    "normal_gravity_kernel",
     "gravity_n",
     "earth_rate_n",
     "transport_rate_n",
@@ -93,7 +94,7 @@ def radii(lat):
 
 
 def normal_gravity(lat, h):
-    """Magnitude of WGS-84 normal gravity [m/s^2] at geodetic ``lat``, height ``h``.
+    """Magnitude of WGS-84 normal gravity [m/s^2] at geodetic ``lat``, height ``h`` (array-likes broadcast).
 
     Somigliana on the ellipsoid::
 
@@ -105,6 +106,11 @@ def normal_gravity(lat, h):
 
     with ``m = omega^2 a^2 b / GM``.
     """
+    return normal_gravity_kernel(np.asarray(lat, dtype=float), np.asarray(h, dtype=float))
+
+
+def normal_gravity_kernel(lat, h):
+    """:func:`normal_gravity` for floats or arrays only: plain arithmetic that numba compiles as it is."""
     s2 = np.sin(lat) ** 2
     gamma0 = GAMMA_E * (1.0 + K * s2) / np.sqrt(1.0 - E2 * s2)
     corr = 1.0 - 2.0 / A * (1.0 + F + M - 2.0 * F * s2) * h + 3.0 * h**2 / A**2

@@ -24,7 +24,7 @@ import numpy as np
 from estimators import earth
 
 _radii = nb.njit(cache=True)(earth.radii)
-_gravity = nb.njit(cache=True)(earth.normal_gravity)
+_gravity = nb.njit(cache=True)(earth.normal_gravity_kernel)
 _OMEGA = earth.OMEGA_IE
 
 

@@ -10,7 +10,7 @@ from pygeomag import GeoMag, decimal_year_from_date
 
 from estimators import earth
 from estimators.logformat import MAG, SUPPORT_IMU, check_table, make_table
-from estimators.rotations import euler_to_mat, euler_to_quat, quat_conj, quat_rotate
+from estimators.rotations import euler_to_mat, euler_to_quat, quat_conj, quat_rotate, quat_to_mat
 from twin.layout import FaceFrame
 from twin.magnetometer import (
     earth_field_n,
@@ -21,7 +21,13 @@ from twin.magnetometer import (
     tilt_compensated_heading,
 )
 from twin.scenario import parse_scenario
-from twin.support_units import DISTURBANCE_RANGE_PANS, canopy_motion, canopy_rows, support_imu_stream
+from twin.support_units import (
+    DISTURBANCE_RANGE_PANS,
+    canopy_attitude_n,
+    canopy_motion,
+    canopy_rows,
+    support_imu_stream,
+)
 
 SITE = (34.27, 117.18, 36.0)
 DATE = "2026-06-01"
@@ -227,13 +233,15 @@ def test_support_units_at_rest_sense_gravity_earth_rate_and_earth_field():
     ids = [3, 20]
     scn = scenario({"noise_t": 0.0}, {"supports": ids, "grade": "ideal"})
     shearer = passing_shearer(duration=60.0, speed=0.0, s0=5.0)  # parked next to support 3
-    out = support_imu_stream(scn, support_truth(scn, range(44)), shearer, np.random.default_rng(0), [])
+    truth = support_truth(scn, range(44))
+    out = support_imu_stream(scn, truth, shearer, np.random.default_rng(0), [])
     check_table(SUPPORT_IMU, make_table(SUPPORT_IMU, out), "support_imu")
     assert out["t"].size == 2 * 3001 and np.all(out["support"][:2] == ids)
     w_ie_t = earth.earth_rate_n(np.radians(scn.site.lat_deg))
     for j in ids:
         c_cn, c_ct, lat, h = expected_static(scn, j)
-        _, gyro, accel, mag = unit(out, j)
+        t, gyro, accel, mag = unit(out, j)
+        np.testing.assert_allclose(quat_to_mat(canopy_attitude_n(scn, truth, j, t[:3])), [c_cn] * 3, atol=1e-15)
         np.testing.assert_allclose(accel, np.broadcast_to(-c_cn.T @ earth.gravity_n(lat, h), accel.shape),
                                    atol=1e-12)
         assert accel[0] == pytest.approx([0.0, 0.0, earth.normal_gravity(lat, h)], abs=1e-3)
@@ -298,6 +306,9 @@ def test_support_advance_moves_and_tilts_the_canopy_smoothly():
         if dtilt == 0.0:  # no lever-arm motion: the smooth step's peak speed, forwards
             x_t = mat_tf[:, 0]
             assert mo.v_t[t.size // 2] @ x_t == pytest.approx(0.8 / 12 * 1.875, rel=1e-9)
+            # Half way, the base has risen half the rise and the canopy is lowered by supports.lower_m.
+            dz = mo.p_t[t.size // 2, 2] - mo.p_t[0, 2]
+            assert dz == pytest.approx(rise / 2 - scn.supports.lower_m * np.cos(tilt0), abs=1e-12)
         # The canopy dips by the lowering while moving: the vertical velocity changes sign.
         assert (mo.v_t[:, 2] < 0).any() and (mo.v_t[:, 2] > 0).any()
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from estimators.csvio import export_csv, import_csv
 from estimators.logformat import STREAMS, LogError, make_table, write_stream
 from twin.rundir import RunDirError, atomic_run_dir, check_target
 from twin.scenario import ScenarioError, load_scenario, scenario_to_toml
@@ -25,17 +26,22 @@ def default_scenario() -> Path:
     return Path(str(resources.files("twin.scenarios") / "default.toml"))
 
 
-def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: bool = False) -> Path:
-    """Simulate a scenario into a run directory; returns its path."""
+def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: bool = False,
+        trials: int = 1) -> Path:
+    """Simulate a scenario into a run directory (sensor trial 0 at the top, trials 1.. in trials/NNN/)."""
+    from twin.faults import check_faults_in_run
+    from twin.haulage import Timeline
     from twin.recording import write_recording
     from twin.report import format_summary, twin_summary
+    from twin.sensors import imu_truth, sensor_streams
     from twin.simulate import simulate
 
     scn = load_scenario(scenario, seed)
+    check_faults_in_run(scn, Timeline(scn).duration)
     out = Path(out) if out is not None else Path("runs") / f"{scn.name}-seed{scn.seed}"
     check_target(out, force)
     start = time.perf_counter()
-    stages = {"face": 0.6, "shearer": 0.25, "write": 0.1, "recording": 0.05}
+    stages = {"face": 0.5, "shearer": 0.2, "sensors": 0.15, "write": 0.1, "recording": 0.05}
     bar = tqdm(total=100, desc=f"longwall run {scn.name}", disable=quiet, leave=False,
                bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}")
     done = {k: 0.0 for k in stages}
@@ -50,9 +56,22 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
         tables = {name: make_table(STREAMS[name], cols) for name, cols in result.tables.items()}
         for name, table in tables.items():
             write_stream(staging, STREAMS[name], table)
+        ideal = imu_truth(scn, result.tables["truth_shearer"])
+        for trial in range(trials):
+            streams = sensor_streams(scn, result.tables, ideal, trial)
+            target = staging if trial == 0 else staging / "trials" / f"{trial:03d}"
+            target.mkdir(parents=True, exist_ok=True)
+            for name, cols in streams.items():
+                table = make_table(STREAMS[name], cols)
+                write_stream(target, STREAMS[name], table)
+                if trial == 0:
+                    tables[name] = table
+            progress("sensors", (trial + 1) / trials)
         (staging / "scenario.toml").write_text(scenario_to_toml(scn))
         progress("write", 1.0)
-        write_recording(staging / "run.rrd", scn, tables, result.floor_grid.mesh_t(result.frame))
+        write_recording(staging / "run.rrd", scn, {k: v for k, v in tables.items() if k.startswith("truth_")},
+                        result.floor_grid.mesh_t(result.frame),
+                        sensors={k: v for k, v in tables.items() if not k.startswith("truth_")})
         progress("recording", 1.0)
         bar.close()
         summary = twin_summary(scn, result.tables, time.perf_counter() - start)
@@ -72,17 +91,33 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--seed", type=int, help="override the scenario's random seed")
     p_run.add_argument("--force", action="store_true", help="replace an existing non-empty run directory")
     p_run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    p_run.add_argument("--trials", type=int, default=1,
+                       help="Monte Carlo: sensor-error trials drawn from the same truth (default 1)")
     p_view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     p_view.add_argument("run_dir", type=Path)
+    p_imp = sub.add_parser("import", help="turn CSV files (one per stream, name[unit] headers) into a run directory")
+    p_imp.add_argument("csv_dir", type=Path)
+    p_imp.add_argument("--out", type=Path, required=True, help="run directory to create")
+    p_exp = sub.add_parser("export", help="write a run directory's streams as CSV files")
+    p_exp.add_argument("run_dir", type=Path)
+    p_exp.add_argument("--csv", type=Path, required=True, help="folder for the CSV files")
     args = parser.parse_args(argv)
     try:
         if args.command == "run":
             if args.seed is not None and args.seed < 0:
                 raise ScenarioError(f"--seed: must be >= 0 (got {args.seed})")
-            run(args.scenario or default_scenario(), args.out, args.seed, args.force, args.quiet)
+            if args.trials < 1:
+                raise ScenarioError(f"--trials: must be >= 1 (got {args.trials})")
+            run(args.scenario or default_scenario(), args.out, args.seed, args.force, args.quiet, args.trials)
         elif args.command == "view":
             from twin.recording import open_viewer
             open_viewer(args.run_dir)
+        elif args.command == "import":
+            report = import_csv(args.csv_dir, args.out)
+            print(report.summary())
+        elif args.command == "export":
+            for path in export_csv(args.run_dir, args.csv):
+                print(path)
     except (ScenarioError, RunDirError, LogError, FileNotFoundError) as err:
         print(f"longwall: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -27,7 +27,7 @@ import numba as nb
 import numpy as np
 
 from estimators import earth
-from estimators.rotations import euler_to_mat, quat_conj, quat_mul, quat_rotate
+from estimators.rotations import euler_to_mat, quat_conj, quat_rotate
 from twin.haulage import STOPPED
 from twin.scenario import Scenario
 from twin.sensor_config import VibrationState
@@ -77,14 +77,7 @@ def machine_state(scn: Scenario, phase: np.ndarray, s: np.ndarray) -> np.ndarray
     return state
 
 
-@nb.njit(cache=True)
-def _cross(a, b, out):
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
-
-
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _hermite(y0, y1, d0, d1, h, x):
     """Cubic Hermite value and derivative at x in [0, 1] of an interval of length h."""
     x2, x3 = x * x, x * x * x
@@ -93,85 +86,128 @@ def _hermite(y0, y1, d0, d1, h, x):
     return val, der
 
 
+@nb.njit(cache=True, inline="always")
+def _cross3(a0, a1, a2, b0, b1, b2):
+    return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+
+
 @nb.njit(cache=True)
+def _interval(k, t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs, nodes, weights,
+              dtheta, dv, sin0, cos0):
+    """Increments of interval k (scratch sin0/cos0: (n_states, n_tones, 6) sines and cosines at t[k-1])."""
+    n_states, n_tones = freq.shape
+    h = t[k] - t[k - 1]
+    for st in range(n_states):
+        if amp_state[k - 1, st] == 0.0 and amp_state[k, st] == 0.0:
+            continue
+        for tone in range(n_tones):
+            om = 2 * np.pi * freq[st, tone]
+            for i in range(3):
+                sin0[st, tone, i] = np.sin(om * t[k - 1] + ph_ang[i, tone])
+                cos0[st, tone, i] = np.cos(om * t[k - 1] + ph_ang[i, tone])
+                sin0[st, tone, 3 + i] = np.sin(om * t[k - 1] + ph_lin[i, tone])
+                cos0[st, tone, 3 + i] = np.cos(om * t[k - 1] + ph_lin[i, tone])
+    th0 = th1 = th2 = v0 = v1 = v2 = 0.0
+    for q in range(nodes.size):
+        x = 0.5 * (nodes[q] + 1.0)
+        wb0, wd0 = _hermite(w[k - 1, 0], w[k, 0], dw[k - 1, 0], dw[k, 0], h, x)
+        wb1, wd1 = _hermite(w[k - 1, 1], w[k, 1], dw[k - 1, 1], dw[k, 1], h, x)
+        wb2, wd2 = _hermite(w[k - 1, 2], w[k, 2], dw[k - 1, 2], dw[k, 2], h, x)
+        fb0, _ = _hermite(f[k - 1, 0], f[k, 0], df[k - 1, 0], df[k, 0], h, x)
+        fb1, _ = _hermite(f[k - 1, 1], f[k, 1], df[k - 1, 1], df[k, 1], h, x)
+        fb2, _ = _hermite(f[k - 1, 2], f[k, 2], df[k - 1, 2], df[k, 2], h, x)
+        p0 = p1 = p2 = pd0 = pd1 = pd2 = 0.0
+        u0 = u1 = u2 = ud0 = ud1 = ud2 = uu0 = uu1 = uu2 = 0.0
+        for st in range(n_states):
+            wgt = (1 - x) * amp_state[k - 1, st] + x * amp_state[k, st]
+            if wgt == 0.0:
+                continue
+            for tone in range(n_tones):
+                om = 2 * np.pi * freq[st, tone]
+                cn, sn = np.cos(om * x * h), np.sin(om * x * h)
+                for i in range(3):
+                    a_ang, a_lin = wgt * ang_amp[st, tone, i], wgt * lin_amp[st, tone, i]
+                    s_a = sin0[st, tone, i] * cn + cos0[st, tone, i] * sn
+                    c_a = cos0[st, tone, i] * cn - sin0[st, tone, i] * sn
+                    s_l = sin0[st, tone, 3 + i] * cn + cos0[st, tone, 3 + i] * sn
+                    c_l = cos0[st, tone, 3 + i] * cn - sin0[st, tone, 3 + i] * sn
+                    if i == 0:
+                        p0 += a_ang * s_a
+                        pd0 += a_ang * om * c_a
+                        u0 += a_lin * s_l
+                        ud0 += a_lin * om * c_l
+                        uu0 -= a_lin * om * om * s_l
+                    elif i == 1:
+                        p1 += a_ang * s_a
+                        pd1 += a_ang * om * c_a
+                        u1 += a_lin * s_l
+                        ud1 += a_lin * om * c_l
+                        uu1 -= a_lin * om * om * s_l
+                    else:
+                        p2 += a_ang * s_a
+                        pd2 += a_ang * om * c_a
+                        u2 += a_lin * s_l
+                        ud2 += a_lin * om * c_l
+                        uu2 -= a_lin * om * om * s_l
+        # C_s^b = M Exp(phi): Exp(phi) = I + a [phi]x + b [phi]x^2, J_r = I - b [phi]x + c [phi]x^2;
+        # the envelope's own slope is neglected (it changes over seconds).
+        theta2 = p0 * p0 + p1 * p1 + p2 * p2
+        theta = np.sqrt(theta2)
+        if theta < 1e-4:
+            a, b, c = 1.0 - theta2 / 6, 0.5 - theta2 / 24, 1.0 / 6 - theta2 / 120
+        else:
+            a, b, c = np.sin(theta) / theta, (1 - np.cos(theta)) / theta2, (theta - np.sin(theta)) / (theta2 * theta)
+        # Vibration rate J_r(phi) dphi/dt = dphi - b phi x dphi + c phi x (phi x dphi).
+        x0, x1, x2 = _cross3(p0, p1, p2, pd0, pd1, pd2)
+        y0, y1, y2 = _cross3(p0, p1, p2, x0, x1, x2)
+        wv0, wv1, wv2 = pd0 - b * x0 + c * y0, pd1 - b * x1 + c * y1, pd2 - b * x2 + c * y2
+        # Specific force of the sensor's point in b: f + dw x rho + w x (w x rho) + 2 w x du + d2u.
+        r0, r1, r2 = lever[0] + u0, lever[1] + u1, lever[2] + u2
+        a0, a1, a2 = _cross3(wd0, wd1, wd2, r0, r1, r2)
+        e0, e1, e2 = _cross3(wb0, wb1, wb2, r0, r1, r2)
+        g0, g1, g2 = _cross3(wb0, wb1, wb2, e0, e1, e2)
+        j0, j1, j2 = _cross3(wb0, wb1, wb2, ud0, ud1, ud2)
+        fp0, fp1, fp2 = fb0 + a0 + g0 + 2 * j0 + uu0, fb1 + a1 + g1 + 2 * j1 + uu1, fb2 + a2 + g2 + 2 * j2 + uu2
+        # Into s: C_b^s v = Exp(-phi) M^T v = v' - a phi x v' + b phi x (phi x v'), v' = M^T v.
+        m0 = mat_bs[0, 0] * wb0 + mat_bs[1, 0] * wb1 + mat_bs[2, 0] * wb2
+        m1 = mat_bs[0, 1] * wb0 + mat_bs[1, 1] * wb1 + mat_bs[2, 1] * wb2
+        m2 = mat_bs[0, 2] * wb0 + mat_bs[1, 2] * wb1 + mat_bs[2, 2] * wb2
+        x0, x1, x2 = _cross3(p0, p1, p2, m0, m1, m2)
+        y0, y1, y2 = _cross3(p0, p1, p2, x0, x1, x2)
+        ws0, ws1, ws2 = m0 - a * x0 + b * y0 + wv0, m1 - a * x1 + b * y1 + wv1, m2 - a * x2 + b * y2 + wv2
+        m0 = mat_bs[0, 0] * fp0 + mat_bs[1, 0] * fp1 + mat_bs[2, 0] * fp2
+        m1 = mat_bs[0, 1] * fp0 + mat_bs[1, 1] * fp1 + mat_bs[2, 1] * fp2
+        m2 = mat_bs[0, 2] * fp0 + mat_bs[1, 2] * fp1 + mat_bs[2, 2] * fp2
+        x0, x1, x2 = _cross3(p0, p1, p2, m0, m1, m2)
+        y0, y1, y2 = _cross3(p0, p1, p2, x0, x1, x2)
+        wq = weights[q]
+        th0 += wq * ws0
+        th1 += wq * ws1
+        th2 += wq * ws2
+        v0 += wq * (m0 - a * x0 + b * y0)
+        v1 += wq * (m1 - a * x1 + b * y1)
+        v2 += wq * (m2 - a * x2 + b * y2)
+    dtheta[k, 0], dtheta[k, 1], dtheta[k, 2] = 0.5 * h * th0, 0.5 * h * th1, 0.5 * h * th2
+    dv[k, 0], dv[k, 1], dv[k, 2] = 0.5 * h * v0, 0.5 * h * v1, 0.5 * h * v2
+
+
+@nb.njit(cache=True, parallel=True)
 def _increments_kernel(t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs,
                        nodes, weights, dtheta, dv):
     """Gauss-Legendre integration of the sensor's rate and specific force over each interval (t[k-1], t[k]].
 
-    amp_state (K, n_states): the weight of each machine state at each sample (a smooth envelope, linear
-    between samples). Sines at the nodes come from one sine and cosine per interval and tone, turned by
-    the node offsets (angle addition), so the cost is a few trigonometric calls per sample."""
-    n_states, n_tones, n_nodes = freq.shape[0], freq.shape[1], nodes.size
-    w_b, w_dot, f_b = np.empty(3), np.empty(3), np.empty(3)
-    phi, phi_dot, u, u_dot, u_ddot = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    rho, tmp, tmp2, f_pt, w_vib = np.empty(3), np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    kx, exp_phi, jr, c_sb = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
-    eye = np.eye(3)
-    for k in range(1, t.size):
-        h = t[k] - t[k - 1]
-        acc_th = np.zeros(3)
-        acc_v = np.zeros(3)
-        for q in range(n_nodes):
-            x = 0.5 * (nodes[q] + 1.0)
-            for i in range(3):
-                w_b[i], w_dot[i] = _hermite(w[k - 1, i], w[k, i], dw[k - 1, i], dw[k, i], h, x)
-                f_b[i], _ = _hermite(f[k - 1, i], f[k, i], df[k - 1, i], df[k, i], h, x)
-                phi[i] = phi_dot[i] = u[i] = u_dot[i] = u_ddot[i] = 0.0
-            for st in range(n_states):
-                wgt = (1 - x) * amp_state[k - 1, st] + x * amp_state[k, st]
-                if wgt == 0.0:
-                    continue
-                for tone in range(n_tones):
-                    om = 2 * np.pi * freq[st, tone]
-                    c_node, s_node = np.cos(om * x * h), np.sin(om * x * h)
-                    for i in range(3):
-                        a_ang, a_lin = wgt * ang_amp[st, tone, i], wgt * lin_amp[st, tone, i]
-                        s0, c0 = np.sin(om * t[k - 1] + ph_ang[i, tone]), np.cos(om * t[k - 1] + ph_ang[i, tone])
-                        s_a, c_a = s0 * c_node + c0 * s_node, c0 * c_node - s0 * s_node
-                        s0, c0 = np.sin(om * t[k - 1] + ph_lin[i, tone]), np.cos(om * t[k - 1] + ph_lin[i, tone])
-                        s_l, c_l = s0 * c_node + c0 * s_node, c0 * c_node - s0 * s_node
-                        phi[i] += a_ang * s_a
-                        phi_dot[i] += a_ang * om * c_a
-                        u[i] += a_lin * s_l
-                        u_dot[i] += a_lin * om * c_l
-                        u_ddot[i] -= a_lin * om * om * s_l
-            # C_b^s = (M Exp(phi))^T; the envelope's own slope is neglected (it changes over seconds).
-            theta2 = phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2
-            theta = np.sqrt(theta2)
-            if theta < 1e-4:
-                a, b, c = 1.0 - theta2 / 6, 0.5 - theta2 / 24, 1.0 / 6 - theta2 / 120
-            else:
-                a = np.sin(theta) / theta
-                b = (1 - np.cos(theta)) / theta2
-                c = (theta - np.sin(theta)) / (theta2 * theta)
-            kx[0, 0], kx[0, 1], kx[0, 2] = 0.0, -phi[2], phi[1]
-            kx[1, 0], kx[1, 1], kx[1, 2] = phi[2], 0.0, -phi[0]
-            kx[2, 0], kx[2, 1], kx[2, 2] = -phi[1], phi[0], 0.0
-            for r in range(3):
-                for col in range(3):
-                    kk = phi[r] * phi[col] - theta2 * eye[r, col]  # [phi x]^2
-                    exp_phi[r, col] = eye[r, col] + a * kx[r, col] + b * kk
-                    jr[r, col] = eye[r, col] - b * kx[r, col] + c * kk
-            for r in range(3):
-                for col in range(3):
-                    c_sb[col, r] = mat_bs[r, 0] * exp_phi[0, col] + mat_bs[r, 1] * exp_phi[1, col] + \
-                        mat_bs[r, 2] * exp_phi[2, col]
-                rho[r] = lever[r] + u[r]
-            # f of the point: f_b + dw x rho + w x (w x rho) + 2 w x du + d2u
-            _cross(w_dot, rho, f_pt)
-            _cross(w_b, rho, tmp)
-            _cross(w_b, tmp, tmp2)
-            _cross(w_b, u_dot, tmp)
-            for i in range(3):
-                f_pt[i] += f_b[i] + tmp2[i] + 2 * tmp[i] + u_ddot[i]
-            for i in range(3):
-                w_vib[i] = jr[i, 0] * phi_dot[0] + jr[i, 1] * phi_dot[1] + jr[i, 2] * phi_dot[2]
-                acc_th[i] += weights[q] * (c_sb[i, 0] * w_b[0] + c_sb[i, 1] * w_b[1] + c_sb[i, 2] * w_b[2]
-                                           + w_vib[i])
-                acc_v[i] += weights[q] * (c_sb[i, 0] * f_pt[0] + c_sb[i, 1] * f_pt[1] + c_sb[i, 2] * f_pt[2])
-        for i in range(3):
-            dtheta[k, i] = 0.5 * h * acc_th[i]
-            dv[k, i] = 0.5 * h * acc_v[i]
+    amp_state (K, n_states) weighs each machine state's tones at each sample (a smooth envelope, linear
+    between samples). The sines at the nodes come from one sine and cosine per interval and tone, turned by
+    the node offsets (angle addition). Intervals are independent: they run in parallel, in chunks with
+    their own scratch arrays."""
+    n_chunks = 64
+    size = (t.size - 1 + n_chunks - 1) // n_chunks
+    for chunk in nb.prange(n_chunks):
+        sin0 = np.zeros((freq.shape[0], freq.shape[1], 6))
+        cos0 = np.zeros((freq.shape[0], freq.shape[1], 6))
+        for k in range(1 + chunk * size, min(t.size, 1 + (chunk + 1) * size)):
+            _interval(k, t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs, nodes,
+                      weights, dtheta, dv, sin0, cos0)
 
 
 def sensor_increments(t: np.ndarray, w_ib_b: np.ndarray, f_b: np.ndarray, amp_state: np.ndarray,
@@ -187,18 +223,18 @@ def sensor_increments(t: np.ndarray, w_ib_b: np.ndarray, f_b: np.ndarray, amp_st
     return dtheta, dv
 
 
-def gravity_at_lever_arm_b(shearer: dict[str, np.ndarray], lever_arm_b: np.ndarray, lat0: float, lon0: float,
-                           h0: float) -> np.ndarray:
+def gravity_at_lever_arm_b(shearer: dict[str, np.ndarray], lever_arm_b: np.ndarray) -> np.ndarray:
     """g at the sensor minus g at the body reference point, in b (K, 3): the gravity gradient over the lever
-    arm, ~3e-6 s^-2 per metre up and the turn of the vertical, 1.6e-7 rad per metre across. The truth's
-    f^b holds the reference point's gravity; the sensor feels its own."""
+    arm d_n = C_nb r. Across, the vertical turns by d/R (g_E = -gamma d_E / (R_N + h), g_N = -gamma d_N /
+    (R_M + h)); up, gamma falls by about 3.1e-6 s^-2 per metre. Second-order terms are (r / R)^2 ~ 1e-14."""
     q_nb = np.column_stack([shearer[f"q_nb_{a}"] for a in "wxyz"])
-    q_tn = quat_mul(quat_conj(earth.quat_en(lat0, lon0))[None], earth.quat_en(shearer["lat"], shearer["lon"]))
-    p_t = np.column_stack([shearer[f"p_t_{a}"] for a in "enu"])
-    lat_s, lon_s, h_s = earth.enu_to_lla(p_t + quat_rotate(quat_mul(q_tn, q_nb), lever_arm_b[None]), lat0, lon0, h0)
-    q_ts = quat_mul(quat_conj(earth.quat_en(lat0, lon0))[None], earth.quat_en(lat_s, lon_s))
-    g_sensor_n = quat_rotate(quat_mul(quat_conj(q_tn), q_ts), earth.gravity_n(lat_s, h_s))
-    return quat_rotate(quat_conj(q_nb), g_sensor_n - earth.gravity_n(shearer["lat"], shearer["h"]))
+    lat, h = shearer["lat"], shearer["h"]
+    d_n = quat_rotate(q_nb, np.broadcast_to(lever_arm_b, (lat.size, 3)))
+    r_m, r_n = earth.radii(lat)
+    gamma = earth.normal_gravity(lat, h)
+    dg_n = np.column_stack([-gamma * d_n[:, 0] / (r_n + h), -gamma * d_n[:, 1] / (r_m + h),
+                            gamma - earth.normal_gravity(lat, h + d_n[:, 2])])
+    return quat_rotate(quat_conj(q_nb), dg_n)
 
 
 def mounting_matrix(misalignment_deg) -> np.ndarray:
@@ -228,9 +264,8 @@ def ideal_increments(scn: Scenario, shearer: dict[str, np.ndarray], rng: np.rand
         kernel = np.ones(width) / width
         amp_state = np.column_stack([np.convolve(amp_state[:, j], kernel, mode="same") for j in range(3)])
     lever = np.asarray(cfg.imu.lever_arm_m, float)
-    site = scn.site
     # f = a - g: the sensor's specific force loses what its own gravity adds over the reference point's.
-    f = f - gravity_at_lever_arm_b(shearer, lever, np.radians(site.lat_deg), np.radians(site.lon_deg), site.height_m)
+    f = f - gravity_at_lever_arm_b(shearer, lever)
     dtheta, dv = sensor_increments(t, w, f, amp_state, tones, lever, mounting_matrix(cfg.imu.misalignment_deg))
     return {"t": t, **{f"dtheta_{a}": dtheta[:, i] for i, a in enumerate("xyz")},
             **{f"dv_{a}": dv[:, i] for i, a in enumerate("xyz")}}

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute  # noqa: F401  (pa.compute)
 import rerun as rr
 import rerun.blueprint as rrb
 
@@ -296,6 +297,65 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate
     rec.send_columns("plots/cycle", indexes=index, columns=rr.Scalars.columns(scalars=cycle.astype(float)))
 
 
+def _mean_rate(t: np.ndarray, values: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Block means of increments per second at about rate_hz (sums over blocks / their duration)."""
+    if t.size < 2:
+        return t, values
+    dt = float(np.median(np.diff(t)))
+    step = max(1, int(round(1.0 / (rate_hz * dt))))
+    n = (t.size // step) * step
+    blocks = values[:n].reshape(n // step, step, -1).sum(axis=1)
+    return t[step - 1:n:step], blocks / (step * dt)
+
+
+def _series(rec: rr.RecordingStream, entity: str, t: np.ndarray, values: np.ndarray, names: list[str]) -> None:
+    rec.log(entity, rr.SeriesLines(names=names), static=True)
+    rec.send_columns(entity, indexes=[_time_column(t)], columns=rr.Scalars.columns(scalars=values))
+
+
+def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz: float) -> None:
+    """Every sensor channel as time series (fast streams averaged to about rate_hz), fault windows as
+    0/1 steps, the ram readings as a bar chart per support."""
+    if "imu" in sensors:
+        imu = sensors["imu"]
+        t = _col(imu, "t")
+        for name, prefix, label in (("gyro", "dtheta", "rad/s"), ("accel", "dv", "m/s^2")):
+            tt, rate = _mean_rate(t, _vec(imu, prefix, "xyz"), rate_hz)
+            _series(rec, f"sensors/imu/{name}", tt, rate, [f"{a} [{label}]" for a in "xyz"])
+    if "odometer" in sensors:
+        odo = sensors["odometer"]
+        _series(rec, "sensors/odometer/distance", _col(odo, "t"), _col(odo, "distance")[:, None], ["distance [m]"])
+    if "mag" in sensors:
+        mag = sensors["mag"]
+        keep = decimate(_col(mag, "t"), rate_hz)
+        _series(rec, "sensors/mag", _col(mag, "t")[keep], _vec(mag, "b", "xyz")[keep] * 1e6,
+                [f"{a} [uT]" for a in "xyz"])
+    if "support_imu" in sensors:
+        units = sensors["support_imu"]
+        for j in np.unique(_col(units, "support")):
+            rows = units.filter(pa.compute.equal(units.column("support"), int(j)))
+            keep = decimate(_col(rows, "t"), rate_hz)
+            sub = rows.take(pa.array(keep))
+            _series(rec, f"sensors/support_imu/{j}/accel", _col(sub, "t"), _vec(sub, "accel", "xyz"),
+                    [f"{a} [m/s^2]" for a in "xyz"])
+            _series(rec, f"sensors/support_imu/{j}/gyro", _col(sub, "t"), _vec(sub, "gyro", "xyz"),
+                    [f"{a} [rad/s]" for a in "xyz"])
+    if "pushram" in sensors:
+        ram = sensors["pushram"]
+        t, support = _col(ram, "t"), _col(ram, "support")
+        times, inverse = np.unique(t, return_inverse=True)
+        grid = np.full((times.size, int(support.max()) + 1), np.nan)
+        grid[inverse, support] = _col(ram, "extension")
+        keep = decimate(times, min(rate_hz, 0.2))
+        _send_bar_chart(rec, "sensors/pushram", times[keep], grid[keep])
+    if "faults" in sensors and sensors["faults"].num_rows:
+        faults = sensors["faults"]
+        for kind, target, t0, t1 in zip(faults.column("kind").to_pylist(), _col(faults, "target"),
+                                       _col(faults, "t_start"), _col(faults, "t_end")):
+            name = f"faults/{kind}" + (f"_{target}" if target >= 0 else "")
+            _series(rec, name, np.array([0.0, t0, t1]), np.array([[0.0], [1.0], [0.0]]), [f"{name} active"])
+
+
 def blueprint() -> rrb.Blueprint:
     """3-D face view taking most of the window, plots in a column on the right."""
     return rrb.Blueprint(
@@ -307,6 +367,8 @@ def blueprint() -> rrb.Blueprint:
                 rrb.BarChartView(name="Horizontal bend per chute [deg]", origin="plots/bend_horizontal_deg"),
                 rrb.BarChartView(name="Vertical bend per chute [deg]", origin="plots/bend_vertical_deg"),
                 rrb.BarChartView(name="Ram length [m]", origin="plots/ram_length"),
+                rrb.TimeSeriesView(name="Sensors", origin="sensors", contents="sensors/**"),
+                rrb.TimeSeriesView(name="Fault windows", origin="faults"),
             ),
             column_shares=[3, 1],
         ),
@@ -319,7 +381,8 @@ def blueprint() -> rrb.Blueprint:
 
 
 def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
-                    floor_mesh: tuple[np.ndarray, np.ndarray], shearer_rate_hz: float = 10.0) -> None:
+                    floor_mesh: tuple[np.ndarray, np.ndarray], shearer_rate_hz: float = 10.0,
+                    sensors: dict[str, pa.Table] | None = None) -> None:
     """Write the truth streams of a run as a Rerun recording (.rrd) with its blueprint.
 
     `truth` maps "truth_shearer", "truth_pans", "truth_supports" (required) and "truth_cycles" (optional,
@@ -343,6 +406,7 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
         _log_pans(rec, scn, truth["truth_pans"])
         _log_supports(rec, scn, truth["truth_supports"])
         _log_shearer(rec, scn, truth["truth_shearer"], shearer_rate_hz)
+        _log_sensors(rec, sensors or {}, shearer_rate_hz)
         rec.flush()
     finally:
         rec.disconnect()

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 from twin import snake
+from twin.imu_grades import GRADES
 from twin.sensor_config import Fault, Sensors
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -184,6 +185,14 @@ class Scenario(_Section):
             if needs_target and (fault.target is None or fault.target >= n_supports):
                 raise ValueError(f"faults[{k}]: {fault.kind} needs a target support 0..{n_supports - 1} "
                                  f"(got {fault.target})")
+        for where, name in (("sensors.imu.grade", self.sensors.imu.grade),
+                            ("sensors.support_imu.grade", self.sensors.support_imu.grade)):
+            if name not in GRADES:
+                raise ValueError(f"{where}: no IMU preset '{name}' (presets: {', '.join(sorted(GRADES))})")
+        ratio = self.rates.truth_hz / self.sensors.imu.rate_hz
+        if abs(ratio - round(ratio)) > 1e-9:
+            raise ValueError(f"sensors.imu.rate_hz: {self.sensors.imu.rate_hz} Hz must divide rates.truth_hz = "
+                             f"{self.rates.truth_hz} Hz (IMU increments are sums of truth intervals)")
         bad = [j for j in self.sensors.support_imu.supports if j >= n_supports]
         if bad:
             raise ValueError(f"sensors.support_imu.supports: no support {bad[0]} (supports 0..{n_supports - 1})")

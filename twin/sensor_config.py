@@ -123,5 +123,6 @@ class Fault(_Section):
     t_start_s: NonNegative
     t_end_s: NonNegative
     target: Annotated[int, Field(ge=0)] | None = None
-    """Support index for ram faults and push_shortfall; None for the others."""
+    """Support index for ram faults and push_shortfall; for mag_interference, a support whose canopy unit is
+    disturbed (None: the shearer magnetometer); None for the others."""
     value: Finite = 0.0

@@ -17,6 +17,7 @@ import numpy as np
 from estimators import logformat as lf
 from estimators.rotations import euler_to_quat, mat_to_quat, quat_mul
 from twin.face import WINDOW_MARGIN_PANS, FaceSimulator, FaceState
+from twin.faults import faults_of
 from twin.haulage import Timeline
 from twin.layout import FaceFrame, Floor, bend_angles, initial_pans, support_stations
 from twin.model import FloorGrid
@@ -159,6 +160,14 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
 
     last_target = np.zeros(sim.stations.size)
     last_moved = np.zeros(sim.stations.size, bool)
+    shortfalls = faults_of(scn.faults, "push_shortfall")
+
+    def shortfall_at(t: float) -> np.ndarray:
+        out = np.zeros(sim.stations.size)
+        for fault in shortfalls:
+            if fault.t_start_s <= t < fault.t_end_s:
+                out[fault.target] += fault.value
+        return out
 
     def event(t: float, s_trail: float | None, t_next: float, repush: bool = False) -> bool:
         """One push-advance event; `repush` pushes the last event's pans again to their targets.
@@ -167,6 +176,9 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
         nonlocal events, last_target, last_moved
         pan_target, advancing = ctrl.update(s_trail)
         region = (pan_target != last_target) | advancing | (last_moved & repush)
+        last_target = pan_target
+        # A push shortfall (a fault of the face, not of the sensor): the pan stops short while it lasts.
+        pan_target = pan_target - shortfall_at(t)
         if region.any():
             # A support near the action that is short of its advance (it stuck, or its pan was pulled
             # back) advances again.
@@ -179,7 +191,6 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
         push = sim.ram_lengths(state, shift, state.sup_x)
         target = np.where(advancing, sim.ram_lengths(state, shift, sup_x0 + ctrl.sup_target), push)
         moved = (region | advancing) & ((np.abs(push - state.ram) > RAM_DEADBAND_M) | advancing)
-        last_target = pan_target
         last_moved = moved
         if not moved.any():
             return False

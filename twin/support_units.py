@@ -127,44 +127,62 @@ class CanopyMotion:
 
 
 def canopy_motion(scn: Scenario, rows: CanopyRows, t: np.ndarray) -> CanopyMotion:
-    """The unit's attitude, tilt rate, position, velocity and acceleration at times t (module docstring)."""
+    """The unit's attitude, tilt rate, position, velocity and acceleration at times t (module docstring).
+
+    Only the samples inside a segment in which something changes are blended; elsewhere (a set support, most
+    of the time) the unit rests at its row's values.
+    """
+    t = np.asarray(t, float)
     m = rows.t.size
     i = np.clip(np.searchsorted(rows.t, t, side="right") - 1, 0, m - 1)
-    j = np.minimum(i + 1, m - 1)
-    span = rows.t[j] - rows.t[i]
-    inside = span > 0
-    tau = np.divide(t - rows.t[i], span, out=np.zeros_like(t), where=inside).clip(0.0, 1.0)
-    inv = np.divide(1.0, span, out=np.zeros_like(t), where=inside)
-    s, ds, dds = smooth_step(tau)
+    k = np.arange(m - 1)
+    changes = np.zeros(m, bool)  # segment from row k to k + 1 moves something
+    changes[:-1] = (np.any(rows.p_t[k + 1] != rows.p_t[k], axis=1) | (rows.height[k + 1] != rows.height[k])
+                    | (rows.tilt[k + 1] != rows.tilt[k]) | rows.lowered[k])
+    changes[:-1] &= rows.t[k + 1] > rows.t[k]
+    act = np.flatnonzero(changes[i] & (t > rows.t[i]))
 
-    def blend(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Value, rate, acceleration of a per-row quantity (m,) or (m, 3) blended between rows i and j."""
-        step = v[j] - v[i]  # zero after the last row (j = i), where inv is 0 too
-        if v.ndim == 2:
-            return v[i] + s[:, None] * step, (ds * inv)[:, None] * step, (dds * inv ** 2)[:, None] * step
-        return v[i] + s * step, ds * inv * step, dds * inv ** 2 * step
+    th, h = rows.tilt[i], rows.height[i]
+    base = rows.p_t[i]
+    th_v = np.zeros_like(t)
+    # Kinematics in the face-aligned frame (x advance, y along the face, z up) on the active samples:
+    # the unit sits at base + Ry(tilt) [0, 0, h].
+    v_f, a_f = np.zeros((t.size, 3)), np.zeros((t.size, 3))
+    if act.size:
+        ia = i[act]
+        span = rows.t[ia + 1] - rows.t[ia]
+        tau, inv = ((t[act] - rows.t[ia]) / span).clip(0.0, 1.0), 1.0 / span
+        s, ds, dds = smooth_step(tau)
 
-    base, base_v, base_a = blend(rows.p_t)
-    h, h_v, h_a = blend(rows.height)
-    th, th_v, th_a = blend(rows.tilt)
-    drop = np.where(rows.lowered[i] & inside, scn.supports.lower_m, 0.0)
-    b, db, ddb = lowering_bump(tau)
-    h, h_v, h_a = h - drop * b, h_v - drop * db * inv, h_a - drop * ddb * inv ** 2
+        def blend(v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            """Value, rate, acceleration of a per-row quantity (m,) or (m, 3) blended from row ia to ia + 1."""
+            step = v[ia + 1] - v[ia]
+            if v.ndim == 2:
+                return v[ia] + s[:, None] * step, (ds * inv)[:, None] * step, (dds * inv ** 2)[:, None] * step
+            return v[ia] + s * step, ds * inv * step, dds * inv ** 2 * step
 
-    # Unit offset from the base in the face-aligned frame (x advance, y along the face, z up): Ry(tilt)[0,0,h].
-    st, ct = np.sin(th), np.cos(th)
-    off_x_v = h_v * st + h * ct * th_v
-    off_z_v = h_v * ct - h * st * th_v
-    off_x_a = h_a * st + 2 * h_v * ct * th_v - h * st * th_v ** 2 + h * ct * th_a
-    off_z_a = h_a * ct - 2 * h_v * st * th_v - h * ct * th_v ** 2 - h * st * th_a
-    mat_tf = FaceFrame(np.radians(scn.face.azimuth_deg)).mat_tf
+        base_a_t = blend(rows.p_t)
+        ha, ha_v, ha_a = blend(rows.height)
+        tha, tha_v, tha_a = blend(rows.tilt)
+        drop = np.where(rows.lowered[ia], scn.supports.lower_m, 0.0)
+        b, db, ddb = lowering_bump(tau)
+        ha, ha_v, ha_a = ha - drop * b, ha_v - drop * db * inv, ha_a - drop * ddb * inv ** 2
+        st, ct = np.sin(tha), np.cos(tha)
+        v_f[act, 0] = ha_v * st + ha * ct * tha_v
+        v_f[act, 2] = ha_v * ct - ha * st * tha_v
+        a_f[act, 0] = ha_a * st + 2 * ha_v * ct * tha_v - ha * st * tha_v ** 2 + ha * ct * tha_a
+        a_f[act, 2] = ha_a * ct - 2 * ha_v * st * tha_v - ha * ct * tha_v ** 2 - ha * st * tha_a
+        th, h, base = th.copy(), h.copy(), base.copy()
+        th[act], h[act], th_v[act], base[act] = tha, ha, tha_v, base_a_t[0]
+    frame = FaceFrame(np.radians(scn.face.azimuth_deg))
+    mat_tf = frame.mat_tf
     zero = np.zeros_like(t)
-    p_t = base + np.stack([h * st, zero, h * ct], axis=-1) @ mat_tf.T
-    v_t = base_v + np.stack([off_x_v, zero, off_z_v], axis=-1) @ mat_tf.T
-    a_t = base_a + np.stack([off_x_a, zero, off_z_a], axis=-1) @ mat_tf.T
-
-    yaw = FaceFrame(np.radians(scn.face.azimuth_deg)).yaw_tf
-    q_tf = np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+    p_t = base + np.stack([h * np.sin(th), zero, h * np.cos(th)], axis=-1) @ mat_tf.T
+    v_t, a_t = v_f @ mat_tf.T, a_f @ mat_tf.T
+    if act.size:
+        v_t[act] += base_a_t[1]
+        a_t[act] += base_a_t[2]
+    q_tf = np.array([np.cos(frame.yaw_tf / 2), 0.0, 0.0, np.sin(frame.yaw_tf / 2)])
     q_y = np.stack([np.cos(th / 2), zero, np.sin(th / 2), zero], axis=-1)
     return CanopyMotion(quat_mul(np.broadcast_to(q_tf, q_y.shape), q_y), th_v, p_t, v_t, a_t)
 
