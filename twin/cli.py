@@ -27,7 +27,7 @@ def default_scenario() -> Path:
 
 
 def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: bool = False,
-        trials: int = 1) -> Path:
+        trials: int = 1, sensors: bool = True) -> Path:
     """Simulate a scenario into a run directory (sensor trial 0 at the top, trials 1.. in trials/NNN/)."""
     from twin.faults import check_faults_in_run
     from twin.haulage import Timeline
@@ -56,8 +56,8 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
         tables = {name: make_table(STREAMS[name], cols) for name, cols in result.tables.items()}
         for name, table in tables.items():
             write_stream(staging, STREAMS[name], table)
-        ideal = imu_truth(scn, result.tables["truth_shearer"])
-        for trial in range(trials):
+        ideal = imu_truth(scn, result.tables["truth_shearer"]) if sensors else None
+        for trial in range(trials if sensors else 0):
             streams = sensor_streams(scn, result.tables, ideal, trial)
             target = staging if trial == 0 else staging / "trials" / f"{trial:03d}"
             target.mkdir(parents=True, exist_ok=True)
@@ -93,6 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p_run.add_argument("--trials", type=int, default=1,
                        help="Monte Carlo: sensor-error trials drawn from the same truth (default 1)")
+    p_run.add_argument("--twin-only", action="store_true", help="truth only, no sensor streams")
     p_view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     p_view.add_argument("run_dir", type=Path)
     p_imp = sub.add_parser("import", help="turn CSV files (one per stream, name[unit] headers) into a run directory")
@@ -108,7 +109,8 @@ def main(argv: list[str] | None = None) -> int:
                 raise ScenarioError(f"--seed: must be >= 0 (got {args.seed})")
             if args.trials < 1:
                 raise ScenarioError(f"--trials: must be >= 1 (got {args.trials})")
-            run(args.scenario or default_scenario(), args.out, args.seed, args.force, args.quiet, args.trials)
+            run(args.scenario or default_scenario(), args.out, args.seed, args.force, args.quiet, args.trials,
+                not args.twin_only)
         elif args.command == "view":
             from twin.recording import open_viewer
             open_viewer(args.run_dir)
