@@ -93,8 +93,9 @@ def _cross3(a0, a1, a2, b0, b1, b2):
 
 @nb.njit(cache=True)
 def _interval(k, t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs, nodes, weights,
-              dtheta, dv, sin0, cos0):
-    """Increments of interval k (scratch sin0/cos0: (n_states, n_tones, 6) sines and cosines at t[k-1])."""
+              dtheta, dv, sin0, cos0, vib):
+    """Increments of interval k (scratch: sin0/cos0 (n_states, n_tones, 6) sines and cosines at t[k-1],
+    vib (5, 3) the vibration at a node)."""
     n_states, n_tones = freq.shape
     h = t[k] - t[k - 1]
     for st in range(n_states):
@@ -116,8 +117,7 @@ def _interval(k, t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_
         fb0, _ = _hermite(f[k - 1, 0], f[k, 0], df[k - 1, 0], df[k, 0], h, x)
         fb1, _ = _hermite(f[k - 1, 1], f[k, 1], df[k - 1, 1], df[k, 1], h, x)
         fb2, _ = _hermite(f[k - 1, 2], f[k, 2], df[k - 1, 2], df[k, 2], h, x)
-        p0 = p1 = p2 = pd0 = pd1 = pd2 = 0.0
-        u0 = u1 = u2 = ud0 = ud1 = ud2 = uu0 = uu1 = uu2 = 0.0
+        vib[:] = 0.0  # rows: phi, dphi/dt, u, du/dt, d2u/dt2 (columns x, y, z)
         for st in range(n_states):
             wgt = (1 - x) * amp_state[k - 1, st] + x * amp_state[k, st]
             if wgt == 0.0:
@@ -131,24 +131,16 @@ def _interval(k, t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_
                     c_a = cos0[st, tone, i] * cn - sin0[st, tone, i] * sn
                     s_l = sin0[st, tone, 3 + i] * cn + cos0[st, tone, 3 + i] * sn
                     c_l = cos0[st, tone, 3 + i] * cn - sin0[st, tone, 3 + i] * sn
-                    if i == 0:
-                        p0 += a_ang * s_a
-                        pd0 += a_ang * om * c_a
-                        u0 += a_lin * s_l
-                        ud0 += a_lin * om * c_l
-                        uu0 -= a_lin * om * om * s_l
-                    elif i == 1:
-                        p1 += a_ang * s_a
-                        pd1 += a_ang * om * c_a
-                        u1 += a_lin * s_l
-                        ud1 += a_lin * om * c_l
-                        uu1 -= a_lin * om * om * s_l
-                    else:
-                        p2 += a_ang * s_a
-                        pd2 += a_ang * om * c_a
-                        u2 += a_lin * s_l
-                        ud2 += a_lin * om * c_l
-                        uu2 -= a_lin * om * om * s_l
+                    vib[0, i] += a_ang * s_a
+                    vib[1, i] += a_ang * om * c_a
+                    vib[2, i] += a_lin * s_l
+                    vib[3, i] += a_lin * om * c_l
+                    vib[4, i] -= a_lin * om * om * s_l
+        p0, p1, p2 = vib[0, 0], vib[0, 1], vib[0, 2]
+        pd0, pd1, pd2 = vib[1, 0], vib[1, 1], vib[1, 2]
+        u0, u1, u2 = vib[2, 0], vib[2, 1], vib[2, 2]
+        ud0, ud1, ud2 = vib[3, 0], vib[3, 1], vib[3, 2]
+        uu0, uu1, uu2 = vib[4, 0], vib[4, 1], vib[4, 2]
         # C_s^b = M Exp(phi): Exp(phi) = I + a [phi]x + b [phi]x^2, J_r = I - b [phi]x + c [phi]x^2;
         # the envelope's own slope is neglected (it changes over seconds).
         theta2 = p0 * p0 + p1 * p1 + p2 * p2
@@ -205,9 +197,10 @@ def _increments_kernel(t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_an
     for chunk in nb.prange(n_chunks):
         sin0 = np.zeros((freq.shape[0], freq.shape[1], 6))
         cos0 = np.zeros((freq.shape[0], freq.shape[1], 6))
+        vib = np.zeros((5, 3))
         for k in range(1 + chunk * size, min(t.size, 1 + (chunk + 1) * size)):
             _interval(k, t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs, nodes,
-                      weights, dtheta, dv, sin0, cos0)
+                      weights, dtheta, dv, sin0, cos0, vib)
 
 
 def sensor_increments(t: np.ndarray, w_ib_b: np.ndarray, f_b: np.ndarray, amp_state: np.ndarray,
