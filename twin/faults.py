@@ -38,6 +38,18 @@ def window_overlap(t0: np.ndarray, t1: np.ndarray, fault: Fault) -> np.ndarray:
     return np.divide(inside, width, out=np.zeros_like(width), where=width > 0)
 
 
+SHORTFALL_SPREAD = 3
+"""A push shortfall takes the pans of this many supports on each side back with the target, tapering off:
+an AFC is a chain, so one pan cannot stand alone behind neighbours that its joints tie it to."""
+
+
+def shortfall_profile(fault: Fault, n_supports: int) -> np.ndarray:
+    """Metres each support's pan falls short under a push_shortfall fault (`value` at the target support,
+    tapering linearly to zero SHORTFALL_SPREAD + 1 supports away)."""
+    distance = np.abs(np.arange(n_supports) - fault.target)
+    return fault.value * np.clip(1.0 - distance / (SHORTFALL_SPREAD + 1), 0.0, None)
+
+
 def faults_of(faults: Iterable[Fault], *kinds: FaultKind) -> list[Fault]:
     """The faults of the given kinds, in schedule order."""
     return [f for f in faults if f.kind in kinds]

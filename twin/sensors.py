@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from twin.faults import check_faults_in_run, faults_of, faults_table, window_mask
+from twin.faults import check_faults_in_run, faults_of, faults_table, shortfall_profile, window_mask
 from twin.imu import ideal_increments
 from twin.imu_errors import apply_imu_errors
 from twin.imu_grades import grade
@@ -67,10 +67,10 @@ def sensor_streams(scn: Scenario, truth: dict[str, dict[str, np.ndarray]], ideal
     imu = {"t": ideal.t[1:], **{f"dtheta_{a}": dtheta[:, i] for i, a in enumerate("xyz")},
            **{f"dv_{a}": dv[:, i] for i, a in enumerate("xyz")}}
     pushram = pushram_stream(scn, supports, duration, trial_rng(scn, trial, _PUSHRAM), faults, shearer)
-    # A push shortfall happens at the pan, not in the sensor: the reading keeps the commanded stroke.
+    # A push shortfall happens at the pans, not in the sensors: the readings keep the commanded strokes.
     for fault in faults_of(faults, "push_shortfall"):
-        hit = window_mask(pushram["t"], fault) & (pushram["support"] == fault.target)
-        pushram["extension"] = np.where(hit, pushram["extension"] + fault.value, pushram["extension"])
+        short = shortfall_profile(fault, int(pushram["support"].max()) + 1)[pushram["support"]]
+        pushram["extension"] = pushram["extension"] + np.where(window_mask(pushram["t"], fault), short, 0.0)
     streams = {
         "imu": imu,
         "odometer": odometer_stream(scn, shearer, trial_rng(scn, trial, _ODOMETER), faults),

@@ -17,7 +17,7 @@ import numpy as np
 from estimators import logformat as lf
 from estimators.rotations import euler_to_quat, mat_to_quat, quat_mul
 from twin.face import WINDOW_MARGIN_PANS, FaceSimulator, FaceState
-from twin.faults import faults_of
+from twin.faults import faults_of, shortfall_profile
 from twin.haulage import Timeline
 from twin.layout import FaceFrame, Floor, bend_angles, initial_pans, support_stations
 from twin.model import FloorGrid
@@ -153,7 +153,7 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
     ctrl = PushAdvanceController(scn)
     state = sim.initial_supports(initial_pans(scn, floor, rng), ctrl.support_lag_m())
     sim.settle(state)
-    pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
+    pan_x0, sup_x0, ram_rest = state.pans[sim.stations, 0].copy(), state.sup_x.copy(), state.ram.copy()
     recorder = _FaceRecorder(scn, frame, state)
     length, ram_speed = scn.face.pan_length_m, scn.supports.ram_speed_m_s
     events = 0
@@ -163,11 +163,8 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
     shortfalls = faults_of(scn.faults, "push_shortfall")
 
     def shortfall_at(t: float) -> np.ndarray:
-        out = np.zeros(sim.stations.size)
-        for fault in shortfalls:
-            if fault.t_start_s <= t < fault.t_end_s:
-                out[fault.target] += fault.value
-        return out
+        return sum((shortfall_profile(f, sim.stations.size) for f in shortfalls if f.t_start_s <= t < f.t_end_s),
+                   np.zeros(sim.stations.size))
 
     def event(t: float, s_trail: float | None, t_next: float, repush: bool = False) -> bool:
         """One push-advance event; `repush` pushes the last event's pans again to their targets.
@@ -186,10 +183,10 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
             near[np.flatnonzero(region).min():np.flatnonzero(region).max() + 1] = True
             advancing |= near & (ctrl.sup_target - (state.sup_x - sup_x0) > SUPPORT_DEADBAND_M)
         # Strokes that take each pan from where it is to its target, from where its support stands; an
-        # advancing support then pulls itself up to its own target.
+        # advancing support then retracts its ram to the rest stroke, pulling itself up to its pan.
         shift = pan_target - (state.pans[sim.stations, 0] - pan_x0)
         push = sim.ram_lengths(state, shift, state.sup_x)
-        target = np.where(advancing, sim.ram_lengths(state, shift, sup_x0 + ctrl.sup_target), push)
+        target = np.where(advancing, ram_rest, push)
         moved = (region | advancing) & ((np.abs(push - state.ram) > RAM_DEADBAND_M) | advancing)
         last_moved = moved
         if not moved.any():
