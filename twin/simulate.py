@@ -153,7 +153,7 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
     ctrl = PushAdvanceController(scn)
     state = sim.initial_supports(initial_pans(scn, floor, rng), ctrl.support_lag_m())
     sim.settle(state)
-    pan_x0, sup_x0, ram_rest = state.pans[sim.stations, 0].copy(), state.sup_x.copy(), state.ram.copy()
+    pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
     recorder = _FaceRecorder(scn, frame, state)
     length, ram_speed = scn.face.pan_length_m, scn.supports.ram_speed_m_s
     events = 0
@@ -174,19 +174,22 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
         pan_target, advancing = ctrl.update(s_trail)
         region = (pan_target != last_target) | advancing | (last_moved & repush)
         last_target = pan_target
-        # A push shortfall (a fault of the face, not of the sensor): the pan stops short while it lasts.
-        pan_target = pan_target - shortfall_at(t)
+        # A push shortfall (a fault of the face, not of the sensors): the pans stop short while it lasts,
+        # and their supports, which follow them, with them.
+        short = shortfall_at(t)
+        pan_target = pan_target - short
+        sup_goal = ctrl.sup_target - short
         if region.any():
             # A support near the action that is short of its advance (it stuck, or its pan was pulled
             # back) advances again.
             near = np.zeros_like(region)
             near[np.flatnonzero(region).min():np.flatnonzero(region).max() + 1] = True
-            advancing |= near & (ctrl.sup_target - (state.sup_x - sup_x0) > SUPPORT_DEADBAND_M)
+            advancing |= near & (sup_goal - (state.sup_x - sup_x0) > SUPPORT_DEADBAND_M)
         # Strokes that take each pan from where it is to its target, from where its support stands; an
-        # advancing support then retracts its ram to the rest stroke, pulling itself up to its pan.
+        # advancing support then pulls itself up to its own target.
         shift = pan_target - (state.pans[sim.stations, 0] - pan_x0)
         push = sim.ram_lengths(state, shift, state.sup_x)
-        target = np.where(advancing, ram_rest, push)
+        target = np.where(advancing, sim.ram_lengths(state, shift, sup_x0 + sup_goal), push)
         moved = (region | advancing) & ((np.abs(push - state.ram) > RAM_DEADBAND_M) | advancing)
         last_moved = moved
         if not moved.any():
