@@ -2,10 +2,10 @@
 
 Per interval, in the fixed order velocity, position, attitude, each with mid-interval quantities:
 
-* attitude increment of the body: the rotation vector phi = dtheta_k + (1/12) dtheta_{k-1} x dtheta_k
-  (two-sample coning correction with the previous interval);
+* attitude increment of the body over N sub-samples: the rotation vector
+  phi = sum theta_i + (sum_{i<N} k_i theta_i) x theta_N (N-sample coning compensation, estimators.coning);
 * velocity increment in the body frame with rotation and sculling corrections:
-  dv_b = dv_k + 1/2 dtheta_k x dv_k + 1/12 (dtheta_{k-1} x dv_k + dv_{k-1} x dtheta_k);
+  dv_b = sum v_i + 1/2 (sum theta_i) x (sum v_i) + sum_{i<N} k_i (theta_i x v_N + v_i x theta_N);
 * velocity: v_k = v_{k-1} + (I - 1/2 [zeta x]) C_nb(k-1) dv_b + (g_n - (2 w_ie + w_en) x v) h,
   zeta = (w_ie + w_en) h the rotation of n over the interval;
 * position: latitude, longitude, height from the mean velocity;
@@ -22,6 +22,7 @@ import numba as nb
 import numpy as np
 
 from estimators import earth
+from estimators.coning import coefficients
 
 _radii = nb.njit(cache=True)(earth.radii)
 _gravity = nb.njit(cache=True)(earth.normal_gravity_kernel)
@@ -81,61 +82,99 @@ def _rates(lat, h, v):
     return w_ie, w_en
 
 
+def compensate(dtheta: np.ndarray, dv: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per update of N increments (rows 1.., grouped by N): the rotation vector with coning compensation and
+    the body velocity increment with rotation and sculling compensation (000 eqs. 60-61, 68-69), (U, 3) each.
+
+    phi = sum theta_i + c x theta_N,  dv_b = sum v_i + 1/2 (sum theta_i) x (sum v_i) + c x v_N + d x theta_N,
+    with c = sum_{i<N} k_i theta_i and d = sum_{i<N} k_i v_i (estimators.coning)."""
+    u = (dtheta.shape[0] - 1) // n_samples
+    th = dtheta[1:1 + u * n_samples].reshape(u, n_samples, 3)
+    v = dv[1:1 + u * n_samples].reshape(u, n_samples, 3)
+    k = coefficients(n_samples)
+    sum_th, sum_v = th.sum(axis=1), v.sum(axis=1)
+    c = np.einsum("i,uij->uj", k, th[:, :-1])
+    d = np.einsum("i,uij->uj", k, v[:, :-1])
+    phi = sum_th + np.cross(c, th[:, -1])
+    dv_b = sum_v + 0.5 * np.cross(sum_th, sum_v) + np.cross(c, v[:, -1]) + np.cross(d, th[:, -1])
+    return phi, dv_b
+
+
 @nb.njit(cache=True)
-def _mechanize_kernel(t, dtheta, dv, lat, lon, hgt, vel, quat, coning):
-    for k in range(1, t.size):
-        dt = t[k] - t[k - 1]
-        phi = dtheta[k].copy()
-        dv_b = dv[k] + 0.5 * _cross(dtheta[k], dv[k])
-        if coning and k >= 2:
-            phi += _cross(dtheta[k - 1], dtheta[k]) / 12.0
-            dv_b += (_cross(dtheta[k - 1], dv[k]) + _cross(dv[k - 1], dtheta[k])) / 12.0
+def body_attitude(q0: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Attitude of the body relative to a non-rotating frame after each update: q_u = q_{u-1} (x) Exp(phi_u)."""
+    out = np.empty((phi.shape[0] + 1, 4))
+    out[0] = q0
+    for u in range(phi.shape[0]):
+        q = _qmul(out[u], _qexp(phi[u]))
+        out[u + 1] = q / np.sqrt(np.sum(q * q))
+    return out
+
+
+@nb.njit(cache=True)
+def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat):
+    """Update u (over (t_upd[u-1], t_upd[u]]) with the compensated phi[u-1], dv_b[u-1]; outputs at index u."""
+    for u in range(1, lat.size):
+        dt = t_upd[u] - t_upd[u - 1]
         # Mid-interval position and velocity, extrapolated from the last two epochs.
-        if k >= 2:
-            lat_m = lat[k - 1] + 0.5 * (lat[k - 1] - lat[k - 2])
-            h_m = hgt[k - 1] + 0.5 * (hgt[k - 1] - hgt[k - 2])
-            v_m = vel[k - 1] + 0.5 * (vel[k - 1] - vel[k - 2])
+        if u >= 2:
+            lat_m = lat[u - 1] + 0.5 * (lat[u - 1] - lat[u - 2])
+            h_m = hgt[u - 1] + 0.5 * (hgt[u - 1] - hgt[u - 2])
+            v_m = vel[u - 1] + 0.5 * (vel[u - 1] - vel[u - 2])
         else:
             lat_m, h_m, v_m = lat[0], hgt[0], vel[0].copy()
         w_ie, w_en = _rates(lat_m, h_m, v_m)
         zeta = (w_ie + w_en) * dt
-        dv_n = _qrot(quat[k - 1], dv_b)
+        dv_n = _qrot(quat[u - 1], dv_b[u - 1])
         dv_n = dv_n - 0.5 * _cross(zeta, dv_n)
         g_n = np.array([0.0, 0.0, -_gravity(lat_m, h_m)])
-        vel[k] = vel[k - 1] + dv_n + (g_n - _cross(2.0 * w_ie + w_en, v_m)) * dt
-        v_bar = 0.5 * (vel[k] + vel[k - 1])
-        hgt[k] = hgt[k - 1] + v_bar[2] * dt
-        h_bar = 0.5 * (hgt[k] + hgt[k - 1])
-        r_m, r_n = _radii(lat[k - 1])
-        lat[k] = lat[k - 1] + v_bar[1] * dt / (r_m + h_bar)
-        lat_bar = 0.5 * (lat[k] + lat[k - 1])
+        vel[u] = vel[u - 1] + dv_n + (g_n - _cross(2.0 * w_ie + w_en, v_m)) * dt
+        v_bar = 0.5 * (vel[u] + vel[u - 1])
+        hgt[u] = hgt[u - 1] + v_bar[2] * dt
+        h_bar = 0.5 * (hgt[u] + hgt[u - 1])
+        r_m, r_n = _radii(lat[u - 1])
+        lat[u] = lat[u - 1] + v_bar[1] * dt / (r_m + h_bar)
+        lat_bar = 0.5 * (lat[u] + lat[u - 1])
         r_m, r_n = _radii(lat_bar)
-        lon[k] = lon[k - 1] + v_bar[0] * dt / ((r_n + h_bar) * np.cos(lat_bar))
+        lon[u] = lon[u - 1] + v_bar[0] * dt / ((r_n + h_bar) * np.cos(lat_bar))
         # Attitude with the n-frame rotation re-evaluated at the new mid-interval state.
         w_ie, w_en = _rates(lat_bar, h_bar, v_bar)
-        q = _qmul(_qmul(_qexp(-(w_ie + w_en) * dt), quat[k - 1]), _qexp(phi))
-        quat[k] = q / np.sqrt(np.sum(q * q))
+        q = _qmul(_qmul(_qexp(-(w_ie + w_en) * dt), quat[u - 1]), _qexp(phi[u - 1]))
+        quat[u] = q / np.sqrt(np.sum(q * q))
 
 
 def mechanize(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, lat0: float, lon0: float, h0: float,
-              v0_n: np.ndarray, q0_nb: np.ndarray, coning: bool = True) -> NavState:
-    """Integrate increments (row k over (t[k-1], t[k]]; row 0 unused) from the state at t[0]."""
+              v0_n: np.ndarray, q0_nb: np.ndarray, n_samples: int = 4) -> NavState:
+    """Integrate increments (row k over (t[k-1], t[k]]; row 0 unused) from the state at t[0].
+
+    Attitude and velocity are updated every `n_samples` increments with N-sample coning and sculling
+    compensation (estimators.coning; N = 1 is none); the solution is at t[0], t[N], t[2N], ...
+    """
     t = np.ascontiguousarray(t, float)
     dtheta = np.ascontiguousarray(dtheta, float)
     dv = np.ascontiguousarray(dv, float)
     if dtheta.shape != (t.size, 3) or dv.shape != (t.size, 3):
         raise ValueError(f"increments must be ({t.size}, 3) like t; got {dtheta.shape} and {dv.shape}")
-    if t.size > 1 and not np.all(np.diff(t) > 0):
-        raise ValueError(f"time must increase; row {int(np.argmin(np.diff(t) > 0)) + 1} does not")
+    step = np.diff(t)
+    if t.size > 1 and not np.all(step > 0):
+        raise ValueError(f"time must increase; row {int(np.argmin(step > 0)) + 1} does not")
+    if t.size > 2:
+        median = np.median(step)
+        odd = np.flatnonzero(np.abs(step - median) > 0.5 * median)
+        if odd.size:
+            raise ValueError(f"sample interval at row {odd[0] + 1} is {step[odd[0]]:.6g} s, the median is "
+                             f"{median:.6g} s: resample or split the log at the gap")
     for name, arr in (("dtheta", dtheta), ("dv", dv)):
         bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
         if bad.size:
             raise ValueError(f"{name} row {bad[0]} is not finite")
     earth.check_latitude(lat0)
-    n = t.size
+    phi, dv_b = compensate(dtheta, dv, n_samples)
+    n = phi.shape[0] + 1
+    t_upd = np.ascontiguousarray(t[: (n - 1) * n_samples + 1: n_samples])
     lat, lon, hgt = np.empty(n), np.empty(n), np.empty(n)
     vel, quat = np.empty((n, 3)), np.empty((n, 4))
     lat[0], lon[0], hgt[0], vel[0] = lat0, lon0, h0, v0_n
     quat[0] = np.asarray(q0_nb, float) / np.linalg.norm(q0_nb)
-    _mechanize_kernel(t, dtheta, dv, lat, lon, hgt, vel, quat, coning)
-    return NavState(t, lat, lon, hgt, vel, quat)
+    _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat)
+    return NavState(t_upd, lat, lon, hgt, vel, quat)
