@@ -112,7 +112,7 @@ def body_attitude(q0: np.ndarray, phi: np.ndarray) -> np.ndarray:
 
 
 @nb.njit(cache=True)
-def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat):
+def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height):
     """Update u (over (t_upd[u-1], t_upd[u]]) with the compensated phi[u-1], dv_b[u-1]; outputs at index u."""
     for u in range(1, lat.size):
         dt = t_upd[u] - t_upd[u - 1]
@@ -129,6 +129,8 @@ def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat):
         dv_n = dv_n - 0.5 * _cross(zeta, dv_n)
         g_n = np.array([0.0, 0.0, -_gravity(lat_m, h_m)])
         vel[u] = vel[u - 1] + dv_n + (g_n - _cross(2.0 * w_ie + w_en, v_m)) * dt
+        if hold_height:  # the vertical channel held (an altitude aid or a known floor): no vertical motion
+            vel[u, 2] = 0.0
         v_bar = 0.5 * (vel[u] + vel[u - 1])
         hgt[u] = hgt[u - 1] + v_bar[2] * dt
         h_bar = 0.5 * (hgt[u] + hgt[u - 1])
@@ -144,11 +146,12 @@ def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat):
 
 
 def mechanize(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, lat0: float, lon0: float, h0: float,
-              v0_n: np.ndarray, q0_nb: np.ndarray, n_samples: int = 4) -> NavState:
+              v0_n: np.ndarray, q0_nb: np.ndarray, n_samples: int = 4, hold_height: bool = False) -> NavState:
     """Integrate increments (row k over (t[k-1], t[k]]; row 0 unused) from the state at t[0].
 
     Attitude and velocity are updated every `n_samples` increments with N-sample coning and sculling
     compensation (estimators.coning; N = 1 is none); the solution is at t[0], t[N], t[2N], ...
+    `hold_height` keeps the height and zeroes the vertical velocity (the unstable vertical channel held).
     """
     t = np.ascontiguousarray(t, float)
     dtheta = np.ascontiguousarray(dtheta, float)
@@ -176,5 +179,5 @@ def mechanize(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, lat0: float, lo
     vel, quat = np.empty((n, 3)), np.empty((n, 4))
     lat[0], lon[0], hgt[0], vel[0] = lat0, lon0, h0, v0_n
     quat[0] = np.asarray(q0_nb, float) / np.linalg.norm(q0_nb)
-    _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat)
+    _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height)
     return NavState(t_upd, lat, lon, hgt, vel, quat)
