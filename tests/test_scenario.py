@@ -56,6 +56,7 @@ def with_value(path: str, value) -> dict:
     ("face.pan_count", 20, ["face.pan_count", "too short"]),
     ("face.initial_bend_horizontal_deg", [0.1, 0.2], ["initial_bend_horizontal_deg", "pan_count - 1"]),
     ("pattern.snake_length_pans", 4, ["snake_length_pans"]),
+    ("face.undulation_amplitude_m", 1.5, ["face.undulation_amplitude_m", "bend_limit_vertical_deg"]),
 ])
 def test_bad_values_name_the_key(path, value, words):
     with pytest.raises(ScenarioError) as err:

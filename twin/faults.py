@@ -15,11 +15,6 @@ import numpy as np
 from twin.scenario import Scenario, ScenarioError
 from twin.sensor_config import Fault, FaultKind
 
-RAM_KINDS: tuple[FaultKind, ...] = ("ram_stuck", "ram_offset", "ram_drift", "ram_scale", "ram_dropout",
-                                    "ram_noise_burst")
-"""Faults of a support's push-ram stroke sensor (twin.pushram)."""
-
-
 def window_mask(t: np.ndarray, fault: Fault) -> np.ndarray:
     """Boolean mask of the sample times inside the fault's window, t_start_s <= t < t_end_s."""
     t = np.asarray(t, dtype=float)

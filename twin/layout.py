@@ -15,7 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.rotations import euler_to_mat
-from twin.scenario import Scenario
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from twin.scenario import Scenario
 
 # Pan state columns (face frame F).
 PX, PY, PZ, YAW, PITCH, ROLL = range(6)
@@ -50,6 +53,19 @@ class FaceFrame:
         return -self.azimuth_rad
 
 
+UNDULATION_SHARES = (0.6, 0.3, 0.1)
+"""Amplitude shares of the three along-face undulation sinusoids."""
+UNDULATION_WAVELENGTHS = (1.0, 0.62, 0.38)
+"""Their wavelengths relative to the scenario's undulation wavelength."""
+
+
+def floor_pitch_change(amplitude_m: float, wavelength_m: float, pan_length_m: float) -> float:
+    """Upper bound of the floor's slope change over one pan [rad]: amplitude x curvature bound x pan length."""
+    curvature = amplitude_m * sum(w * (2 * np.pi / (r * wavelength_m)) ** 2
+                                  for w, r in zip(UNDULATION_SHARES, UNDULATION_WAVELENGTHS))
+    return curvature * pan_length_m
+
+
 @dataclass(frozen=True)
 class Floor:
     """Floor height z(x, y) in F: seam dip along the face, dip in the advance direction, and undulation.
@@ -76,8 +92,8 @@ class Floor:
             dip_y=float(np.tan(np.radians(f.seam_dip_deg))),
             dip_x=float(np.tan(np.radians(f.advance_dip_deg))),
             amplitude=f.undulation_amplitude_m,
-            wavelengths=(lam, 0.62 * lam, 0.38 * lam),
-            weights=(0.6, 0.3, 0.1),
+            wavelengths=tuple(r * lam for r in UNDULATION_WAVELENGTHS),
+            weights=UNDULATION_SHARES,
             phases=phases,
             advance_wavelength=4.0 * lam,
             advance_phase=float(rng.uniform(0, 2 * np.pi)),
@@ -90,10 +106,6 @@ class Floor:
         modulation = 1.0 + 0.3 * np.sin(2 * np.pi * x / self.advance_wavelength + self.advance_phase)
         return self.dip_y * y + self.dip_x * x + self.amplitude * und * modulation / 1.3
 
-    def max_pitch_change(self, pan_length: float) -> float:
-        """Upper bound of the floor's slope change over one pan length [rad] (second derivative bound)."""
-        curv = self.amplitude * sum(w * (2 * np.pi / lam) ** 2 for w, lam in zip(self.weights, self.wavelengths))
-        return curv * pan_length
 
 
 def pan_axes(states: np.ndarray) -> np.ndarray:

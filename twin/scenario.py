@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Annotated, Literal
 
 from twin import snake
+from twin.layout import floor_pitch_change
 from twin.imu_grades import GRADES
 from twin.sensor_config import Fault, Sensors
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
@@ -169,6 +170,11 @@ class Scenario(_Section):
         if 2 * end_zone > length:
             raise ValueError(f"face.pan_count: a {length:.1f} m face is too short for the shearer and the snake "
                              f"at both ends (needs > {2 * end_zone:.1f} m); add pans or shorten the snake")
+        bend = floor_pitch_change(f.undulation_amplitude_m, f.undulation_wavelength_m, f.pan_length_m)
+        if bend > 0.8 * math.radians(f.bend_limit_vertical_deg):
+            raise ValueError(f"face.undulation_amplitude_m: the floor bends up to {math.degrees(bend):.2f} deg per pan, "
+                             f"more than 80 % of bend_limit_vertical_deg = {f.bend_limit_vertical_deg}; flatten the "
+                             f"floor or lengthen undulation_wavelength_m")
         if self.cycles * f.web_depth_m > f.panel_length_m:
             raise ValueError(f"cycles: {self.cycles} cycles of {f.web_depth_m} m exceed face.panel_length_m = "
                              f"{f.panel_length_m} m; lengthen the panel or run fewer cycles")
@@ -203,10 +209,6 @@ class Scenario(_Section):
                 raise ValueError(f"haulage.stops: stop at {stop.at_m} m is beyond the "
                                  f"{travel_length_m(self):.1f} m of travel")
         return self
-
-    @property
-    def face_length_resolved_m(self) -> float:
-        return self.face.pan_count * self.face.pan_length_m
 
 
 def travel_length_m(scn: Scenario) -> float:
