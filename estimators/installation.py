@@ -51,14 +51,15 @@ from estimators import earth
 from estimators.rotations import euler_to_mat, skew
 
 __all__ = [
-    "tilt_from_specific_force",
+    "compensate_lever_arm",
+    "estimate_lever_arm",
+    "lever_arm_acceleration",
+    "lever_arm_dv_two_sample",
+    "lever_arm_q",
+    "local_gravity",
     "mounting_calibration",
     "mounting_error_specific_force",
-    "lever_arm_q",
-    "lever_arm_acceleration",
-    "estimate_lever_arm",
-    "lever_arm_dv_two_sample",
-    "compensate_lever_arm",
+    "tilt_from_specific_force",
 ]
 
 
@@ -246,7 +247,12 @@ def compensate_lever_arm(dtheta, dv, r_p, h: float | None = None, t=None):
 
     Rows 1..K-1 are taken in pairs (1, 2), (3, 4), ... and each pair's two-sample fit (eqs. 48-52,
     `lever_arm_dv_two_sample`) gives both of its rows' lever-arm increments; an odd last row uses the fit of
-    itself and its predecessor. h is the sample interval (or from t). Returns dv_0 (K, 3)."""
+    itself and its predecessor. h is the sample interval (or from t). Returns dv_0 (K, 3).
+
+    Accuracy: over each pair the lever-arm increment is right to O(T^2) (the linear rate fit); its split over
+    the pair's two samples is right only to O(|w| h) relative, because the rate derivative is taken constant
+    over the pair. Mechanize with an even number of samples per update (n_samples = 2, 4, ...) so the
+    updates see whole pairs."""
     dtheta = np.asarray(dtheta, float)
     dv = np.asarray(dv, float)
     if dtheta.shape != dv.shape or dtheta.ndim != 2 or dtheta.shape[1] != 3:
