@@ -42,6 +42,7 @@ import numpy as np
 from pygeomag import GeoMag, decimal_year_from_date
 
 from estimators.rotations import quat_conj, quat_rotate
+from twin.clock import sample_times
 from twin.faults import faults_of, window_mask
 from twin.haulage import STOPPED
 from twin.scenario import Scenario
@@ -104,13 +105,6 @@ def site_field_n(scn: Scenario) -> np.ndarray:
 def site_field_elements(scn: Scenario) -> FieldElements:
     """Field elements at the scenario's reference point on `sensors.mag.date` (for reports)."""
     return field_elements(scn.site.lat_deg, scn.site.lon_deg, scn.site.height_m, scn.sensors.mag.date)
-
-
-def sample_times(t_truth: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Times k / rate_hz inside [t_truth[0], t_truth[-1]] (integer k, so no accumulated rounding)."""
-    k0 = int(np.ceil(t_truth[0] * rate_hz - 1e-9))
-    k1 = int(np.floor(t_truth[-1] * rate_hz + 1e-9))
-    return np.arange(k0, k1 + 1) / rate_hz
 
 
 def bracket(t_truth: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -186,7 +180,7 @@ def mag_stream(scn: Scenario, shearer: dict, rng: np.random.Generator,
     """
     cfg = scn.sensors.mag
     faults = list(scn.faults if faults is None else faults)
-    t = sample_times(np.asarray(shearer["t"], float), cfg.rate_hz)
+    t = sample_times(float(shearer["t"][0]), float(shearer["t"][-1]), cfg.rate_hz)
     q_nb = shearer_attitude_at(shearer, t)
     b_b = quat_rotate(quat_conj(q_nb), site_field_n(scn)) @ np.asarray(cfg.soft_iron, float).T
     b_b += np.asarray(cfg.hard_iron_t, float)

@@ -52,6 +52,7 @@ from __future__ import annotations
 import numpy as np
 
 from estimators.rotations import euler_to_mat
+from twin.clock import sample_times
 from twin.faults import faults_of, window_overlap
 from twin.scenario import Scenario
 from twin.sensor_config import Fault
@@ -79,13 +80,6 @@ def speed_along_axis(shearer: dict[str, np.ndarray], axis_b: np.ndarray) -> np.n
     row_n = 2 * (xy + wz) * ax + (1 - 2 * (xx + zz)) * ay + 2 * (yz - wx) * az
     row_u = 2 * (xz - wy) * ax + 2 * (yz + wx) * ay + (1 - 2 * (xx + yy)) * az
     return row_e * v[0] + row_n * v[1] + row_u * v[2]
-
-
-def sample_times(t0: float, t1: float, rate_hz: float) -> np.ndarray:
-    """The sensor clock k / rate_hz for every k with t0 <= k / rate_hz <= t1."""
-    k0 = int(np.ceil(t0 * rate_hz - 1e-9))
-    k1 = int(np.floor(t1 * rate_hz + 1e-9))
-    return np.arange(k0, k1 + 1) / rate_hz
 
 
 def odometer_stream(scn: Scenario, shearer: dict[str, np.ndarray], rng: np.random.Generator,

@@ -54,9 +54,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from twin.clock import sample_times
 from twin.faults import faults_of, window_mask
 from twin.layout import support_stations
-from twin.odometer import sample_times
 from twin.scenario import Scenario
 from twin.sensor_config import Fault
 

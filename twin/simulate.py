@@ -16,6 +16,7 @@ import numpy as np
 
 from estimators import logformat as lf
 from estimators.rotations import euler_to_quat, mat_to_quat, quat_mul
+from twin.clock import sample_times
 from twin.face import WINDOW_MARGIN_PANS, FaceSimulator, FaceState
 from twin.faults import faults_of, shortfall_profile
 from twin.haulage import Timeline
@@ -125,9 +126,9 @@ def shearer_chunk(scn: Scenario, timeline: Timeline, versions: list[PanVersion],
                   last: bool) -> dict[str, np.ndarray]:
     """Ride and truth columns for times in [t0, t1) ([t0, t1] for the last chunk)."""
     ride_hz, truth_hz = scn.rates.ride_hz, scn.rates.truth_hz
-    t_ride = np.arange(int(np.ceil(t0 * ride_hz - 1e-9)), int(np.floor(t1 * ride_hz + 1e-9)) + 1) / ride_hz
+    t_ride = sample_times(t0, t1, ride_hz)
     pos, quat = simulate_ride(scn, *ride_targets_t(versions, t_ride, timeline.sample(t_ride)["s"], scn))
-    t = np.arange(int(np.ceil(t0 * truth_hz - 1e-9)), int(np.floor(t1 * truth_hz + 1e-9)) + 1) / truth_hz
+    t = sample_times(t0, t1, truth_hz)
     t = t[(t <= t_ride[-1]) & ((t < t1) | last)]
     haul = timeline.sample(t)
     site, frame = scn.site, FaceFrame(np.radians(scn.face.azimuth_deg))

@@ -51,9 +51,10 @@ import numpy as np
 
 from estimators import earth
 from estimators.rotations import quat_conj, quat_mul, quat_rotate
+from twin.clock import sample_times
 from twin.faults import faults_of, window_mask
 from twin.layout import FaceFrame, support_stations
-from twin.magnetometer import sample_times, site_field_n
+from twin.magnetometer import site_field_n
 from twin.scenario import Scenario
 from twin.sensor_config import Fault
 
@@ -243,7 +244,7 @@ def support_imu_stream(scn: Scenario, supports: dict, shearer: dict, rng: np.ran
     cfg = scn.sensors.support_imu
     faults = list(scn.faults if faults is None else faults)
     units = np.unique(np.asarray(cfg.supports, dtype=int))
-    t = sample_times(np.asarray(shearer["t"], float), cfg.rate_hz)
+    t = sample_times(float(shearer["t"][0]), float(shearer["t"][-1]), cfg.rate_hz)
     out = {c: np.empty(t.size * units.size) for c in COLUMNS}
     out["support"] = np.empty(t.size * units.size, dtype=np.int32)
     if units.size == 0:
