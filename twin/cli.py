@@ -37,7 +37,10 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
     from twin.simulate import simulate
 
     scn = load_scenario(scenario, seed)
-    check_faults_in_run(scn, Timeline(scn).duration)
+    try:
+        check_faults_in_run(scn, Timeline(scn).duration)
+    except ScenarioError as err:
+        raise ScenarioError(f"{scenario}: {err}") from None
     out = Path(out) if out is not None else Path("runs") / f"{scn.name}-seed{scn.seed}"
     check_target(out, force)
     start = time.perf_counter()
