@@ -195,8 +195,70 @@ FAULTS = Stream(
     time_order="none",
 )
 
+SURVEY = Stream(
+    "survey",
+    "Surveyed fixes of the shearer body reference point (the truth's point): the start pose before the first "
+    "cut and the face-end points (001 section 2.2: the ends of the face are measured in advance). Heading is "
+    "NaN where the survey gives none.",
+    (
+        T,
+        Column("lat", "rad", "f8", "geodetic latitude (WGS-84)"),
+        Column("lon", "rad", "f8", "geodetic longitude"),
+        Column("h", "m", "f8", "ellipsoidal height"),
+        Column("yaw", "rad", "f8", "body yaw (DESIGN convention: counter-clockwise from north)", nan_ok=True),
+        Column("sd_horizontal", "m", "f8", "one-sigma horizontal error of the fix"),
+        Column("sd_vertical", "m", "f8", "one-sigma vertical error of the fix"),
+        Column("sd_yaw", "rad", "f8", "one-sigma yaw error", nan_ok=True),
+    ),
+)
+
+# Bits of the estimates' `flags` column.
+FLAG_VELOCITY = 1  # odometer / motion-constraint velocity update applied
+FLAG_POSITION = 2  # position fix (CPOEM point or survey) applied
+FLAG_ZUPT = 4  # zero-velocity update applied
+FLAG_SKIPPED = 8  # a measurement was due but skipped (dropout, missing push-ram reading, gated)
+FLAG_COVARIANCE_REPAIRED = 16  # the covariance was re-symmetrized / clipped to stay positive definite
+FLAG_SMOOTHED = 32  # the row is an RTS-smoothed estimate
+
+ESTIMATE = Stream(
+    "estimate",
+    "One estimator's navigation solution for the shearer body reference point (the truth's point), written "
+    "to estimates/NAME.parquet. One-sigma columns are NaN for methods without a covariance.",
+    (
+        T,
+        Column("lat", "rad", "f8", "geodetic latitude (WGS-84)"),
+        Column("lon", "rad", "f8", "geodetic longitude"),
+        Column("h", "m", "f8", "ellipsoidal height"),
+        *_xyz("v_n", "m/s", "ground velocity in n", "enu"),
+        *_quat("q_nb", "attitude, rotates b vectors into n"),
+        *(Column(f"sd_pos_{a}", "m", "f8", f"one-sigma position error, {a}", nan_ok=True) for a in "enu"),
+        *(Column(f"sd_vel_{a}", "m/s", "f8", f"one-sigma velocity error, {a}", nan_ok=True) for a in "enu"),
+        *(Column(f"sd_att_{a}", "rad", "f8", f"one-sigma attitude error angle about {a}", nan_ok=True)
+          for a in "enu"),
+        Column("flags", "1", "i4", "bitmask of estimators.logformat FLAG_* (what the step applied or skipped)"),
+    ),
+)
+
+ESTIMATE_STATES = Stream(
+    "estimate_states",
+    "An error-state filter's sensor states (estimates/NAME_states.parquet): what it believes the sensor errors "
+    "are, with one-sigma.",
+    (
+        T,
+        *_xyz("gyro_bias", "rad/s", "gyro bias in b"),
+        *_xyz("accel_bias", "m/s^2", "accelerometer bias in b"),
+        *_xyz("odo_mount", "rad", "odometer mounting angle (001 eq. 10)"),
+        Column("odo_scale", "1", "f8", "odometer scale-factor error delta k_D (001 eq. 1)"),
+        *_xyz("sd_gyro_bias", "rad/s", "one-sigma gyro bias"),
+        *_xyz("sd_accel_bias", "m/s^2", "one-sigma accelerometer bias"),
+        *_xyz("sd_odo_mount", "rad", "one-sigma odometer mounting angle"),
+        Column("sd_odo_scale", "1", "f8", "one-sigma odometer scale-factor error"),
+    ),
+)
+
 TRUTH_STREAMS = (TRUTH_SHEARER, TRUTH_PANS, TRUTH_SUPPORTS, TRUTH_CYCLES)
-SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, MAG, SUPPORT_IMU, FAULTS)
+SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, MAG, SUPPORT_IMU, FAULTS, SURVEY)
+ESTIMATE_STREAMS = (ESTIMATE, ESTIMATE_STATES)
 STREAMS = {s.name: s for s in TRUTH_STREAMS + SENSOR_STREAMS}
 
 
@@ -258,3 +320,24 @@ def read_stream(run_dir: Path, stream: Stream) -> pa.Table:
         raise LogError(f"{path}: not a readable Parquet file ({err})") from None
     check_table(stream, table, str(path))
     return table
+
+
+ESTIMATES_DIR = "estimates"
+
+
+def estimate_path(run_dir: Path, method: str, states: bool = False) -> Path:
+    """Where estimator `method` writes its solution (or its sensor states) in a run directory."""
+    return Path(run_dir) / ESTIMATES_DIR / f"{method}{'_states' if states else ''}.parquet"
+
+
+def write_estimate(run_dir: Path, method: str, data: dict[str, np.ndarray], states: bool = False) -> Path:
+    stream = ESTIMATE_STATES if states else ESTIMATE
+    path = estimate_path(run_dir, method, states)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return write_stream(path.parent, Stream(path.stem, stream.doc, stream.columns), make_table(stream, data))
+
+
+def read_estimate(run_dir: Path, method: str, states: bool = False) -> pa.Table:
+    path = estimate_path(run_dir, method, states)
+    stream = ESTIMATE_STATES if states else ESTIMATE
+    return read_stream(path.parent, Stream(path.stem, stream.doc, stream.columns))
