@@ -9,10 +9,13 @@ import numpy as np
 import pytest
 
 from estimators.logformat import STREAMS, check_table, make_table
+from estimators.metrics import geodetic_to_enu_offset, truth_at
+from estimators.rotations import quat_to_euler
 from twin.faults import SHORTFALL_SPREAD
 from twin.scenario import ScenarioError, parse_scenario
 from twin.sensors import imu_truth, sensor_streams
 from twin.simulate import simulate
+from twin.survey import survey_stream
 
 from .conftest import capped
 
@@ -38,7 +41,7 @@ def faulty_run():
 
 def test_every_stream_fits_its_schema():
     _, _, _, streams = faulty_run()
-    assert {"imu", "odometer", "pushram", "mag", "faults", "support_imu"} <= set(streams)
+    assert {"imu", "odometer", "pushram", "mag", "faults", "support_imu", "survey"} <= set(streams)
     for name, cols in streams.items():
         check_table(STREAMS[name], make_table(STREAMS[name], cols), name)
 
@@ -140,3 +143,43 @@ def test_bad_grade_and_fault_are_one_line():
     data["faults"] = [{"kind": "ram_stuck", "t_start_s": 1.0, "t_end_s": 2.0, "target": 999}]
     with pytest.raises(ScenarioError, match="target support"):
         parse_scenario(data, "x.toml")
+
+
+def test_survey_fixes_at_face_ends_with_the_configured_spread():
+    """The start pose (t = 0, with yaw) and face end B of the first cut (no yaw); over many seeds the errors
+    against the truth have zero mean and the configured one-sigma (001 Table 1: 0.05 m, 1 deg)."""
+    scn, truth, _, streams = faulty_run()
+    shearer, cycles = truth["truth_shearer"], truth["truth_cycles"]
+    survey = streams["survey"]
+    np.testing.assert_array_equal(survey["t"], [0.0, cycles["t_cut_end"][0]])
+    assert np.isfinite(survey["yaw"][0]) and np.isnan(survey["yaw"][1]) and np.isnan(survey["sd_yaw"][1])
+    cfg = scn.sensors.survey
+    assert survey["sd_yaw"][0] == pytest.approx(np.radians(cfg.sd_yaw_deg))
+    np.testing.assert_array_equal(survey["sd_horizontal"], cfg.sd_horizontal_m)
+    # Many draws, against a thinned truth to keep them cheap (the reference is the same thinned truth).
+    thin = {k: v[::50] for k, v in shearer.items()}
+    true = truth_at(thin, survey["t"])
+    yaw_true = quat_to_euler(true["q_nb"][0])[2]
+    n = 2000
+    draws = [survey_stream(scn, thin, cycles, np.random.default_rng([99, k])) for k in range(n)]
+    pos = np.stack([geodetic_to_enu_offset(d["lat"], d["lon"], d["h"], true["lat"], true["lon"], true["h"])
+                    for d in draws])                                    # (n, 2 fixes, 3)
+    yaw = np.angle(np.exp(1j * (np.array([d["yaw"][0] for d in draws]) - yaw_true)))
+    sd = np.array([cfg.sd_horizontal_m, cfg.sd_horizontal_m, cfg.sd_vertical_m])
+    np.testing.assert_allclose(pos.std(axis=0), np.broadcast_to(sd, (2, 3)), rtol=0.07)
+    assert (np.abs(pos.mean(axis=0)) < 4 * sd / np.sqrt(n)).all()
+    assert abs(yaw.std() / np.radians(cfg.sd_yaw_deg) - 1) < 0.07 and abs(yaw.mean()) < 4 * np.radians(1) / 45
+    assert abs(np.corrcoef(pos[:, 0, 0], pos[:, 1, 0])[0, 1]) < 0.1  # the two fixes are independent
+
+
+def test_survey_is_reproducible_per_trial_and_leaves_the_other_streams():
+    scn, truth, ideal, streams = faulty_run()
+    again = sensor_streams(scn, truth, ideal, 0)["survey"]
+    other = sensor_streams(scn, truth, ideal, 1)["survey"]
+    for col in streams["survey"]:
+        np.testing.assert_array_equal(again[col], streams["survey"][col])
+    assert not np.array_equal(other["lat"], streams["survey"]["lat"])
+    # Its own generator: the survey draws what a generator keyed (seed, trial, 5) gives, nothing else shifts.
+    direct = survey_stream(scn, truth["truth_shearer"], truth["truth_cycles"],
+                           np.random.default_rng([scn.seed, 0, 5]))
+    np.testing.assert_array_equal(direct["lat"], streams["survey"]["lat"])

@@ -96,6 +96,18 @@ class SupportImu(_Section):
     """Peak magnetic disturbance at a support while the shearer passes it (falls off over a pan length)."""
 
 
+class Survey(_Section):
+    """Surveyed fixes of the shearer: the start pose at face end A and face end B of the first cut (001 section
+    2.2: the face ends are measured in advance). Defaults are 001 Table 1's initial position and heading errors."""
+
+    sd_horizontal_m: NonNegative = 0.05
+    """One-sigma error of each horizontal coordinate (east, north) of a fix."""
+    sd_vertical_m: NonNegative = 0.05
+    """One-sigma error of the height of a fix."""
+    sd_yaw_deg: NonNegative = 1.0
+    """One-sigma error of the surveyed yaw of the start pose (the face-end fix B carries no heading)."""
+
+
 class Sensors(_Section):
     imu: Imu = Imu()
     vibration: Vibration = Vibration()
@@ -103,6 +115,7 @@ class Sensors(_Section):
     pushram: PushRam = PushRam()
     mag: Magnetometer = Magnetometer()
     support_imu: SupportImu = SupportImu()
+    survey: Survey = Survey()
 
 
 FaultKind = Literal["ram_stuck", "ram_offset", "ram_drift", "ram_scale", "ram_dropout", "ram_noise_burst",

@@ -1,0 +1,40 @@
+"""The survey "sensor": surveyed fixes of the shearer body point at the face ends (001 section 2.2, Fig. 3).
+
+Before the first cut the shearer stands at face end A and its pose is surveyed (position and yaw); face end B,
+where the first straight cut ends, is surveyed in advance (position only; 001: "the two optimal points
+corresponding to both ends of the longwall face can be accurately measured in advance"). Each fix is the
+true body point plus independent N(0, sd) errors in East, North and Up; the start yaw is the true body yaw
+plus N(0, sd_yaw). Errors come from 001 Table 1 by default (twin.sensor_config.Survey).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from estimators.metrics import enu_offset_to_geodetic, truth_at
+from estimators.rotations import quat_to_euler
+from twin.scenario import Scenario
+
+
+def survey_stream(scn: Scenario, truth_shearer: dict[str, np.ndarray], truth_cycles: dict[str, np.ndarray] | None,
+                  rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """The SURVEY columns (estimators.logformat): the start pose at t = 0 (face end A, with yaw) and face end B
+    at the end of cycle 0's straight cut (t_cut_end, yaw NaN) when the run reaches it."""
+    cfg = scn.sensors.survey
+    t = [0.0]
+    if truth_cycles is not None and len(truth_cycles["t"]) and truth_cycles["t_cut_end"][0] <= truth_shearer["t"][-1]:
+        t.append(float(truth_cycles["t_cut_end"][0]))
+    t = np.asarray(t)
+    true = truth_at(truth_shearer, t)
+    sd = np.array([cfg.sd_horizontal_m, cfg.sd_horizontal_m, cfg.sd_vertical_m])
+    lat, lon, h = enu_offset_to_geodetic(rng.normal(size=(t.size, 3)) * sd, true["lat"], true["lon"], true["h"])
+    sd_yaw = np.radians(cfg.sd_yaw_deg)
+    yaw = np.full(t.size, np.nan)
+    yaw_true = quat_to_euler(true["q_nb"][0])[2]
+    yaw[0] = np.angle(np.exp(1j * (yaw_true + sd_yaw * rng.normal())))  # wrapped to (-pi, pi]
+    return {
+        "t": t, "lat": lat, "lon": lon, "h": h, "yaw": yaw,
+        "sd_horizontal": np.full(t.size, cfg.sd_horizontal_m), "sd_vertical": np.full(t.size, cfg.sd_vertical_m),
+        "sd_yaw": np.where(np.isnan(yaw), np.nan, sd_yaw),
+    }
+
