@@ -31,21 +31,24 @@ def straight_truth(n: int = 1001, dt: float = 0.1) -> dict[str, np.ndarray]:
     return {"t": t, "lat": lat, "lon": lon, "h": h, **{f"q_nb_{a}": q[:, i] for i, a in enumerate("wxyz")}}
 
 
-def estimate_table(t, lat, lon, h, q):
+def estimate_table(t, lat, lon, h, q, sd=np.nan, flags=0):
+    """An ESTIMATE table; sd: one-sigma of every position [m], velocity and attitude [rad] axis."""
     k = t.size
-    nan = np.full(k, np.nan)
     return make_table(ESTIMATE, {
         "t": t, "lat": lat, "lon": lon, "h": h, **{f"v_n_{a}": np.zeros(k) for a in "enu"},
         **{f"q_nb_{a}": q[:, i] for i, a in enumerate("wxyz")},
-        **{f"sd_{p}_{a}": nan for p in ("pos", "vel", "att") for a in "enu"}, "flags": np.zeros(k, np.int32)})
+        **{f"sd_{p}_{a}": np.full(k, sd) for p in ("pos", "vel", "att") for a in "enu"},
+        "flags": np.broadcast_to(flags, (k,)).astype(np.int32)})
 
 
-def offset_estimate(truth, t, offset_enu, rotvec=(0.0, 0.0, 0.0)):
+def offset_estimate(truth, t, offset_enu, rotvec=(0.0, 0.0, 0.0), **kwargs):
+    """The truth at times t displaced by offset_enu [m] East/North/Up, its attitude rotated by rotvec:
+    C_b^n(est) = Exp([rotvec x]) C_b^n(true), so the psi-angle error is phi = -rotvec."""
     true = truth_at(truth, t)
     lat, lon, h = enu_offset_to_geodetic(np.broadcast_to(offset_enu, (t.size, 3)), true["lat"], true["lon"],
                                          true["h"])
     q = quat_mul(rotvec_to_quat(np.broadcast_to(rotvec, (t.size, 3))), true["q_nb"])
-    return estimate_table(t, lat, lon, h, q)
+    return estimate_table(t, lat, lon, h, q, **kwargs)
 
 
 def test_constant_east_offset_gives_rmse_and_sep():

@@ -32,6 +32,7 @@ import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
 import rerun as rr
 import rerun.blueprint as rrb
+from rerun.chunk import RrdReader
 
 from estimators.earth import mat_en
 from estimators.rotations import mat_to_quat, quat_mul, quat_rotate
@@ -40,6 +41,9 @@ from twin.scenario import Scenario
 
 TIMELINE = "sim_time"
 APPLICATION_ID = "longwall-twin"
+RUN_RRD = "run.rrd"
+ESTIMATES_RRD = "estimates.rrd"
+"""The estimators' recording beside run.rrd: same application and recording id, so the viewer merges the two."""
 
 SHEARER_WIDTH_M = 1.2
 """Body extent across the face (body x) of the drawn shearer."""
@@ -356,20 +360,24 @@ def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz:
             _series(rec, name, np.array([0.0, t0, t1]), np.array([[0.0], [1.0], [0.0]]), [f"{name} active"])
 
 
-def blueprint() -> rrb.Blueprint:
-    """3-D face view taking most of the window, plots in a column on the right."""
+def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
+    """3-D face view taking most of the window, plots in a column on the right (the estimators' plots, when
+    given, in a second tab of that column)."""
+    twin_plots = rrb.Vertical(
+        rrb.TimeSeriesView(name="Shearer speed [m/s]", origin="plots/shearer_speed"),
+        rrb.TimeSeriesView(name="Cycle", origin="plots/cycle"),
+        rrb.BarChartView(name="Horizontal bend per chute [deg]", origin="plots/bend_horizontal_deg"),
+        rrb.BarChartView(name="Vertical bend per chute [deg]", origin="plots/bend_vertical_deg"),
+        rrb.BarChartView(name="Ram length [m]", origin="plots/ram_length"),
+        rrb.TimeSeriesView(name="Sensors", origin="sensors", contents="sensors/**"),
+        rrb.TimeSeriesView(name="Fault windows", origin="faults"),
+        name="Twin",
+    )
+    plots = rrb.Tabs(twin_plots, rrb.Vertical(*estimate_views, name="Estimates")) if estimate_views else twin_plots
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Spatial3DView(name="Face", origin="world", contents="world/**"),
-            rrb.Vertical(
-                rrb.TimeSeriesView(name="Shearer speed [m/s]", origin="plots/shearer_speed"),
-                rrb.TimeSeriesView(name="Cycle", origin="plots/cycle"),
-                rrb.BarChartView(name="Horizontal bend per chute [deg]", origin="plots/bend_horizontal_deg"),
-                rrb.BarChartView(name="Vertical bend per chute [deg]", origin="plots/bend_vertical_deg"),
-                rrb.BarChartView(name="Ram length [m]", origin="plots/ram_length"),
-                rrb.TimeSeriesView(name="Sensors", origin="sensors", contents="sensors/**"),
-                rrb.TimeSeriesView(name="Fault windows", origin="faults"),
-            ),
+            plots,
             column_shares=[3, 1],
         ),
         collapse_panels=True,
@@ -412,9 +420,21 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
         rec.disconnect()
 
 
+def run_recording_id(run_dir: Path) -> str | None:
+    """The recording id of `run_dir/run.rrd` (None without a readable one): recordings written beside it with
+    this id and APPLICATION_ID merge with it in the viewer."""
+    rrd = Path(run_dir) / RUN_RRD
+    try:
+        recordings = RrdReader(rrd).recordings() if rrd.is_file() else []
+    except (OSError, ValueError, RuntimeError):
+        return None
+    return recordings[0].recording_id if recordings else None
+
+
 def open_viewer(run_dir: Path) -> None:
-    """Open `run_dir/run.rrd` in the Rerun viewer (a detached `rerun` process)."""
-    rrd = Path(run_dir) / "run.rrd"
+    """Open `run_dir/run.rrd` (and `estimates.rrd` beside it, if there is one) in the Rerun viewer (a detached
+    `rerun` process)."""
+    rrd = Path(run_dir) / RUN_RRD
     if not rrd.is_file():
         raise FileNotFoundError(f"{rrd}: recording not found (write it first)")
     beside = Path(sys.executable).parent / "rerun"
@@ -422,5 +442,6 @@ def open_viewer(run_dir: Path) -> None:
     if exe is None:
         raise FileNotFoundError(f"rerun viewer executable not found next to {sys.executable} or on PATH "
                                 "(pip install rerun-sdk)")
-    subprocess.Popen([exe, str(rrd)], start_new_session=True,
+    files = [str(p) for p in (rrd, Path(run_dir) / ESTIMATES_RRD) if p.is_file()]
+    subprocess.Popen([exe, *files], start_new_session=True,
                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

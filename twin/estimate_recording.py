@@ -1,0 +1,185 @@
+"""The estimators' Rerun recording: `estimates.rrd` beside a run's `run.rrd`, merged with it by the viewer.
+
+The file carries the application id and the recording id of run.rrd (read from it; a fresh id when the run has
+none, e.g. an imported log), so `longwall view` shows the truth replay and the estimates as one recording. Its
+default blueprint is the run's with a second "Estimates" tab of plots. Everything is logged column-wise with
+`send_columns` on the `sim_time` timeline; plots are decimated to at most `PLOT_RATE_HZ`.
+
+Entities, per estimator METHOD (errors as estimators.metrics defines them: estimate - truth in East/North/Up at
+the truth point; attitude the psi-angle phi, C_b^n(true) = (I + [phi x]) C_b^n(est)):
+
+* `world/estimates/METHOD/path`       static LineStrips3D of the estimated body path in t, one strip per cycle
+* `world/estimates/METHOD/position`   Points3D, the estimated body point in t at the plot rate
+* `plots/errors/METHOD/{east,north,up}`               Scalars, position error [m]
+* `plots/attitude_errors/METHOD/{e,n,u}`              Scalars, attitude error phi [deg]
+* `plots/sigma/METHOD/position/{east,north,up}`       Scalars, +- one-sigma of the position [m]
+* `plots/sigma/METHOD/attitude/{e,n,u}`               Scalars, +- one-sigma of the attitude [deg]
+* `plots/flags/METHOD`                                Scalars 0/1: position fix, ZUPT, skipped measurement in
+                                                      each plot interval (estimators.logformat FLAG_*)
+* `plots/states/METHOD/{gyro_bias,accel_bias,odo_mount,odo_scale}`   Scalars, the filter's sensor states
+  [deg/h, mg, deg, 1], with the true values as flat series where given
+* `plots/sigma/METHOD/{gyro_bias,accel_bias,odo_mount,odo_scale}`    Scalars, +- their one-sigma
+"""
+
+from __future__ import annotations
+
+import uuid
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import rerun as rr
+import rerun.blueprint as rrb
+
+from estimators import earth
+from estimators.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT
+from estimators.metrics import attitude_errors, column, columns, position_errors
+from twin.imu_grades import DEG, DEG_PER_H, MG
+from twin.recording import (
+    APPLICATION_ID,
+    _series,
+    _time_column,
+    blueprint,
+    decimate,
+    run_recording_id,
+)
+from twin.scenario import Scenario
+
+PLOT_RATE_HZ = 10.0
+"""Largest rate of the logged plots and the moving estimate point."""
+
+POSITION_AXES = ("east", "north", "up")
+ATTITUDE_AXES = ("e", "n", "u")
+STATE_GROUPS = {  # state column prefix: (axes, SI value per display unit, display unit)
+    "gyro_bias": ("xyz", DEG_PER_H, "deg/h"),
+    "accel_bias": ("xyz", MG, "mg"),
+    "odo_mount": ("xyz", DEG, "deg"),
+    "odo_scale": ("", 1.0, "1"),
+}
+FLAG_SERIES = (("position fix", FLAG_POSITION), ("ZUPT", FLAG_ZUPT), ("skipped", FLAG_SKIPPED))
+_PALETTE = np.array([[40, 160, 240], [60, 200, 90], [200, 80, 220], [240, 200, 40], [120, 120, 255]], np.uint8)
+
+
+def _names(group: str) -> list[str]:
+    axes = STATE_GROUPS[group][0]
+    return [f"{group}_{a}" for a in axes] if axes else [group]
+
+
+def _plot_rows(table: pa.Table, rate_hz: float) -> tuple[pa.Table, np.ndarray]:
+    """The rows kept for plotting (first of each 1/rate_hz interval and the last) and their times."""
+    keep = decimate(column(table, "t"), rate_hz)
+    sub = table.take(pa.array(keep))
+    return sub, column(sub, "t")
+
+
+def _log_band(rec: rr.RecordingStream, entity: str, t: np.ndarray, sd: np.ndarray, label: str) -> None:
+    """+- one-sigma of (K,) values as two series, unless there is no sigma at all (NaN throughout)."""
+    if np.isfinite(sd).any():
+        _series(rec, entity, t, np.column_stack([sd, -sd]), [f"+1 sigma {label}", f"-1 sigma {label}"])
+
+
+def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method: str, table: pa.Table,
+                  rate_hz: float, color: np.ndarray) -> None:
+    if table.num_rows == 0:
+        return
+    sub, t = _plot_rows(table, rate_hz)
+    site = scn.site
+    p_t = earth.lla_to_enu(column(sub, "lat"), column(sub, "lon"), column(sub, "h"), np.radians(site.lat_deg),
+                           np.radians(site.lon_deg), site.height_m).astype(np.float32)
+    # One strip per cycle, the cycle of the truth sample at or before each estimate time.
+    t_truth = column(truth_shearer, "t")
+    cycle = column(truth_shearer, "cycle")[np.clip(np.searchsorted(t_truth, t, side="right") - 1, 0, None)]
+    breaks = np.flatnonzero(np.diff(cycle)) + 1
+    rec.log(f"world/estimates/{method}/path", rr.LineStrips3D(np.split(p_t, breaks), radii=0.03, colors=color),
+            static=True)
+    rec.log(f"world/estimates/{method}/position", rr.Points3D.from_fields(radii=0.15, colors=color), static=True)
+    rec.send_columns(f"world/estimates/{method}/position", indexes=[_time_column(t)],
+                     columns=rr.Points3D.columns(positions=p_t))
+
+    _, err = position_errors(sub, truth_shearer)
+    _, phi = attitude_errors(sub, truth_shearer)
+    sd_pos, sd_att = columns(sub, "sd_pos"), np.degrees(columns(sub, "sd_att"))
+    for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
+        _series(rec, f"plots/errors/{method}/{axis}", t, err[:, i:i + 1], [f"{method} {axis} [m]"])
+        _series(rec, f"plots/attitude_errors/{method}/{a}", t, np.degrees(phi[:, i:i + 1]),
+                [f"{method} phi_{a} [deg]"])
+        _log_band(rec, f"plots/sigma/{method}/position/{axis}", t, sd_pos[:, i], f"{method} {axis} [m]")
+        _log_band(rec, f"plots/sigma/{method}/attitude/{a}", t, sd_att[:, i], f"{method} phi_{a} [deg]")
+
+    # Flags are events: OR them over each plot interval so a single-sample fix is not decimated away.
+    t_all = column(table, "t")
+    keep = decimate(t_all, rate_hz)
+    flags = np.bitwise_or.reduceat(np.asarray(table.column("flags").to_numpy(), np.int64), keep)
+    _series(rec, f"plots/flags/{method}", t_all[keep],
+            np.column_stack([(flags & bit) != 0 for _, bit in FLAG_SERIES]).astype(float),
+            [f"{method} {name}" for name, _ in FLAG_SERIES])
+
+
+def _log_states(rec: rr.RecordingStream, method: str, table: pa.Table, truth: dict[str, float] | None,
+                rate_hz: float) -> None:
+    if table.num_rows == 0:
+        return
+    sub, t = _plot_rows(table, rate_hz)
+    for group, (_, per_unit, unit) in STATE_GROUPS.items():
+        names = _names(group)
+        values = np.column_stack([column(sub, n) for n in names]) / per_unit
+        labels = [f"{n} [{unit}]" for n in names]
+        known = [n for n in names if truth and n in truth]
+        if known:
+            flat = np.broadcast_to(np.array([truth[n] for n in known]) / per_unit, (t.size, len(known)))
+            values = np.column_stack([values, flat])
+            labels += [f"{n} true [{unit}]" for n in known]
+        _series(rec, f"plots/states/{method}/{group}", t, values, labels)
+        sd = np.column_stack([column(sub, f"sd_{n}") for n in names]) / per_unit
+        _series(rec, f"plots/sigma/{method}/{group}", t, np.column_stack([sd, -sd]),
+                [f"{sign}1 sigma {n} [{unit}]" for sign in "+-" for n in names])
+
+
+def estimate_views(methods: list[str], state_methods: list[str]) -> tuple[rrb.View, ...]:
+    """Time-series views of the Estimates tab: each error axis over all methods with their sigma bands, each
+    group of sensor states, the flags."""
+    views = []
+    for axis in POSITION_AXES:
+        views.append(rrb.TimeSeriesView(
+            name=f"Position error {axis} [m]", origin="/",
+            contents=[f"plots/errors/{m}/{axis}" for m in methods] + [f"plots/sigma/{m}/position/{axis}"
+                                                                       for m in methods]))
+    for a in ATTITUDE_AXES:
+        views.append(rrb.TimeSeriesView(
+            name=f"Attitude error phi_{a} [deg]", origin="/",
+            contents=[f"plots/attitude_errors/{m}/{a}" for m in methods] + [f"plots/sigma/{m}/attitude/{a}"
+                                                                             for m in methods]))
+    for group, (_, _, unit) in STATE_GROUPS.items() if state_methods else ():
+        views.append(rrb.TimeSeriesView(
+            name=f"{group} [{unit}]", origin="/",
+            contents=[f"plots/states/{m}/{group}" for m in state_methods] + [f"plots/sigma/{m}/{group}"
+                                                                              for m in state_methods]))
+    views.append(rrb.TimeSeriesView(name="Position fixes, ZUPTs, skipped", origin="plots/flags"))
+    return tuple(views)
+
+
+def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates: dict[str, pa.Table],
+                             states: dict[str, pa.Table], states_truth: dict[str, float] | None = None,
+                             rate_hz: float = PLOT_RATE_HZ) -> None:
+    """Write the estimators' outputs as `path` (normally RUN_DIR/estimates.rrd) with the recording id of
+    RUN_DIR/run.rrd.
+
+    `truth_shearer`: the truth_shearer table (or its columns as arrays); `estimates`: method name -> ESTIMATE
+    table; `states`: method name -> ESTIMATE_STATES table (filters with sensor states only); `states_truth`:
+    true values of the sensor states by ESTIMATE_STATES column name in SI units (e.g. "gyro_bias_x" [rad/s],
+    "odo_scale"), drawn as flat series. Estimate times must lie within the truth span (LogError otherwise).
+    """
+    if not rate_hz > 0:
+        raise ValueError(f"write_estimate_recording: rate_hz must be positive, got {rate_hz}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=run_recording_id(path.parent) or uuid.uuid4())
+    rec.save(path, default_blueprint=blueprint(estimate_views(list(estimates), list(states))))
+    try:
+        for k, (method, table) in enumerate(estimates.items()):
+            _log_estimate(rec, scn, truth_shearer, method, table, rate_hz, _PALETTE[k % len(_PALETTE)])
+        for method, table in states.items():
+            _log_states(rec, method, table, states_truth, rate_hz)
+        rec.flush()
+    finally:
+        rec.disconnect()
