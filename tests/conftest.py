@@ -11,11 +11,14 @@ from pathlib import Path
 
 import pytest
 
+from twin.experiment import is_experiment
 from twin.scenario import Scenario, load_scenario, parse_scenario
 from twin.simulate import SimResult, simulate
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
-SCENARIOS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+SCENARIOS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml") if not is_experiment(p))
+"""The shipped face scenarios; the SINS experiment files (kind = "sins_experiment") are tests/test_experiment.py's."""
+EXPERIMENTS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml") if is_experiment(p))
 TEST_CYCLES = 2
 VARIANTS = {"default-before-push": ("default", {"supports": {"sequence": "before_push"}})}
 """Runs beyond the shipped files: a shipped scenario with some sections changed."""

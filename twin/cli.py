@@ -29,6 +29,9 @@ def default_scenario() -> Path:
 def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: bool = False,
         trials: int = 1, sensors: bool = True) -> Path:
     """Simulate a scenario into a run directory (sensor trial 0 at the top, trials 1.. in trials/NNN/)."""
+    from twin.experiment import is_experiment, run_experiment_file
+    if is_experiment(scenario):  # a SINS experiment file (kind = "sins_experiment"): twin.experiment
+        return run_experiment_file(scenario, out, seed, force, quiet)
     from twin.faults import check_faults_in_run
     from twin.haulage import Timeline
     from twin.recording import write_recording
