@@ -678,14 +678,15 @@ def entity_path(s: Series) -> str:
     return "/".join(x for x in ("errors", s.group, s.quantity, s.variant) if x)
 
 
-def write_experiment_recording(path: Path, result: ExperimentResult) -> None:
-    """The error time series as Rerun Scalars (one send_columns per entity `errors/[group/]quantity[/variant]`),
-    with a blueprint of one time-series view per group and quantity (compensated beside uncompensated; for the
-    alignment, the attitude errors and the filter's sigma of each filter)."""
+def write_experiment_recording(path: Path, result: ExperimentResult, rate_hz: float = 20.0) -> None:
+    """The error time series as Rerun Scalars (one send_columns per entity `errors/[group/]quantity[/variant]`,
+    decimated to about `rate_hz`; errors.parquet keeps every sample), with a blueprint of one time-series view per
+    group and quantity (compensated beside uncompensated; for the alignment, the attitude errors and the filter's
+    sigma of each filter)."""
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from twin.recording import APPLICATION_ID, _series
+    from twin.recording import APPLICATION_ID, _series, decimate
 
     views: dict[str, str] = {}
     for s in result.series:
@@ -701,7 +702,8 @@ def write_experiment_recording(path: Path, result: ExperimentResult) -> None:
         for s in result.series:
             unit, convert = UNITS[s.quantity]
             label = f"{s.quantity}{' ' + s.variant if s.variant else ''}"
-            _series(rec, entity_path(s), s.t, convert(s.values), [f"{label} {a} [{unit}]" for a in "ENU"])
+            keep = decimate(s.t, rate_hz)
+            _series(rec, entity_path(s), s.t[keep], convert(s.values[keep]), [f"{label} {a} [{unit}]" for a in "ENU"])
         rec.flush()
     finally:
         rec.disconnect()
