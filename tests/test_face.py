@@ -177,3 +177,10 @@ def test_explicit_bend_list_is_used():
     rng = np.random.default_rng(0)
     got = bend_angles(initial_pans(scn, Floor.from_scenario(scn, rng), rng))[0]
     np.testing.assert_allclose(np.degrees(got), wanted, atol=1e-12)
+
+
+def test_truth_clock_has_no_gaps(run):
+    """The shearer truth is on one uniform clock across the ride chunks (a lost sample is a gap in the IMU)."""
+    scn, result = run
+    step = np.diff(result.tables["truth_shearer"]["t"])
+    assert np.abs(step - 1.0 / scn.rates.truth_hz).max() < 1e-9

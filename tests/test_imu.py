@@ -6,9 +6,21 @@ import numpy as np
 import pytest
 
 from estimators import earth
-from estimators.rotations import mat_to_quat, quat_conj, quat_mul, quat_to_mat, quat_to_rotvec
+from estimators.rotations import (
+    mat_to_quat,
+    quat_conj,
+    quat_mul,
+    quat_to_mat,
+    quat_to_rotvec,
+)
 from estimators.strapdown import mechanize
-from twin.imu import COAL, ideal_increments, mounting_matrix, sensor_increments, vibration_tones
+from twin.imu import (
+    COAL,
+    ideal_increments,
+    mounting_matrix,
+    sensor_increments,
+    vibration_tones,
+)
 from twin.motions import coning, coning_increments_closed_form, sculling
 
 from .conftest import simulated
@@ -83,10 +95,13 @@ def test_vibration_amplitudes_follow_the_machine_state():
     amp = np.zeros((t.size, 3))
     amp[:, COAL] = 1.0
     dtheta, dv = sensor_increments(t, zeros, zeros, amp, tones, np.zeros(3), np.eye(3))
+    # The pick band carries the configured RMS; the drum tone adds its own (amplitude x omega / sqrt 2).
+    w_drum, w_pick = 2 * np.pi * np.array([cfg.drum_hz, cfg.pick_hz])
     rate_rms = np.sqrt(np.mean((dtheta[1:] / dt) ** 2, axis=0))
-    np.testing.assert_allclose(rate_rms, np.radians(cfg.angular_rms_deg_s), rtol=0.1)
+    want_rate = np.hypot(np.radians(cfg.angular_rms_deg_s), w_drum * np.radians(cfg.drum_angle_deg) / np.sqrt(2))
+    np.testing.assert_allclose(rate_rms, want_rate, rtol=0.1)
     # Picks at 30 Hz are sampled at 200 Hz: the mean over an interval keeps sinc(f dt) of the amplitude.
     acc_rms = np.sqrt(np.mean((dv[1:] / dt) ** 2, axis=0))
-    drum, picks = 2 * np.pi * np.array([cfg.drum_hz, cfg.pick_hz]) * dt / 2
-    kept = np.sqrt(0.5 * (np.sinc(drum / np.pi) ** 2 + np.sinc(picks / np.pi) ** 2))
-    np.testing.assert_allclose(acc_rms, cfg.accel_rms_g * 9.80665 * kept, rtol=0.1)
+    kept_pick = np.sinc(w_pick * dt / 2 / np.pi)
+    want_acc = np.hypot(cfg.accel_rms_g * 9.80665 * kept_pick, w_drum ** 2 * cfg.drum_displacement_mm * 1e-3 / np.sqrt(2))
+    np.testing.assert_allclose(acc_rms, want_acc, rtol=0.1)

@@ -55,17 +55,17 @@ class VibrationTones:
 
 
 def vibration_tones(states: list[VibrationState], rng: np.random.Generator) -> VibrationTones:
-    """Amplitudes from the RMS specifications: each tone carries half the power on every axis.
-
-    A sine of rate amplitude a has RMS a / sqrt(2); so a tone with angular-rate RMS s / sqrt(2) (half the
-    power) has rate amplitude s and angle amplitude s / (2 pi f); likewise for acceleration and displacement.
-    """
+    """Tone amplitudes per state: the drum tone from its displacement and angle amplitudes, the pick tone from
+    the band's RMS (a sine of RMS s has amplitude sqrt(2) s: rate amplitude sqrt(2) s is angle amplitude
+    sqrt(2) s / (2 pi f), acceleration likewise over (2 pi f)^2)."""
     freq = np.array([[max(st.drum_hz, 1e-3), max(st.pick_hz, 1e-3)] for st in states])
-    rate_rms = np.array([np.radians(st.angular_rms_deg_s) for st in states])[:, None]
-    acc_rms = np.array([st.accel_rms_g * G0 for st in states])[:, None]
-    omega = 2 * np.pi * freq
+    omega_pick = 2 * np.pi * freq[:, 1]
+    ang = np.column_stack([[np.radians(st.drum_angle_deg) for st in states],
+                           [np.sqrt(2) * np.radians(st.angular_rms_deg_s) for st in states] / omega_pick])
+    lin = np.column_stack([[st.drum_displacement_mm * 1e-3 for st in states],
+                           [np.sqrt(2) * st.accel_rms_g * G0 for st in states] / omega_pick ** 2])
     per_axis = np.ones((1, 1, 3))
-    return VibrationTones(freq, (rate_rms / omega)[..., None] * per_axis, (acc_rms / omega ** 2)[..., None] * per_axis,
+    return VibrationTones(freq, ang[..., None] * per_axis, lin[..., None] * per_axis,
                           rng.uniform(0, 2 * np.pi, (3, 2)), rng.uniform(0, 2 * np.pi, (3, 2)))
 
 

@@ -34,19 +34,32 @@ class Imu(_Section):
 
 
 class VibrationState(_Section):
-    """Vibration of the IMU in one machine state: a drum-rotation tone and pick-impact band, with phase."""
+    """Vibration of the IMU in one machine state: a drum-rotation tone and a pick-impact band, with phase.
+
+    The drum tone is slow (the drums turn at 0.5-1 Hz), so it is specified by how far it moves the machine:
+    millimetres and hundredths of a degree, not g (0.3 g at 0.6 Hz would swing the shearer by 20 cm). The pick
+    band carries the RMS acceleration and angular rate that accelerometers on a cutting shearer report."""
 
     drum_hz: Annotated[float, Field(ge=0, le=5, allow_inf_nan=False)] = 0.6
+    drum_displacement_mm: Annotated[float, Field(ge=0, le=20, allow_inf_nan=False)] = 0.0
+    """Amplitude of the drum tone's displacement of the IMU, per axis."""
+    drum_angle_deg: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] = 0.0
+    """Amplitude of the drum tone's rocking of the IMU, per axis."""
     pick_hz: Annotated[float, Field(ge=0, le=200, allow_inf_nan=False)] = 30.0
     accel_rms_g: Annotated[float, Field(ge=0, le=5, allow_inf_nan=False)] = 0.0
+    """RMS acceleration of the pick band, per axis."""
     angular_rms_deg_s: Annotated[float, Field(ge=0, le=10, allow_inf_nan=False)] = 0.0
+    """RMS angular rate of the pick band, per axis."""
 
 
 class Vibration(_Section):
     enabled: bool = True
-    idle: VibrationState = VibrationState(accel_rms_g=0.02, angular_rms_deg_s=0.02)
-    cutting_coal: VibrationState = VibrationState(accel_rms_g=0.3, angular_rms_deg_s=0.3)
-    cutting_rock: VibrationState = VibrationState(accel_rms_g=0.8, angular_rms_deg_s=0.8, pick_hz=38.0)
+    idle: VibrationState = VibrationState(drum_displacement_mm=0.1, drum_angle_deg=0.001, accel_rms_g=0.02,
+                                          angular_rms_deg_s=0.02)
+    cutting_coal: VibrationState = VibrationState(drum_displacement_mm=1.0, drum_angle_deg=0.01, accel_rms_g=0.3,
+                                                  angular_rms_deg_s=0.3)
+    cutting_rock: VibrationState = VibrationState(drum_displacement_mm=2.0, drum_angle_deg=0.02, accel_rms_g=0.8,
+                                                  angular_rms_deg_s=0.8, pick_hz=38.0)
     rock_zones_m: list[Annotated[list[NonNegative], Field(min_length=2, max_length=2)]] = []
     """Arc-length intervals [from, to] along the face where the drums cut rock (floor or roof bands)."""
 

@@ -126,10 +126,12 @@ def shearer_chunk(scn: Scenario, timeline: Timeline, versions: list[PanVersion],
                   last: bool) -> dict[str, np.ndarray]:
     """Ride and truth columns for times in [t0, t1) ([t0, t1] for the last chunk)."""
     ride_hz, truth_hz = scn.rates.ride_hz, scn.rates.truth_hz
-    t_ride = sample_times(t0, t1, ride_hz)
+    # The ride reaches one ride step beyond the chunk on both sides (the shearer stands there), so every truth
+    # sample in [t0, t1) lies inside the ride whatever the two rates.
+    t_ride = sample_times(max(0.0, t0 - 1.0 / ride_hz), min(timeline.duration, t1 + 1.0 / ride_hz), ride_hz)
     pos, quat = simulate_ride(scn, *ride_targets_t(versions, t_ride, timeline.sample(t_ride)["s"], scn))
     t = sample_times(t0, t1, truth_hz)
-    t = t[(t <= t_ride[-1]) & ((t < t1) | last)]
+    t = t[(t >= t_ride[0]) & (t <= t_ride[-1]) & ((t < t1) | last)]
     haul = timeline.sample(t)
     site, frame = scn.site, FaceFrame(np.radians(scn.face.azimuth_deg))
     truth = shearer_truth(t_ride, pos, quat, t, mat_to_quat(frame.mat_tf), np.radians(site.lat_deg),
