@@ -1,5 +1,5 @@
 """Stationary fine alignment of a standing shearer: the 10-state model of 000 section 5.2 run by an EKF, a UKF
-and the "optimized UKF", all sharing one model and one loop.
+and the "optimized UKF", all sharing one model, one measurement and one loop.
 
 State (000 eq. 19, same order and meaning):
 
@@ -9,13 +9,13 @@ dV_E, dV_N: east/north velocity error of the computed solution (the truth stands
 the computed navigation frame n', as large-azimuth error angles C_n'^n = E(phi) = Rz(phi_U) Rx(phi_E) Ry(phi_N)
 (C_b^n = E(phi) C_b^n'; to first order E = I + [phi x], the psi-angle convention of estimators.error_model and
 C_n^n' ~ I - [phi x] of 000 eq. 10). phi_U is the heading error at any size and the tilt E^T e_U does not depend
-on it, so a heading uncertainty of tens of degrees does not leak into the level (a rotation-vector state does:
-a UKF on it shrank the heading sigma of a MEMS IMU below its true error). eps_a (x, y) and eps_w (x, y, z): accelerometer and gyro biases in the body
-frame, reported = true + eps, random constants (000 eq. 16).
+on it, so a heading uncertainty of tens of degrees does not leak into the level (a rotation-vector state does).
+eps_a (x, y) and eps_w (x, y, z): accelerometer and gyro biases in the body frame, reported = true + eps, random
+constants (000 eq. 16) or random walks (`gyro_bias_psd`, `accel_bias_psd`).
 
 Model. 000 eqs. 15 and 20-22 are the small-angle linearization; to handle the 3, 3, 5 deg initial errors the
 filter propagates the exact nonlinear error of a stationary IMU instead (derived from the mechanization
-q_nb(k+1) = Exp(-w_ie T) q_nb(k) Exp(dtheta), v(k+1) = v(k) + C_b^n' dv + g T - 2 w_ie x v T, and the truth
+C_b^n'(k+1) = Exp(-w_ie T) C_b^n'(k) Exp(dtheta), v(k+1) = v(k) + C_b^n' dv + g T - 2 w_ie x v T, and the truth
 C_b^n constant up to the Earth rotation, v = 0):
 
     E(phi_{k+1}) = R E(phi_k) R^T Exp(-C_b^n'(k+1) eps_w T),        R = Exp(-[w_ie x] T)        (000 eq. 15, 18)
@@ -25,15 +25,28 @@ with f^n = [0, 0, gamma]; linearized at phi = 0 this is A of 000 eqs. 20-22 (wit
 coupling -[w_ie x] phi and the gyro drift mapped by the full C_b^n', eq. 22). Process noise W of 000 eq. 19 on
 the velocity (VRW^2) and attitude (ARW^2) states; discretized as 000 eqs. 24, 26, 27, 29 (transition
 Phi = I + A T + A^2 T^2/2 + A^3 T^3/6, Gamma = T (I + A T/2 + A^2 T^2/6), Q_k = q / T, so Q_d = Gamma Q_k Gamma^T).
-Measurement (000 eqs. 23, 25, 28): z = computed (v_E, v_N) = H x + V, H = [I_2 0_{2x8}], R_k = r^2 I (eq. 30).
+
+Measurements, one linear (z, H, R) per update (000 eqs. 23, 25, 28, 30 and one addition):
+
+* zero velocity (000 eq. 23): z = computed (v_E, v_N) = [I_2 0] x + V, R = velocity_sigma^2 I;
+* zero vertical rate (not in 000; ``zero_rate=True``): the standing shearer turns only with the Earth, so the
+  gyro output over the block resolved on the computed vertical minus the Earth rate's vertical component is the
+  vertical gyro bias: z = [C_b^n' dtheta]_U - w_U T = -w_N T phi_E + T [C_b^n' eps_w]_U + ARW noise,
+  R = ARW^2 T. Without it a MEMS gyro (hundreds of deg/h) turns the computed frame by tens of degrees during the
+  alignment; the first-order covariance does not rotate the tilt with the frame while it does rotate the
+  body-fixed accelerometer bias, so the filter takes the accelerometer bias for observable and the level ends
+  several times accel bias / g off with a sigma that is too small (measured: 0.8 deg off, sigma 0.05 deg on the
+  MTi-G-700). The horizontal gyro outputs are left to the velocity channel (their Earth-rate part depends on
+  the unknown heading, the gyrocompassing 000 relies on), so nothing is counted twice there.
 
 Loop: increments are summed over blocks of `update_rate` (default 10 Hz); per block the nominal solution
-(q_nb', v') is mechanized, the filter predicts and updates, and the estimated phi and dV are fed back into the
+(C_b^n', v') is mechanized, the filter predicts and updates, and the estimated phi and dV are fed back into the
 nominal (error-state reset: C_b^n' <- E(phi) C_b^n', v' <- v' - dV, phi = dV = 0; biases stay in the state).
-The measurement is linear, so all three filters share the exact linear (Kalman) update; they differ in the time
-update only:
+The measurements are linear, so all three filters share the exact linear (Kalman, Joseph form) update; they
+differ in the time update only:
 
-* ``ekf``: x <- f(x), P <- Phi P Phi^T + Q_d (Phi from the Jacobian A at the current estimate, eq. 26).
+* ``ekf``: x <- f(x), P <- Phi P Phi^T + Q_d (Phi from the Jacobian A at the current estimate, eq. 26); the whole
+  loop is one numba kernel.
 * ``ukf``: the unscented transform of the nonlinear f, filterpy ``MerweScaledSigmaPoints`` with the usual
   scaled-UT parameters alpha = 1e-3, beta = 2, kappa = 0 and filterpy ``unscented_transform``.
 * ``optimized_ukf``: 000 section 5.2 names an "optimized UKF" but gives no equation of the optimization (its
@@ -44,48 +57,61 @@ update only:
   nonlinearity acts, instead of the near-linearization of alpha = 1e-3. If the propagated covariance loses
   positive definiteness (the centre weight is negative) the step falls back to the ukf transform.
 
-Limits. Level and heading cannot be separated from the horizontal accelerometer bias and the east gyro drift at
-rest: they settle at the floors accel bias / g and east gyro bias / (w_ie cos L) (estimators.alignment
-`level_limit`, `heading_limit`), and the covariance says so when the bias priors are given (gyro_bias_sigma,
-accel_bias_sigma, e.g. the grade's turn-on bias). Known defect: with a MEMS gyro bias of hundreds of deg/h
-(MTi-G-700) the uncompensated vertical drift turns the computed frame by tens of degrees, the (first-order)
-covariance treats the accelerometer bias as observable from that turning, and the level settles at 2-5 times
-accel bias / g with a level sigma (~0.05 deg) that is too small; the heading sigma stays honest (tens of deg).
+Limits (`alignment_floors`). At rest an attitude error is invisible when the biases mimic it: a tilt phi_E
+changes the north specific force by gamma phi_E and the gyros by the Earth rate turned by phi_E (north by
+-w_U phi_E, up by w_N phi_E); phi_N changes the east specific force and, with the heading phi_U, the east gyro.
+So phi_N settles at accel bias / g (east), phi_U at the gyrocompassing floor (east gyro bias) / (w_ie cos L)
+plus tan L phi_N, and phi_E at the information-weighted mean of what the north accelerometer and the north and
+up gyros each say: -nabla_N / g where the accelerometer prior is the tighter reference (every MEMS grade: the
+Earth rate is far below the gyro bias), while a navigation-grade gyro (004: 0.001 deg/h against 30 ug) takes
+about a sixth of the weight. The covariance says so when the bias priors are given (gyro_bias_sigma,
+accel_bias_sigma, e.g. the grade's turn-on bias). A gyro whose heading floor exceeds the initial heading
+uncertainty leaves the heading where it started, with its sigma.
+
+Bad input. The zero-velocity and zero-rate innovations of a standing IMU are white with the covariance the
+filter predicts; their normalized squares (NIS) averaged over MOTION_WINDOW_S windows are tested against the
+chi-square bound of false-alarm rate MOTION_FALSE_ALARM. A shearer that moves (starts hauling, cuts, turns)
+fails the test: `fine_align` raises AlignmentError naming the time, or with on_motion="flag" returns the result
+with `motion_t` set.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, unscented_transform
+from scipy.stats import chi2
 
 from estimators import earth
-from estimators.rotations import (
-    euler_to_mat,
-    mat_to_euler,
-    mat_to_quat,
-    quat_mul,
-    quat_normalize,
-    quat_to_euler,
-    quat_to_mat,
-    rotvec_to_quat,
-    skew,
-)
+from estimators.alignment import AlignmentError, heading_limit, level_limit
+from estimators.rotations import mat_to_euler, mat_to_quat, quat_to_euler, quat_to_mat
 
 DV = slice(0, 2)
 PHI = slice(2, 5)
 EPS_A = slice(5, 7)
 EPS_W = slice(7, 10)
 N_STATES = 10
+_DVE, _DVN, _PE, _PN, _PU, _AX, _AY, _WX = 0, 1, 2, 3, 4, 5, 6, 7  # indices for the kernels
 METHODS = ("ekf", "ukf", "optimized_ukf")
+
+MOTION_WINDOW_S = 10.0
+"""Length of the windows [s] over which the normalized innovations are averaged for the motion test."""
+MOTION_FALSE_ALARM = 1e-6
+"""False-alarm probability per window of the motion test (chi-square of a standing, consistent filter)."""
+MOTION_SETTLE_S = 20.0
+"""The first seconds, while the 3-5 deg start errors are being removed, are not tested."""
 
 
 @dataclass
 class FineAlignment:
     """Estimates at each update: t [s] (end of block), q_nb (K, 4), sigma (K, 10) state sigmas after the update
-    (attitude sigmas = uncertainty of the attitude), x (K, 10) the bias estimates (phi, dV are reset to 0),
-    and the final covariance P."""
+    (attitude sigmas = uncertainty of the attitude), bias (K, 5) the bias estimates (phi, dV are reset to 0),
+    nis (K,) normalized innovation squared of each update (dof = number of measurements: 3 with the zero-rate
+    update, else 2), the final covariance P, and motion_t: the start [s] of the first window that failed the
+    motion test (None: the data look stationary)."""
 
     method: str
     t: np.ndarray
@@ -93,6 +119,8 @@ class FineAlignment:
     sigma: np.ndarray
     bias: np.ndarray
     P: np.ndarray
+    nis: np.ndarray
+    motion_t: float | None = None
 
     @property
     def attitude_sigma(self) -> np.ndarray:
@@ -114,71 +142,261 @@ class FineAlignment:
         return float(phi @ np.linalg.solve(self.P[PHI, PHI], phi))
 
 
-class _Model:
-    """The shared nonlinear error model over one block of length T (see the module docstring)."""
-
-    def __init__(self, lat: float, h: float, T: float, q_psd: np.ndarray):
-        self.T = T
-        self.w = earth.earth_rate_n(lat)
-        self.gamma = float(earth.normal_gravity(lat, h))
-        self.f_n = np.array([0.0, 0.0, self.gamma])
-        self.R = quat_to_mat(rotvec_to_quat(-self.w * T))
-        self.q_psd = q_psd  # continuous PSD of W (diagonal, 10)
-        self.c_nb = np.eye(3)
-
-    def f(self, X: np.ndarray) -> np.ndarray:
-        """Propagate rows of states X (S, 10) over one block with the nominal C_b^n' of the block end."""
-        T, c = self.T, self.c_nb
-        e0 = _err_mat(X[:, PHI])
-        theta = -(X[:, EPS_W] @ c.T) * T
-        e1 = self.R @ e0 @ self.R.T @ quat_to_mat(rotvec_to_quat(theta))
-        phi1 = np.stack(mat_to_euler(e1), axis=-1)
-        mid = _err_mat(0.5 * (X[:, PHI] + phi1))
-        acc = (np.swapaxes(mid, -1, -2) @ self.f_n)[:, :2]  # (E^T f^n)_EN; E^T e_U does not depend on the heading
-        acc += X[:, EPS_A] @ c[:2, :2].T
-        dv = X[:, DV]
-        cor = 2 * np.stack([-self.w[2] * dv[:, 1], self.w[2] * dv[:, 0]], axis=1)  # [2 w x (dvE, dvN, 0)]_EN
-        out = X.copy()
-        out[:, DV] = dv + (acc - cor) * T
-        out[:, PHI] = phi1
-        return out
-
-    def jacobian(self) -> np.ndarray:
-        """A (000 eq. 20) of the continuous error dynamics at phi = 0."""
-        a = np.zeros((N_STATES, N_STATES))
-        wu = self.w[2]
-        a[DV, DV] = [[0.0, 2 * wu], [-2 * wu, 0.0]]
-        a[DV, PHI] = skew(self.f_n)[:2]
-        a[DV, EPS_A] = self.c_nb[:2, :2]
-        a[PHI, PHI] = -skew(self.w)
-        a[PHI, EPS_W] = -self.c_nb
-        return a
-
-    def discretize(self) -> tuple[np.ndarray, np.ndarray]:
-        """Phi (000 eq. 26) and Q_d = Gamma Q_k Gamma^T (eqs. 27, 29) to third order."""
-        a, T = self.jacobian(), self.T
-        at = a * T
-        at2 = at @ at
-        phi = np.eye(N_STATES) + at + at2 / 2 + at2 @ at / 6
-        gamma = T * (np.eye(N_STATES) + at / 2 + at2 / 6)
-        qd = gamma @ np.diag(self.q_psd / T) @ gamma.T
-        return phi, 0.5 * (qd + qd.T)
+def alignment_floors(c_nb, accel_bias_b, gyro_bias_b, lat: float, accel_sigma: float, gyro_sigma: float,
+                     h: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Final attitude errors phi = (phi_E, phi_N, phi_U) [rad] no stationary alignment can beat, for the true
+    attitude c_nb (C_b^n) and effective biases in b (reported - true, whatever their cause: turn-on bias, the
+    non-orthogonality times the sensed gravity, the in-run drift). Returns (floors, classical): classical =
+    (-nabla_N / g, nabla_E / g, tan L phi_N - eps_E / (w_ie cos L)), the accelerometer and gyrocompassing
+    floors (estimators.alignment `level_limit`, `heading_limit`); floors = the same with phi_E the
+    information-weighted mean of the accelerometer's and the north and up gyros' verdicts (module docstring),
+    weights gamma^2 / accel_sigma^2, w_U^2 / gyro_sigma^2, w_N^2 / gyro_sigma^2 (the per-axis bias priors)."""
+    acc_n = np.asarray(c_nb) @ np.asarray(accel_bias_b, float)
+    gyr_n = np.asarray(c_nb) @ np.asarray(gyro_bias_b, float)
+    w = earth.earth_rate_n(lat)
+    phi_n = level_limit(acc_n[0], lat, h)
+    classical = np.array([-level_limit(acc_n[1], lat, h), phi_n,
+                          np.tan(lat) * phi_n - heading_limit(gyr_n[0], lat)])
+    gamma = float(earth.normal_gravity(lat, h))
+    info = np.array([gamma ** 2 / max(accel_sigma, 1e-30) ** 2, w[2] ** 2 / max(gyro_sigma, 1e-30) ** 2,
+                     w[1] ** 2 / max(gyro_sigma, 1e-30) ** 2])
+    verdicts = np.array([classical[0], -gyr_n[1] / w[2], gyr_n[2] / w[1]])
+    floors = classical.copy()
+    floors[0] = float(info @ verdicts / info.sum())
+    return floors, classical
 
 
-def _err_mat(phi: np.ndarray) -> np.ndarray:
-    """C_n'^n of attitude-error angles phi = (phi_E, phi_N, phi_U) (..., 3): Rz(phi_U) Rx(phi_E) Ry(phi_N)."""
-    return euler_to_mat(phi[..., 0], phi[..., 1], phi[..., 2])
+# ------------------------------------------------------------------------------------------------------------
+# Kernels (numba): shared by the EKF loop and the UKF steps.
+
+
+@nb.njit(cache=True)
+def _err_mat(pe, pn, pu):
+    """E(phi) = Rz(phi_U) Rx(phi_E) Ry(phi_N) (estimators.rotations euler_to_mat order)."""
+    sp, cp = math.sin(pe), math.cos(pe)
+    sr, cr = math.sin(pn), math.cos(pn)
+    sy, cy = math.sin(pu), math.cos(pu)
+    return np.array([[cy * cr - sy * sp * sr, -sy * cp, cy * sr + sy * sp * cr],
+                     [sy * cr + cy * sp * sr, cy * cp, sy * sr - cy * sp * cr],
+                     [-cp * sr, sp, cp * cr]])
+
+
+@nb.njit(cache=True)
+def _err_angles(c):
+    """Inverse of _err_mat (estimators.rotations mat_to_euler): (phi_E, phi_N, phi_U)."""
+    cp = math.hypot(c[2, 0], c[2, 2])
+    pe = math.atan2(c[2, 1], cp)
+    pn = 0.0 if cp < 1e-12 else math.atan2(-c[2, 0], c[2, 2])
+    sr, cr = math.sin(pn), math.cos(pn)
+    return pe, pn, math.atan2(c[1, 0] * cr + c[1, 2] * sr, c[0, 0] * cr + c[0, 2] * sr)
+
+
+@nb.njit(cache=True)
+def _exp_mat(r):
+    """Rotation matrix of the rotation vector r (Rodrigues; series for tiny angles)."""
+    a2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    if a2 < 1e-16:
+        s, c = 1.0 - a2 / 6.0, 0.5 - a2 / 24.0
+    else:
+        a = math.sqrt(a2)
+        s, c = math.sin(a) / a, (1.0 - math.cos(a)) / a2
+    k = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
+    return np.eye(3) + s * k + c * (k @ k)
+
+
+@nb.njit(cache=True)
+def _propagate(x, c1, r_ie, w_u, gamma, T):
+    """The nonlinear error model over one block (module docstring) for one state x."""
+    e0 = _err_mat(x[_PE], x[_PN], x[_PU])
+    e1 = r_ie @ e0 @ r_ie.T @ _exp_mat(-(c1 @ x[_WX:_WX + 3]) * T)
+    pe, pn, pu = _err_angles(e1)
+    mid = _err_mat(0.5 * (x[_PE] + pe), 0.5 * (x[_PN] + pn), 0.5 * (x[_PU] + pu))
+    acc_e = gamma * mid[2, 0] + c1[0, 0] * x[_AX] + c1[0, 1] * x[_AY] + 2 * w_u * x[_DVN]  # minus [2 w x dV]
+    acc_n = gamma * mid[2, 1] + c1[1, 0] * x[_AX] + c1[1, 1] * x[_AY] - 2 * w_u * x[_DVE]
+    out = x.copy()
+    out[_DVE] += acc_e * T
+    out[_DVN] += acc_n * T
+    out[_PE], out[_PN], out[_PU] = pe, pn, pu
+    return out
+
+
+@nb.njit(cache=True)
+def _propagate_rows(xs, c1, r_ie, w_u, gamma, T):
+    out = np.empty_like(xs)
+    for i in range(xs.shape[0]):
+        out[i] = _propagate(xs[i], c1, r_ie, w_u, gamma, T)
+    return out
+
+
+@nb.njit(cache=True)
+def _transition(c1, w, gamma, T, q_psd):
+    """A (000 eqs. 20-22) at phi = 0, then Phi (eq. 26) and Q_d = Gamma Q_k Gamma^T (eqs. 27, 29), third order."""
+    a = np.zeros((N_STATES, N_STATES))
+    a[_DVE, _DVN], a[_DVN, _DVE] = 2 * w[2], -2 * w[2]
+    a[_DVE, _PN], a[_DVN, _PE] = -gamma, gamma  # [f^n x] rows E, N
+    a[_DVE:_DVN + 1, _AX:_AY + 1] = c1[:2, :2]
+    wx = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    a[_PE:_PU + 1, _PE:_PU + 1] = -wx
+    a[_PE:_PU + 1, _WX:_WX + 3] = -c1
+    at = a * T
+    at2 = at @ at
+    eye = np.eye(N_STATES)
+    phi = eye + at + at2 / 2 + at2 @ at / 6
+    gam = T * (eye + at / 2 + at2 / 6)
+    qd = (gam * (q_psd / T)) @ gam.T
+    return phi, 0.5 * (qd + qd.T)
+
+
+@nb.njit(cache=True)
+def _mechanize(c, v, dth, dvb, r_ie, g_n, w_u, T):
+    """Nominal C_b^n' and (v_E, v_N) over one block (stationary: no transport rate; coning negligible)."""
+    c1 = r_ie @ c @ _exp_mat(dth)
+    c1 = 1.5 * c1 - 0.5 * (c1 @ c1.T @ c1)  # keep it orthonormal
+    dvn = 0.5 * (c + c1) @ dvb
+    v1 = np.array([v[0] + dvn[0] + g_n[0] * T + 2 * w_u * v[1] * T,
+                   v[1] + dvn[1] + g_n[1] * T - 2 * w_u * v[0] * T])
+    return c1, v1
+
+
+@nb.njit(cache=True)
+def _measurement(c0, c1, v, dth, w, T, r_vel, r_rate, zero_rate):
+    """(z, H, R) of the standing IMU: zero velocity, and with zero_rate the vertical rate (module docstring)."""
+    m = 3 if zero_rate else 2
+    z = np.zeros(m)
+    hm = np.zeros((m, N_STATES))
+    r = np.zeros((m, m))
+    z[0], z[1] = v[0], v[1]
+    hm[0, _DVE] = hm[1, _DVN] = 1.0
+    r[0, 0] = r[1, 1] = r_vel
+    if zero_rate:
+        c_mid = 0.5 * (c0 + c1)
+        z[2] = c_mid[2, 0] * dth[0] + c_mid[2, 1] * dth[1] + c_mid[2, 2] * dth[2] - w[2] * T
+        hm[2, _PE] = -w[1] * T
+        hm[2, _WX:_WX + 3] = c_mid[2] * T
+        r[2, 2] = r_rate
+    return z, hm, r
+
+
+@nb.njit(cache=True)
+def _update(x, p, z, hm, r):
+    """Kalman update in Joseph form, in place; returns the normalized innovation squared."""
+    y = z - hm @ x
+    s = hm @ p @ hm.T + r
+    k = np.linalg.solve(s, hm @ p).T
+    x += k @ y
+    ikh = np.eye(N_STATES) - k @ hm
+    p[:, :] = ikh @ p @ ikh.T + k @ r @ k.T
+    return y @ np.linalg.solve(s, y)
+
+
+@nb.njit(cache=True)
+def _reset(c, v, x, p):
+    """Feed phi and dV into the nominal and zero them (the biases stay in the state); P follows the reset.
+
+    The remaining error is E(phi) E(phi_hat)^T; its Jacobian G in phi at phi_hat (central differences) is not the
+    identity while phi_hat is large: a heading correction turns the tilt axes. Without P <- G P G^T the tilt
+    covariance stays in the old axes while the body-fixed accelerometer bias is mapped through the turned
+    nominal, and the filter takes the bias for partly observable (level sigma 0.66 accel bias / g measured)."""
+    e_hat = _err_mat(x[_PE], x[_PN], x[_PU])
+    g = np.zeros((3, 3))
+    step = 1e-5
+    for j in range(3):
+        lo, hi = x[_PE:_PU + 1].copy(), x[_PE:_PU + 1].copy()
+        lo[j] -= step
+        hi[j] += step
+        a = _err_angles(_err_mat(hi[0], hi[1], hi[2]) @ e_hat.T)
+        b = _err_angles(_err_mat(lo[0], lo[1], lo[2]) @ e_hat.T)
+        for i in range(3):
+            g[i, j] = (a[i] - b[i]) / (2 * step)
+    p[_PE:_PU + 1, :] = g @ np.ascontiguousarray(p[_PE:_PU + 1, :])
+    p[:, _PE:_PU + 1] = np.ascontiguousarray(p[:, _PE:_PU + 1]) @ g.T
+    c1 = e_hat @ c
+    v1 = np.array([v[0] - x[_DVE], v[1] - x[_DVN]])
+    x[:_PU + 1] = 0.0
+    return c1, v1
+
+
+@nb.njit(cache=True)
+def _correct(k, c0, c, v, x, p, dth, w, T, r_vel, r_rate, zero_rate, c_out, s_out, b_out, nis_out):
+    """Measurement update, reset and outputs of block k (shared by both loops); returns the nominal (c, v)."""
+    z, hm, r = _measurement(c0, c, v, dth, w, T, r_vel, r_rate, zero_rate)
+    nis_out[k] = _update(x, p, z, hm, r)
+    c, v = _reset(c, v, x, p)
+    c_out[k] = c
+    for i in range(N_STATES):
+        s_out[k, i] = math.sqrt(p[i, i])
+    b_out[k] = x[_AX:]
+    return c, v
+
+
+@nb.njit(cache=True)
+def _ekf_kernel(dth_b, dv_b, c, v, x, T, w, r_ie, g_n, gamma, q_psd, p, r_vel, r_rate, zero_rate, c_out, s_out,
+                b_out, nis_out):
+    """The EKF loop over all blocks from the nominal (c, v) and state (x, p); outputs into c_out (K, 3, 3),
+    s_out (K, 10), b_out (K, 5), nis_out (K,); returns the final P."""
+    for k in range(dth_b.shape[0]):
+        c0 = c
+        c, v = _mechanize(c, v, dth_b[k], dv_b[k], r_ie, g_n, w[2], T)
+        phi, qd = _transition(c, w, gamma, T, q_psd)
+        x = _propagate(x, c, r_ie, w[2], gamma, T)
+        p = phi @ p @ phi.T + qd
+        c, v = _correct(k, c0, c, v, x, p, dth_b[k], w, T, r_vel, r_rate, zero_rate, c_out, s_out, b_out, nis_out)
+    return p
+
+
+# ------------------------------------------------------------------------------------------------------------
+# API
 
 
 def _block_sums(a: np.ndarray, m: int) -> np.ndarray:
     k = a.shape[0] // m
-    return a[: k * m].reshape(k, m, 3).sum(axis=1)
+    return np.ascontiguousarray(a[: k * m].reshape(k, m, 3).sum(axis=1))
+
+
+def _ukf_loop(method, dth_b, dv_b, c, v, x, T, w, r_ie, g_n, gamma, q_psd, P, r_vel, r_rate, zero_rate, c_out,
+              s_out, b_out, nis_out):
+    """The UKF loop (arguments as _ekf_kernel): the unscented time update (filterpy) between the shared kernels."""
+    pts = {"ukf": MerweScaledSigmaPoints(N_STATES, alpha=1e-3, beta=2.0, kappa=0.0),
+           "optimized_ukf": MerweScaledSigmaPoints(N_STATES, alpha=1.0, beta=2.0, kappa=3.0 - N_STATES)}
+    names = (method, "ukf") if method == "optimized_ukf" else ("ukf",)
+    for k in range(dth_b.shape[0]):
+        c0 = c
+        c, v = _mechanize(c, v, dth_b[k], dv_b[k], r_ie, g_n, w[2], T)
+        _, qd = _transition(c, w, gamma, T, q_psd)
+        for name in names:
+            sp = pts[name]
+            x_new, P_new = unscented_transform(_propagate_rows(sp.sigma_points(x, P), c, r_ie, w[2], gamma, T),
+                                               sp.Wm, sp.Wc, qd)
+            P_new = 0.5 * (P_new + P_new.T)
+            try:
+                np.linalg.cholesky(P_new)
+            except np.linalg.LinAlgError:
+                continue
+            x, P = x_new, P_new
+            break
+        else:
+            raise np.linalg.LinAlgError("the propagated covariance is not positive definite")
+        c, v = _correct(k, c0, c, v, x, P, dth_b[k], w, T, r_vel, r_rate, zero_rate, c_out, s_out, b_out, nis_out)
+    return P
+
+
+def motion_test(nis: np.ndarray, dof: int, T: float) -> float | None:
+    """Start [s] of the first MOTION_WINDOW_S window (after MOTION_SETTLE_S) whose summed normalized innovation
+    squared exceeds the chi-square bound of MOTION_FALSE_ALARM, or None."""
+    n = max(1, round(MOTION_WINDOW_S / T))
+    start = round(MOTION_SETTLE_S / T)
+    k = (nis.size - start) // n
+    if k < 1:
+        return None
+    sums = nis[start: start + k * n].reshape(k, n).sum(axis=1)
+    bad = np.flatnonzero(sums > chi2.isf(MOTION_FALSE_ALARM, dof * n))
+    return None if bad.size == 0 else float((start + bad[0] * n) * T)
 
 
 def fine_align(dtheta, dv, dt: float, lat: float, q0_nb, grade_noise: tuple[float, float], initial_sigma_rad,
                method: str = "ukf", *, h: float = 0.0, gyro_bias_sigma: float = 0.0, accel_bias_sigma: float = 0.0,
                velocity_sigma: float = 1e-3, update_rate: float = 10.0, gyro_bias_psd: float = 0.0,
-               accel_bias_psd: float = 0.0) -> FineAlignment:
+               accel_bias_psd: float = 0.0, zero_rate: bool = True, on_motion: str = "raise") -> FineAlignment:
     """Fine alignment of a stationary IMU from increments (rows over equal intervals dt [s]).
 
     lat [rad], h [m]: the known position; q0_nb: the (coarse) start attitude; grade_noise = (arw [rad/sqrt(s)],
@@ -188,10 +406,14 @@ def fine_align(dtheta, dv, dt: float, lat: float, q0_nb, grade_noise: tuple[floa
     the zero-velocity observation (vibration of the standing machine). gyro_bias_psd [rad^2/s^3] and
     accel_bias_psd [m^2/s^5]: random-walk PSD of the bias states for an in-run bias instability (000 eq. 16 takes
     them as random constants, the default 0; a Gauss-Markov bias of sigma s and time tau gives 2 s^2 / tau).
+    zero_rate: use the vertical zero-rate measurement (module docstring). on_motion: 'raise' (AlignmentError) or
+    'flag' (FineAlignment.motion_t) when the data fail the standing test.
     Returns a FineAlignment.
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; use one of {', '.join(METHODS)}")
+    if on_motion not in ("raise", "flag"):
+        raise ValueError(f"on_motion must be 'raise' or 'flag', got {on_motion!r}")
     dtheta, dv = np.asarray(dtheta, float), np.asarray(dv, float)
     if dtheta.shape != dv.shape or dtheta.ndim != 2 or dtheta.shape[1] != 3:
         raise ValueError(f"increments must be two (N, 3) arrays; got {dtheta.shape} and {dv.shape}")
@@ -212,68 +434,25 @@ def fine_align(dtheta, dv, dt: float, lat: float, q0_nb, grade_noise: tuple[floa
     q_psd[PHI] = max(arw, 1e-9) ** 2
     q_psd[EPS_A] = accel_bias_psd
     q_psd[EPS_W] = gyro_bias_psd
-    model = _Model(lat, h, T, q_psd)
-
     s0 = np.asarray(initial_sigma_rad, float)
     P = np.diag(np.concatenate([[velocity_sigma ** 2] * 2, s0 ** 2, [max(accel_bias_sigma, tiny) ** 2] * 2,
                                 [max(gyro_bias_sigma, 1e-12) ** 2] * 3]))
-    x = np.zeros(N_STATES)
-    H = np.zeros((2, N_STATES))
-    H[0, 0] = H[1, 1] = 1.0
-    Rm = velocity_sigma ** 2 * np.eye(2)
-
-    pts = {"ukf": MerweScaledSigmaPoints(N_STATES, alpha=1e-3, beta=2.0, kappa=0.0),
-           "optimized_ukf": MerweScaledSigmaPoints(N_STATES, alpha=1.0, beta=2.0, kappa=3.0 - N_STATES)}
-    q = quat_normalize(np.asarray(q0_nb, float))
-    v = np.zeros(2)
-    q_ie = rotvec_to_quat(-model.w * T)
-    w_u = model.w[2]
+    w = earth.earth_rate_n(lat)
+    gamma = float(earth.normal_gravity(lat, h))
     g_n = earth.gravity_n(lat, h)
+    r_vel, r_rate = velocity_sigma ** 2, max(arw, 1e-9) ** 2 * T
+    c = quat_to_mat(np.asarray(q0_nb, float) / np.linalg.norm(q0_nb))
 
-    t_out = np.arange(1, n_upd + 1) * T
-    q_out = np.empty((n_upd, 4))
+    c_out = np.empty((n_upd, 3, 3))
     s_out = np.empty((n_upd, N_STATES))
     b_out = np.empty((n_upd, 5))
-    for k in range(n_upd):
-        # Nominal mechanization over the block (stationary: no transport rate, coning negligible).
-        c0 = quat_to_mat(q)
-        q = quat_normalize(quat_mul(q_ie, quat_mul(q, rotvec_to_quat(dth_b[k]))))
-        c1 = quat_to_mat(q)
-        dvn = 0.5 * (c0 + c1) @ dv_b[k] + g_n * T
-        v = v + dvn[:2] - 2 * np.array([-w_u * v[1], w_u * v[0]]) * T
-        model.c_nb = c1
-        phi_m, qd = model.discretize()
-        # Time update.
-        if method == "ekf":
-            x = model.f(x[None])[0]
-            P = phi_m @ P @ phi_m.T + qd
-        else:
-            done = False
-            for name in ((method, "ukf") if method == "optimized_ukf" else ("ukf",)):
-                sp = pts[name]
-                sig = model.f(sp.sigma_points(x, P))
-                x_new, P_new = unscented_transform(sig, sp.Wm, sp.Wc, qd)
-                P_new = 0.5 * (P_new + P_new.T)
-                try:
-                    np.linalg.cholesky(P_new)
-                except np.linalg.LinAlgError:
-                    continue
-                x, P, done = x_new, P_new, True
-                break
-            if not done:
-                raise np.linalg.LinAlgError("the propagated covariance is not positive definite")
-        # Measurement update: z = computed v_EN.
-        s = H @ P @ H.T + Rm
-        kg = np.linalg.solve(s, H @ P).T
-        x = x + kg @ (v - H @ x)
-        ikh = np.eye(N_STATES) - kg @ H
-        P = ikh @ P @ ikh.T + kg @ Rm @ kg.T
-        # Error-state reset into the nominal.
-        q = quat_normalize(mat_to_quat(_err_mat(x[PHI]) @ quat_to_mat(q)))
-        v = v - x[DV]
-        x[DV] = 0.0
-        x[PHI] = 0.0
-        q_out[k] = q
-        s_out[k] = np.sqrt(np.diag(P))
-        b_out[k] = x[5:]
-    return FineAlignment(method, t_out, q_out, s_out, b_out, P)
+    nis = np.empty(n_upd)
+    args = (dth_b, dv_b, c, np.zeros(2), np.zeros(N_STATES), T, w, _exp_mat(-w * T), g_n, gamma, q_psd, P, r_vel, r_rate, zero_rate, c_out, s_out, b_out, nis)
+    P = _ekf_kernel(*args) if method == "ekf" else _ukf_loop(method, *args)
+    t_out = np.arange(1, n_upd + 1) * T
+    res = FineAlignment(method, t_out, mat_to_quat(c_out), s_out, b_out, P, nis,
+                        motion_test(nis, 3 if zero_rate else 2, T))
+    if res.motion_t is not None and on_motion == "raise":
+        raise AlignmentError(f"the zero-velocity/zero-rate innovations from t = {res.motion_t:.1f} s are not those "
+                             f"of a standing IMU: the shearer moves; align while it stands")
+    return res
