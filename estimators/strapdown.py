@@ -24,8 +24,8 @@ import numpy as np
 from estimators import earth
 from estimators.coning import coefficients
 
-_radii = nb.njit(cache=True)(earth.radii)
-_gravity = nb.njit(cache=True)(earth.normal_gravity_kernel)
+radii_nb = nb.njit(cache=True)(earth.radii)
+gravity_nb = nb.njit(cache=True)(earth.normal_gravity_kernel)
 _OMEGA = earth.OMEGA_IE
 
 
@@ -42,12 +42,12 @@ class NavState:
 
 
 @nb.njit(cache=True)
-def _cross(a, b):
+def cross3(a, b):
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 @nb.njit(cache=True)
-def _qmul(p, q):
+def qmul(p, q):
     return np.array([
         p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
         p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
@@ -56,7 +56,7 @@ def _qmul(p, q):
 
 
 @nb.njit(cache=True)
-def _qexp(phi):
+def qexp(phi):
     """Unit quaternion of the rotation vector phi (series below 1e-8 rad)."""
     theta = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
     if theta < 1e-8:
@@ -67,16 +67,16 @@ def _qexp(phi):
 
 
 @nb.njit(cache=True)
-def _qrot(q, v):
+def qrot(q, v):
     u = q[1:]
-    t = 2.0 * _cross(u, v)
-    return v + q[0] * t + _cross(u, t)
+    t = 2.0 * cross3(u, v)
+    return v + q[0] * t + cross3(u, t)
 
 
 @nb.njit(cache=True)
-def _rates(lat, h, v):
+def nav_rates(lat, h, v):
     """w_ie^n and w_en^n (ENU) at (lat, h) with velocity v."""
-    r_m, r_n = _radii(lat)
+    r_m, r_n = radii_nb(lat)
     w_ie = np.array([0.0, _OMEGA * np.cos(lat), _OMEGA * np.sin(lat)])
     w_en = np.array([-v[1] / (r_m + h), v[0] / (r_n + h), v[0] * np.tan(lat) / (r_n + h)])
     return w_ie, w_en
@@ -106,7 +106,7 @@ def body_attitude(q0: np.ndarray, phi: np.ndarray) -> np.ndarray:
     out = np.empty((phi.shape[0] + 1, 4))
     out[0] = q0
     for u in range(phi.shape[0]):
-        q = _qmul(out[u], _qexp(phi[u]))
+        q = qmul(out[u], qexp(phi[u]))
         out[u + 1] = q / np.sqrt(np.sum(q * q))
     return out
 
@@ -123,36 +123,35 @@ def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height):
             v_m = vel[u - 1] + 0.5 * (vel[u - 1] - vel[u - 2])
         else:
             lat_m, h_m, v_m = lat[0], hgt[0], vel[0].copy()
-        w_ie, w_en = _rates(lat_m, h_m, v_m)
+        w_ie, w_en = nav_rates(lat_m, h_m, v_m)
         zeta = (w_ie + w_en) * dt
-        dv_n = _qrot(quat[u - 1], dv_b[u - 1])
-        dv_n = dv_n - 0.5 * _cross(zeta, dv_n)
-        g_n = np.array([0.0, 0.0, -_gravity(lat_m, h_m)])
-        vel[u] = vel[u - 1] + dv_n + (g_n - _cross(2.0 * w_ie + w_en, v_m)) * dt
+        dv_n = qrot(quat[u - 1], dv_b[u - 1])
+        dv_n = dv_n - 0.5 * cross3(zeta, dv_n)
+        g_n = np.array([0.0, 0.0, -gravity_nb(lat_m, h_m)])
+        vel[u] = vel[u - 1] + dv_n + (g_n - cross3(2.0 * w_ie + w_en, v_m)) * dt
         if hold_height:  # the vertical channel held (an altitude aid or a known floor): no vertical motion
             vel[u, 2] = 0.0
         v_bar = 0.5 * (vel[u] + vel[u - 1])
         hgt[u] = hgt[u - 1] + v_bar[2] * dt
         h_bar = 0.5 * (hgt[u] + hgt[u - 1])
-        r_m, r_n = _radii(lat[u - 1])
+        r_m, r_n = radii_nb(lat[u - 1])
         lat[u] = lat[u - 1] + v_bar[1] * dt / (r_m + h_bar)
         lat_bar = 0.5 * (lat[u] + lat[u - 1])
-        r_m, r_n = _radii(lat_bar)
+        r_m, r_n = radii_nb(lat_bar)
         lon[u] = lon[u - 1] + v_bar[0] * dt / ((r_n + h_bar) * np.cos(lat_bar))
         # Attitude with the n-frame rotation re-evaluated at the new mid-interval state.
-        w_ie, w_en = _rates(lat_bar, h_bar, v_bar)
-        q = _qmul(_qmul(_qexp(-(w_ie + w_en) * dt), quat[u - 1]), _qexp(phi[u - 1]))
+        w_ie, w_en = nav_rates(lat_bar, h_bar, v_bar)
+        q = qmul(qmul(qexp(-(w_ie + w_en) * dt), quat[u - 1]), qexp(phi[u - 1]))
         quat[u] = q / np.sqrt(np.sum(q * q))
 
 
-def mechanize(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, lat0: float, lon0: float, h0: float,
-              v0_n: np.ndarray, q0_nb: np.ndarray, n_samples: int = 4, hold_height: bool = False) -> NavState:
-    """Integrate increments (row k over (t[k-1], t[k]]; row 0 unused) from the state at t[0].
+def compensated_increments(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray,
+                           n_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Check a log of increments (row k over (t[k-1], t[k]]; row 0 unused) and compensate it per update of
+    `n_samples` increments: (update times t[0], t[N], ... ; rotation vectors; body velocity increments).
 
-    Attitude and velocity are updated every `n_samples` increments with N-sample coning and sculling
-    compensation (estimators.coning; N = 1 is none); the solution is at t[0], t[N], t[2N], ...
-    `hold_height` keeps the height and zeroes the vertical velocity (the unstable vertical channel held).
-    """
+    Raises ValueError with one line naming the first bad row: shapes, time order, a sample-rate change (a gap or
+    a mixed-rate log), non-finite values."""
     t = np.ascontiguousarray(t, float)
     dtheta = np.ascontiguousarray(dtheta, float)
     dv = np.ascontiguousarray(dv, float)
@@ -171,10 +170,22 @@ def mechanize(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, lat0: float, lo
         bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
         if bad.size:
             raise ValueError(f"{name} row {bad[0]} is not finite")
-    earth.check_latitude(lat0)
     phi, dv_b = compensate(dtheta, dv, n_samples)
+    t_upd = np.ascontiguousarray(t[: phi.shape[0] * n_samples + 1: n_samples])
+    return t_upd, phi, dv_b
+
+
+def mechanize(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, lat0: float, lon0: float, h0: float,
+              v0_n: np.ndarray, q0_nb: np.ndarray, n_samples: int = 4, hold_height: bool = False) -> NavState:
+    """Integrate increments (row k over (t[k-1], t[k]]; row 0 unused) from the state at t[0].
+
+    Attitude and velocity are updated every `n_samples` increments with N-sample coning and sculling
+    compensation (estimators.coning; N = 1 is none); the solution is at t[0], t[N], t[2N], ...
+    `hold_height` keeps the height and zeroes the vertical velocity (the unstable vertical channel held).
+    """
+    t_upd, phi, dv_b = compensated_increments(t, dtheta, dv, n_samples)
+    earth.check_latitude(lat0)
     n = phi.shape[0] + 1
-    t_upd = np.ascontiguousarray(t[: (n - 1) * n_samples + 1: n_samples])
     lat, lon, hgt = np.empty(n), np.empty(n), np.empty(n)
     vel, quat = np.empty((n, 3)), np.empty((n, 4))
     lat[0], lon[0], hgt[0], vel[0] = lat0, lon0, h0, v0_n

@@ -129,3 +129,22 @@ def test_monte_carlo_trials_are_written_beside_trial_zero(tmp_path):
     assert imus[0].column("t").equals(imus[2].column("t"))
     assert not imus[0].column("dtheta_x").equals(imus[1].column("dtheta_x"))
     assert not (out / "trials" / "001" / "truth_shearer.parquet").exists()  # one truth for all trials
+
+
+def test_run_writes_estimates_and_estimate_reruns_them(default_run, capsys):
+    from estimators.logformat import read_estimate
+    metrics = json.loads((default_run / "metrics.json").read_text())
+    assert set(metrics["estimators"]) >= {"dr", "kf", "kf_cpoem", "kf_cpoem_rts"}
+    assert len(metrics["estimators"]["kf"]["cycles"]) == 3  # two cycles and "all"
+    assert (default_run / "estimates.rrd").is_file()
+    before = read_estimate(default_run, "kf_cpoem_rts").column("lat").to_numpy()
+    assert main(["estimate", str(default_run)]) == 0
+    assert "SEP per cutting cycle" in capsys.readouterr().out
+    after = read_estimate(default_run, "kf_cpoem_rts").column("lat").to_numpy()
+    assert np.array_equal(before, after)  # same log, same result
+
+
+def test_estimate_without_a_scenario_is_one_line(tmp_path, capsys):
+    assert main(["estimate", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "scenario.toml" in err

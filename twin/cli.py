@@ -16,6 +16,8 @@ from tqdm import tqdm
 
 from estimators.csvio import export_csv, import_csv
 from estimators.logformat import STREAMS, LogError, make_table, write_stream
+from estimators.shearer_positioning import PositioningError
+from twin.estimate import format_estimators, run_estimators, write_metrics
 from twin.rundir import RunDirError, atomic_run_dir, check_target
 from twin.scenario import ScenarioError, load_scenario, scenario_to_toml
 
@@ -47,7 +49,7 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
     out = Path(out) if out is not None else Path("runs") / f"{scn.name}-seed{scn.seed}"
     check_target(out, force)
     start = time.perf_counter()
-    stages = {"face": 0.5, "shearer": 0.2, "sensors": 0.15, "write": 0.1, "recording": 0.05}
+    stages = {"face": 0.45, "shearer": 0.2, "sensors": 0.1, "write": 0.05, "recording": 0.05, "estimators": 0.15}
     bar = tqdm(total=100, desc=f"longwall run {scn.name}", disable=quiet, leave=False,
                bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}")
     done = {k: 0.0 for k in stages}
@@ -79,13 +81,31 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
                         result.floor_grid.mesh_t(result.frame),
                         sensors={k: v for k, v in tables.items() if not k.startswith("truth_")})
         progress("recording", 1.0)
-        bar.close()
         summary = twin_summary(scn, result.tables, time.perf_counter() - start)
         (staging / "metrics.json").write_text(json.dumps({"twin": summary, "estimators": {}}, indent=2) + "\n")
+        estimated = run_estimators(staging, scn) if sensors else {}
+        write_metrics(staging, estimated)
+        progress("estimators", 1.0)
+        bar.close()
     if not quiet:
         print(format_summary(summary))
+        print(format_estimators(estimated))
         print(f"\nrun directory: {out}")
     return out
+
+
+def estimate(run_dir: Path, quiet: bool = False) -> dict:
+    """Re-run the estimators the run's scenario.toml names on an existing (simulated or imported) run directory."""
+    scenario = Path(run_dir) / "scenario.toml"
+    if not scenario.is_file():
+        raise ScenarioError(f"{scenario}: not found; the estimators take their configuration (IMU grade, lever arm, "
+                            f"odometer pulse length, supports) from the run's scenario.toml")
+    scn = load_scenario(scenario)
+    estimated = run_estimators(Path(run_dir), scn)
+    write_metrics(Path(run_dir), estimated)
+    if not quiet:
+        print(format_estimators(estimated))
+    return estimated
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -100,6 +120,9 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--trials", type=int, default=1,
                        help="Monte Carlo: sensor-error trials drawn from the same truth (default 1)")
     p_run.add_argument("--twin-only", action="store_true", help="truth only, no sensor streams")
+    p_est = sub.add_parser("estimate", help="re-run the estimators on a run directory (simulated or imported)")
+    p_est.add_argument("run_dir", type=Path)
+    p_est.add_argument("--quiet", action="store_true", help="no table")
     p_view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     p_view.add_argument("run_dir", type=Path)
     p_imp = sub.add_parser("import", help="turn CSV files (one per stream, name[unit] headers) into a run directory")
@@ -117,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
                 raise ScenarioError(f"--trials: must be >= 1 (got {args.trials})")
             run(args.scenario or default_scenario(), args.out, args.seed, args.force, args.quiet, args.trials,
                 not args.twin_only)
+        elif args.command == "estimate":
+            estimate(args.run_dir, args.quiet)
         elif args.command == "view":
             from twin.recording import open_viewer
             open_viewer(args.run_dir)
@@ -126,7 +151,7 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == "export":
             for path in export_csv(args.run_dir, args.csv):
                 print(path)
-    except (ScenarioError, RunDirError, LogError, FileNotFoundError) as err:
+    except (ScenarioError, RunDirError, LogError, PositioningError, FileNotFoundError) as err:
         print(f"longwall: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

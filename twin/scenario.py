@@ -133,6 +133,25 @@ class Rates(_Section):
     face_timestep_s: Annotated[float, Field(ge=0.001, le=0.02, allow_inf_nan=False)] = 0.01
 
 
+class ShearerPositioning(_Section):
+    """The shearer positioning estimators of 001 that `longwall run` / `longwall estimate` run on the log."""
+
+    methods: list[Literal["dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline"]] = [
+        "dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline"]
+    """estimators.shearer_positioning METHODS; an empty list runs none."""
+    tuning: Literal["ours", "appendix_a"] = "ours"
+    """ours: P0 and Q from the IMU grade and the survey; appendix_a: 001 Appendix A (Table 1 x 3, noise x 5)."""
+    filter_rate_hz: Annotated[float, Field(gt=0, le=50, allow_inf_nan=False)] = 10.0
+    n_samples: Annotated[int, Field(ge=1, le=5)] = 4
+    """Coning/sculling sub-samples per mechanization update."""
+    cpoem_spacing_m: Annotated[float, Field(ge=0.2, le=50, allow_inf_nan=False)] = 2.0
+    """Delta of 001 section 2.2: the distance between CPOEM points (001 uses 2, 6 and 10 m)."""
+
+
+class Estimators(_Section):
+    shearer: ShearerPositioning = ShearerPositioning()
+
+
 class Scenario(_Section):
     name: Annotated[str, Field(min_length=1)]
     seed: Annotated[int, Field(ge=0)] = 0
@@ -146,6 +165,7 @@ class Scenario(_Section):
     rates: Rates = Rates()
     sensors: Sensors = Sensors()
     faults: list[Fault] = []
+    estimators: Estimators = Estimators()
 
     @model_validator(mode="after")
     def _consistent(self) -> "Scenario":

@@ -1,0 +1,158 @@
+"""Closed-path optimal estimation model (CPOEM, 001 section 2.2): position fixes for the next cutting cycle.
+
+The shearer cuts the same face every cycle, moved towards the coal wall by the advance d (001 Fig. 3). Points
+every Delta metres of face coordinate u (the odometer's signed travel from the start) are recorded when the
+shearer crosses them on a straight cut, from the filter (or, better, the RTS-smoothed pass); on the next
+straight cut, when the shearer crosses u_i again, the recorded point moved by the advance of the pans there is a
+position fix (001 eq. 6, with C of eq. 7 turning the ENU increment into latitude, longitude, height):
+
+    p_i,j+1 = p_i,j + C C_b^n C_m^b [d, 0, 0]^T
+
+The advance comes from the push-ram stroke sensors of the supports on either side of the point (interpolated
+along the face): between two passes each pan is pushed once, so the ram of a support shows one stroke of the
+web, in one or several partial strokes, whatever the order of push and support advance (estimators.cpoem
+`ram_stroke`). A point without a valid stroke on both
+neighbouring supports (dropout, missing support) is skipped and reported, never guessed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators import earth
+
+
+@dataclass
+class Points:
+    """Recorded CPOEM points of the last straight cut (one row per face coordinate u_i = i * spacing)."""
+
+    u: np.ndarray  # (P,) face coordinate [m]
+    t: np.ndarray  # (P,) time the shearer crossed the point
+    llh: np.ndarray  # (P, 3) body-point latitude, longitude, height
+    cov: np.ndarray  # (P, 3, 3) ENU covariance of the point [m^2]
+    c_bn: np.ndarray  # (P, 3, 3) attitude at the point (advance direction = body x)
+
+    @classmethod
+    def empty(cls) -> Points:
+        return cls(np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3, 3)))
+
+
+def crossings(u: np.ndarray, spacing: float, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+    """Epochs j in (lo, hi] where the face coordinate crosses a multiple of `spacing`: (j, crossed u_i).
+
+    The crossing lies between epochs j - 1 and j (u_i between u[j-1] and u[j], first crossing per point)."""
+    seg = u[lo:hi + 1]
+    cell = np.floor(seg / spacing)
+    jumps = np.flatnonzero(cell[1:] != cell[:-1])
+    epochs, marks = [], []
+    for k in jumps:
+        a, b = cell[k], cell[k + 1]
+        # Moving up past (a+1)*spacing ..., or down past a*spacing ...
+        pts = np.arange(a + 1, b + 1) if b > a else np.arange(a, b, -1)
+        epochs.append(np.full(pts.size, lo + k + 1))
+        marks.append(pts * spacing)
+    if not epochs:
+        return np.zeros(0, int), np.zeros(0)
+    j, m = np.concatenate(epochs), np.concatenate(marks)
+    _, first = np.unique(m, return_index=True)
+    order = np.sort(first)
+    return j[order], m[order]
+
+
+def record(u: np.ndarray, t: np.ndarray, llh: np.ndarray, cov_enu: np.ndarray, c_bn: np.ndarray,
+           spacing: float, lo: int, hi: int) -> Points:
+    """Points crossed between epochs lo and hi, interpolated linearly between the two epochs around each."""
+    j, marks = crossings(u, spacing, lo, hi)
+    du = u[j] - u[j - 1]
+    w = np.where(np.abs(du) > 0, (marks - u[j - 1]) / np.where(du == 0, 1, du), 1.0)[:, None]
+    return Points(marks, t[j - 1] + w[:, 0] * (t[j] - t[j - 1]), llh[j - 1] + w * (llh[j] - llh[j - 1]),
+                  cov_enu[j], c_bn[j])
+
+
+RAM_WINDOW = 9
+"""Readings in the running median that finds the plateaus of a push-ram record."""
+
+
+def ram_stroke(t: np.ndarray, ext: np.ndarray, valid: np.ndarray, t0: float, t1: float, noise_sd: float) -> float:
+    """The pan's advance at one support between t0 and t1: the sum of the rises between the plateaus of its
+    push-ram reading (NaN when fewer than RAM_WINDOW valid readings).
+
+    The ram extends while the support pushes the pan (possibly in several partial strokes as the snake forms)
+    and retracts while the support pulls itself up to the pan; only the rises move the pan. Plateaus are runs of
+    at least 3 readings of a running median that moves less than 5 of its noise sigmas (>= 2 mm) per sample;
+    each plateau's level is the median of its raw readings, so the sensor noise averages out."""
+    sel = (t > t0) & (t <= t1) & (valid > 0) & np.isfinite(ext)
+    r = ext[sel]
+    if r.size < RAM_WINDOW:
+        return np.nan
+    half = RAM_WINDOW // 2
+    pad = np.concatenate([np.full(half, r[0]), r, np.full(half, r[-1])])
+    smooth = np.median(np.lib.stride_tricks.sliding_window_view(pad, RAM_WINDOW), axis=1)
+    # The running median's noise is about 1.25 sigma / sqrt(window); 5 of those per sample is a move.
+    still = np.abs(np.diff(smooth, prepend=smooth[0])) < max(5 * 1.25 * noise_sd / np.sqrt(RAM_WINDOW), 0.002)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
+    levels = [np.median(r[a:b]) for a, b in zip(edges[::2], edges[1::2]) if b - a >= 3]
+    if not levels:
+        return np.nan
+    return float(np.sum(np.maximum(np.diff(levels), 0.0)))
+
+
+@dataclass(frozen=True)
+class RamLog:
+    """Push-ram readings grouped per support, and where each support sits in face coordinates."""
+
+    t: list[np.ndarray]
+    ext: list[np.ndarray]
+    valid: list[np.ndarray]
+    u: np.ndarray  # (S,) face coordinate of each support [m]
+    noise_sd: float  # one-sigma noise of a reading [m]
+
+    @classmethod
+    def from_rows(cls, t, support, ext, valid, support_u, noise_sd: float) -> RamLog:
+        s = np.asarray(support)
+        groups = [np.flatnonzero(s == k) for k in range(len(support_u))]
+        return cls([t[g] for g in groups], [ext[g] for g in groups], [valid[g] for g in groups],
+                   np.asarray(support_u, float), noise_sd)
+
+    def advance(self, u: float, t0: float, t1: float) -> float:
+        """Pan advance at face coordinate u between t0 and t1 from the two neighbouring supports (NaN if one
+        of them has no stroke)."""
+        k = int(np.clip(np.searchsorted(self.u, u) - 1, 0, self.u.size - 2))
+        a = ram_stroke(self.t[k], self.ext[k], self.valid[k], t0, t1, self.noise_sd)
+        b = ram_stroke(self.t[k + 1], self.ext[k + 1], self.valid[k + 1], t0, t1, self.noise_sd)
+        w = float(np.clip((u - self.u[k]) / (self.u[k + 1] - self.u[k]), 0.0, 1.0))
+        return (1 - w) * a + w * b
+
+
+def predict_fixes(points: Points, u: np.ndarray, t: np.ndarray, epochs: np.ndarray, marks: np.ndarray,
+                  rams: RamLog, advance_sd: float, path_sd: float,
+                  path_along_sd: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Fixes for the crossings (epochs, marks) of the current pass from the previous pass's points (001 eq. 6).
+
+    The predicted point is moved along the face (body y at the point) by u[j] - u_i so that it refers to the
+    epoch where it is applied. R = point covariance + the change of the path between the passes, in the body axes
+    at the point: advance_sd and path_sd across the face (x), path_along_sd along it (y), path_sd vertically (z).
+    Returns (epochs, llh (F, 3), R (F, 3, 3), skipped face coordinates)."""
+    path_b = np.diag([advance_sd ** 2 + path_sd ** 2, path_along_sd ** 2, path_sd ** 2])
+    idx = {round(v / 1e-6): k for k, v in enumerate(points.u)}
+    out_j, out_llh, out_r, skipped = [], [], [], []
+    for j, m in zip(epochs, marks):
+        k = idx.get(round(m / 1e-6))
+        if k is None:
+            continue
+        d = rams.advance(m, points.t[k], t[j])
+        if not np.isfinite(d):
+            skipped.append(m)
+            continue
+        c = points.c_bn[k]
+        shift = c[:, 0] * d + c[:, 1] * (u[j] - m)
+        lat, lon, h = points.llh[k]
+        r_m, r_n = earth.radii(lat)
+        out_j.append(j)
+        out_llh.append([lat + shift[1] / (r_m + h), lon + shift[0] / ((r_n + h) * np.cos(lat)), h + shift[2]])
+        out_r.append(points.cov[k] + c @ path_b @ c.T)
+    if not out_j:
+        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.array(skipped)
+    return np.array(out_j, np.int64), np.array(out_llh), np.array(out_r), np.array(skipped)

@@ -1,0 +1,324 @@
+"""The 19-state SINS/odometer error Kalman filter of 001 section 3 as one sequential numba kernel.
+
+Error state (001 eq. 12, this order; errors are estimate - truth):
+
+    x = [dv_n (ENU, m/s), phi (attitude error, C_b^n' = (I - [phi x]) C_b^n, rad), dp (ENU, m),
+         eps (gyro bias, b, rad/s), nabla (accelerometer bias, b, m/s^2), dalpha (odometer mounting, rad),
+         dk_D (odometer scale-factor error)]
+
+Position errors are kept in metres east/north/up instead of 001's (longitude, latitude, height): the same state
+through the diagonal matrix C of 001 eq. 7, and better conditioned. Dynamics (001 eqs. 13-15, with the Earth and
+transport rates kept in full and the free-air gravity gradient on the vertical channel):
+
+    d(dv)/dt  = f_n x phi - (2 w_ie + w_en) x dv + C_b^n nabla + w_a
+    d(phi)/dt = -(w_ie + w_en) x phi - C_b^n eps + w_g
+    d(dp)/dt  = dv,   d(eps)/dt = w_eps,   d(nabla)/dt = w_nabla,   d(dalpha)/dt = 0,   d(dk_D)/dt = 0
+
+discretized per filter step T as Phi = I + F T + (F T)^2 / 2 (001 eq. 17) and Q_d = (Phi Q_c Phi^T + Q_c) T / 2.
+
+Measurements, each a (z, H, R) block applied in sequence with the Joseph update (001 eq. 28):
+
+* odometer + motion constraint (001 eqs. 18-20): z = C_b^m C_n^b v_n - [0, v_od, 0], with v_n the SINS mean
+  velocity over the step (its displacement / T) and v_od the odometer distance over the step / T corrected by the
+  estimated scale, H = [C_b^m C_n^b, -C_b^m C_n^b [v_n x], 0, 0, 0, -C_b^m [v_b x], -v_m];
+* zero-velocity update at a stand (004 eq. 2): z = v_n, H = [I 0 ...];
+* zero-rate update at a stand: the mean gyro output minus the Earth rate resolved in b must be the residual gyro
+  bias, z = w_ib_b - C_n^b w_ie = eps + C_n^b [w_ie x] phi. It makes the vertical gyro bias, and so the heading
+  drift of a MEMS gyro, observable whenever the shearer stands;
+* position fix (survey or CPOEM point, 001 eqs. 21-22) of the body reference point p = p_imu - C_b^n l:
+  z = p_body' - p_fix (ENU m), H = [0, -[(C_b^n l) x], I, 0 ...]; a fix whose normalized innovation exceeds the
+  gate is skipped and flagged.
+
+After the updates the estimate is fed back into the mechanization, the sensor corrections and the odometer
+calibration (closed loop), and the error state restarts at zero. The posterior update x+ (before the reset),
+the covariances and Phi are stored for the RTS smoother (estimators.rts).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from estimators.logformat import (
+    FLAG_COVARIANCE_REPAIRED,
+    FLAG_POSITION,
+    FLAG_SKIPPED,
+    FLAG_VELOCITY,
+    FLAG_ZUPT,
+)
+from estimators.strapdown import (
+    cross3,
+    gravity_nb,
+    nav_rates,
+    qexp,
+    qmul,
+    qrot,
+    radii_nb,
+)
+
+DV = slice(0, 3)
+PHI = slice(3, 6)
+DP = slice(6, 9)
+GYRO_BIAS = slice(9, 12)
+ACCEL_BIAS = slice(12, 15)
+ODO_MOUNT = slice(15, 18)
+ODO_SCALE = 18
+N_STATES = 19
+_DV, _PHI, _DP, _BG, _BA, _AL = 0, 3, 6, 9, 12, 15  # block starts, for the kernel
+
+# Navigation vector of the kernel: geodetic position, ENU velocity, attitude q_nb.
+LAT, LON, HGT = 0, 1, 2
+VEL = slice(3, 6)
+QUAT = slice(6, 10)
+N_NAV = 10
+# Calibration vector: gyro and accelerometer corrections (subtracted from the increments), odometer mounting as
+# the rotation vector of C_m^b, odometer scale k (distance = nominal / (1 + k)).
+CAL_GYRO = slice(0, 3)
+CAL_ACCEL = slice(3, 6)
+CAL_MOUNT = slice(6, 9)
+CAL_SCALE = 9
+N_CAL = 10
+
+# Indices of the kernel's parameter vector.
+P_R_LATERAL, P_R_ALONG, P_R_VERTICAL, P_R_ZUPT, P_R_ZARU, P_GATE, P_LEVER = 0, 1, 2, 3, 4, 5, 6  # lever: 6..8
+N_PARAMS = 9
+
+
+@nb.njit(cache=True)
+def skew3(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+@nb.njit(cache=True)
+def quat_mat(q):
+    """C_b^n of q_nb."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+@nb.njit(cache=True)
+def rotvec_mat(r):
+    """Rotation matrix of the rotation vector r (Rodrigues)."""
+    a = np.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
+    k = skew3(r)
+    if a < 1e-9:
+        return np.eye(3) + k
+    return np.eye(3) + np.sin(a) / a * k + (1 - np.cos(a)) / a ** 2 * (k @ k)
+
+
+@nb.njit(cache=True)
+def mat_rotvec(c):
+    """Rotation vector of a rotation matrix (angles below pi)."""
+    cos_a = min(1.0, max(-1.0, 0.5 * (c[0, 0] + c[1, 1] + c[2, 2] - 1)))
+    a = np.arccos(cos_a)
+    v = np.array([c[2, 1] - c[1, 2], c[0, 2] - c[2, 0], c[1, 0] - c[0, 1]])
+    return 0.5 * v if a < 1e-9 else a / (2 * np.sin(a)) * v
+
+
+@nb.njit(cache=True)
+def system_matrix(nav, f_n):
+    """F (19 x 19) of the error dynamics at the navigation state `nav` with specific force f_n."""
+    lat, h = nav[LAT], nav[HGT]
+    v = nav[VEL]
+    w_ie, w_en = nav_rates(lat, h, v)
+    c_bn = quat_mat(nav[QUAT])
+    f = np.zeros((N_STATES, N_STATES))
+    f[_DV:_DV + 3, _DV:_DV + 3] = -skew3(2 * w_ie + w_en)
+    f[_DV:_DV + 3, _PHI:_PHI + 3] = skew3(f_n)
+    f[_DV:_DV + 3, _BA:_BA + 3] = c_bn
+    r_m, r_n = radii_nb(lat)
+    f[_DV + 2, _DP + 2] = 2 * gravity_nb(lat, h) / np.sqrt((r_m + h) * (r_n + h))
+    f[_PHI:_PHI + 3, _PHI:_PHI + 3] = -skew3(w_ie + w_en)
+    f[_PHI:_PHI + 3, _BG:_BG + 3] = -c_bn
+    for i in range(3):
+        f[_DP + i, _DV + i] = 1.0
+    return f
+
+
+@nb.njit(cache=True)
+def discretize(f, q_psd, dt):
+    """Phi = I + F T + (F T)^2 / 2 and Q_d = (Phi Q_c Phi^T + Q_c) T / 2 (001 eq. 17)."""
+    ft = f * dt
+    phi = np.eye(N_STATES) + ft + 0.5 * (ft @ ft)
+    qc = np.diag(q_psd)
+    return phi, 0.5 * (phi @ qc @ phi.T + qc) * dt
+
+
+@nb.njit(cache=True)
+def joseph_update(x, p, z, h, r):
+    """Kalman update of (x, P) with (z, H, R) in Joseph form; returns the normalized innovation squared."""
+    y = z - h @ x
+    s = h @ p @ h.T + r
+    s_inv = np.linalg.inv(s)
+    k = p @ h.T @ s_inv
+    x += k @ y
+    ikh = np.eye(N_STATES) - k @ h
+    p[:, :] = ikh @ p @ ikh.T + k @ r @ k.T
+    return y @ s_inv @ y
+
+
+@nb.njit(cache=True)
+def nis(x, p, z, h, r):
+    y = z - h @ x
+    return y @ np.linalg.solve(h @ p @ h.T + r, y)
+
+
+@nb.njit(cache=True)
+def apply_correction(nav, cal, x):
+    """Feed an error estimate back: corrected navigation state and calibration (in place)."""
+    lat, h = nav[LAT], nav[HGT]
+    r_m, r_n = radii_nb(lat)
+    nav[LAT] -= x[_DP + 1] / (r_m + h)
+    nav[LON] -= x[_DP] / ((r_n + h) * np.cos(lat))
+    nav[HGT] -= x[_DP + 2]
+    for i in range(3):
+        nav[3 + i] -= x[_DV + i]
+    q = qmul(qexp(x[_PHI:_PHI + 3]), nav[QUAT])
+    nav[QUAT] = q / np.sqrt(np.sum(q * q))
+    for i in range(3):
+        cal[i] += x[_BG + i]
+        cal[3 + i] += x[_BA + i]
+    # C_b^m <- C_b^m (I - [dalpha x]), i.e. C_m^b <- (I + [dalpha x]) C_m^b, kept as a rotation vector.
+    cal[6:9] = mat_rotvec(rotvec_mat(x[_AL:_AL + 3]) @ rotvec_mat(cal[6:9]))
+    cal[CAL_SCALE] = (1 + cal[CAL_SCALE]) * (1 + x[ODO_SCALE]) - 1
+
+
+@nb.njit(cache=True)
+def _mech_step(nav, phi_b, dv_b, dt):
+    """One strapdown update (estimators.strapdown order); returns (dv_n specific-force increment, mean v)."""
+    lat, h = nav[LAT], nav[HGT]
+    v = nav[VEL].copy()
+    w_ie, w_en = nav_rates(lat, h, v)
+    zeta = (w_ie + w_en) * dt
+    dv_n = qrot(nav[QUAT], dv_b)
+    dv_n = dv_n - 0.5 * cross3(zeta, dv_n)
+    g_n = np.array([0.0, 0.0, -gravity_nb(lat, h)])
+    v_new = v + dv_n + (g_n - cross3(2.0 * w_ie + w_en, v)) * dt
+    v_bar = 0.5 * (v + v_new)
+    h_new = h + v_bar[2] * dt
+    h_bar = 0.5 * (h + h_new)
+    r_m, r_n = radii_nb(lat)
+    lat_new = lat + v_bar[1] * dt / (r_m + h_bar)
+    lat_bar = 0.5 * (lat + lat_new)
+    r_m, r_n = radii_nb(lat_bar)
+    nav[LON] += v_bar[0] * dt / ((r_n + h_bar) * np.cos(lat_bar))
+    nav[LAT], nav[HGT] = lat_new, h_new
+    nav[VEL] = v_new
+    w_ie, w_en = nav_rates(lat_bar, h_bar, v_bar)
+    q = qmul(qmul(qexp(-(w_ie + w_en) * dt), nav[QUAT]), qexp(phi_b))
+    nav[QUAT] = q / np.sqrt(np.sum(q * q))
+    return dv_n, v_bar
+
+
+@nb.njit(cache=True)
+def _body_offset_n(nav, lever):
+    return quat_mat(nav[QUAT]) @ lever
+
+
+@nb.njit(cache=True)
+def _fix_innovation(nav, lever, fix_llh):
+    """Body-point position of the SINS minus the fix, ENU metres."""
+    lat, h = nav[LAT], nav[HGT]
+    r_m, r_n = radii_nb(lat)
+    off = _body_offset_n(nav, lever)
+    return np.array([(nav[LON] - fix_llh[1]) * (r_n + h) * np.cos(lat) - off[0],
+                     (nav[LAT] - fix_llh[0]) * (r_m + h) - off[1],
+                     nav[HGT] - fix_llh[2] - off[2]])
+
+
+@nb.njit(cache=True)
+def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch, fix_llh, fix_r, q_psd, params,
+               nav, cal, p, out_nav, out_cal, x_post, p_post, p_pred, phi_store, flags, nis_out):
+    """Filter epochs j0+1 .. j1 (epoch j ends mechanization step j * steps); state (nav, cal, p) in place.
+
+    odo_mode[j]: 1 moving with a valid odometer over (j-1, j], 0 standing, -1 odometer missing (skipped).
+    Fixes (fix_epoch sorted, fix_llh (F, 3) lat/lon/h, fix_r (F, 3, 3) ENU covariance) apply at their epoch.
+    Stores per epoch: posterior navigation and calibration, covariance, the update x+ and Phi for the smoother.
+    """
+    lever = params[P_LEVER:P_LEVER + 3]
+    r_vel = np.diag(np.array([params[P_R_LATERAL], params[P_R_ALONG], params[P_R_VERTICAL]]) ** 2)
+    k_fix = np.searchsorted(fix_epoch, j0 + 1)
+    x = np.zeros(N_STATES)
+    for j in range(j0 + 1, j1 + 1):
+        u0 = (j - 1) * steps
+        t_span = t_mech[j * steps] - t_mech[u0]
+        f_sum = np.zeros(3)
+        disp = np.zeros(3)
+        w_sum = np.zeros(3)
+        for u in range(u0, u0 + steps):
+            dt = t_mech[u + 1] - t_mech[u]
+            ph = phi_b[u] - cal[CAL_GYRO] * dt
+            dv_n, v_bar = _mech_step(nav, ph, dv_b[u] - cal[CAL_ACCEL] * dt, dt)
+            f_sum += dv_n
+            disp += v_bar * dt
+            w_sum += ph
+        f_n = f_sum / t_span
+        phi, qd = discretize(system_matrix(nav, f_n), q_psd, t_span)
+        p[:, :] = phi @ p @ phi.T + qd
+        phi_store[j] = phi
+        p_pred[j] = p
+        x[:] = 0.0
+        flag = 0
+        c_bn = quat_mat(nav[QUAT])
+        c_nb = c_bn.T
+        if odo_mode[j] == 1:
+            c_mb = rotvec_mat(cal[CAL_MOUNT])
+            c_bm = c_mb.T
+            v_n = disp / t_span
+            v_b = c_nb @ v_n
+            v_od = (odo_dist[j] - odo_dist[j - 1]) / t_span / (1 + cal[CAL_SCALE])
+            v_m = np.array([0.0, v_od, 0.0])
+            h = np.zeros((3, N_STATES))
+            h[:, _DV:_DV + 3] = c_bm @ c_nb
+            h[:, _PHI:_PHI + 3] = -c_bm @ c_nb @ skew3(v_n)
+            h[:, _AL:_AL + 3] = -c_bm @ skew3(v_b)
+            h[:, ODO_SCALE] = -v_m
+            joseph_update(x, p, c_bm @ v_b - v_m, h, r_vel)
+            flag |= FLAG_VELOCITY
+        elif odo_mode[j] == 0:
+            h = np.zeros((3, N_STATES))
+            for i in range(3):
+                h[i, _DV + i] = 1.0
+            joseph_update(x, p, nav[VEL].copy(), h, np.eye(3) * params[P_R_ZUPT] ** 2)
+            w_ie, _w_en = nav_rates(nav[LAT], nav[HGT], nav[VEL])
+            h = np.zeros((3, N_STATES))
+            h[:, _PHI:_PHI + 3] = c_nb @ skew3(w_ie)
+            for i in range(3):
+                h[i, _BG + i] = 1.0
+            joseph_update(x, p, w_sum / t_span - c_nb @ w_ie, h, np.eye(3) * params[P_R_ZARU] ** 2)
+            flag |= FLAG_ZUPT
+        else:
+            flag |= FLAG_SKIPPED
+        while k_fix < fix_epoch.size and fix_epoch[k_fix] == j:
+            h = np.zeros((3, N_STATES))
+            h[:, _PHI:_PHI + 3] = -skew3(c_bn @ lever)
+            for i in range(3):
+                h[i, _DP + i] = 1.0
+            z = _fix_innovation(nav, lever, fix_llh[k_fix])
+            gamma = nis(x, p, z, h, fix_r[k_fix])
+            nis_out[k_fix] = gamma
+            if gamma <= params[P_GATE]:
+                joseph_update(x, p, z, h, fix_r[k_fix])
+                flag |= FLAG_POSITION
+            else:
+                flag |= FLAG_SKIPPED
+            k_fix += 1
+        # Keep P symmetric and positive definite.
+        p[:, :] = 0.5 * (p + p.T)
+        ok = True
+        for i in range(N_STATES):
+            if not (p[i, i] > 0.0) or not np.isfinite(p[i, i]):
+                ok = False
+        if not ok:
+            p[:, :] = p_pred[j]
+            x[:] = 0.0
+            flag |= FLAG_COVARIANCE_REPAIRED
+        apply_correction(nav, cal, x)
+        x_post[j] = x
+        p_post[j] = p
+        out_nav[j] = nav
+        out_cal[j] = cal
+        flags[j] = flag

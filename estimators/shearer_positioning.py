@@ -1,0 +1,579 @@
+"""Shearer positioning of 001: SINS/odometer Kalman filter, CPOEM position fixes, RTS smoothing at each face end,
+and the dead-reckoning baseline, run on a sensor log.
+
+Methods (each an estimates/NAME stream):
+
+* ``dr``            the "traditional method" of 001 section 4: free SINS attitude and odometer distance;
+* ``dr_compensated``  the same with the sensor biases, odometer scale and mounting estimated by ``kf_cpoem_rts``;
+* ``kf``            SINS/odometer filter (001 eqs. 12-20) with zero-velocity and zero-rate updates at stands;
+* ``kf_cpoem``      plus CPOEM fixes (001 eqs. 6, 21-22) whose points come from the forward filter;
+* ``kf_cpoem_rts``  plus the online RTS smoother (001 eqs. 28-31, Fig. 4) run at each face end over the pass just
+                    finished; the smoothed points feed the next cycle's fixes, the output is the smoothed pass;
+* ``rts_offline``   one RTS pass over the whole run of ``kf_cpoem_rts``'s forward filter.
+
+Passes and face ends are found from the odometer alone: a straight cut is a run of travel in one direction
+longer than half the face (the distance between the two surveyed face-end points); the pass ends when the
+shearer stands after it. The first cycle has no CPOEM points; its face ends are surveyed (the survey stream).
+The start pose comes from the survey (position, heading) and from levelling the accelerometers while the
+shearer stands before the first cut.
+"""
+
+from __future__ import annotations
+
+import itertools
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numba as nb
+import numpy as np
+
+from estimators import earth
+from estimators import shearer_kf as kf
+from estimators.cpoem import Points, RamLog, crossings, predict_fixes, record
+from estimators.logformat import FLAG_SMOOTHED
+from estimators.rotations import euler_to_quat, quat_rotate, quat_to_mat
+from estimators.rts import rts_backward
+from estimators.strapdown import compensated_increments, mechanize
+
+METHODS = ("dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline")
+DEG = np.pi / 180
+
+
+class PositioningError(ValueError):
+    """A log the positioning cannot use; the message names the stream and what to fix."""
+
+
+@dataclass(frozen=True)
+class ImuNoise:
+    """The IMU's error budget as the filter models it (SI): white noise, turn-on bias sigma, bias random walk."""
+
+    gyro_arw: float  # rad/sqrt(s)
+    accel_vrw: float  # m/s/sqrt(s)
+    gyro_bias: float  # rad/s, one-sigma turn-on bias
+    accel_bias: float  # m/s^2
+    gyro_bias_psd: float = 0.0  # rad^2/s^3, random-walk density of the in-run bias
+    accel_bias_psd: float = 0.0  # m^2/s^5
+
+
+@dataclass(frozen=True)
+class Config:
+    """Everything the filter needs besides the log. Units SI."""
+
+    imu: ImuNoise
+    lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """IMU position relative to the body reference point (the point reported), body frame."""
+    metres_per_pulse: float = 0.002
+    support_u_m: tuple[float, ...] = ()
+    """Face coordinate (odometer travel from the start pose) of each support, for the CPOEM advance."""
+    n_samples: int = 4
+    filter_rate_hz: float = 10.0
+    cpoem_spacing_m: float = 2.0
+    r_lateral: float = 0.01  # motion-constraint noise across the face [m/s]
+    r_vertical: float = 0.01
+    r_odometer: float = 0.002  # odometer velocity noise besides quantization [m/s]
+    r_zupt: float = 0.002  # [m/s]
+    r_zaru: float = 5e-4  # zero-rate noise: idle vibration of the machine [rad/s]
+    advance_sd: float = 0.005  # advance from the ram strokes [m]
+    ram_noise_sd: float = 1e-4  # one-sigma noise of a push-ram reading [m]
+    path_sd: float = 0.01  # the pans' running line between cycles beyond the measured advance [m]
+    path_along_sd: float = 0.05  # the same along the face: bent pans in the snake shift the chain along it [m]
+    fix_gate: float = 40.0  # normalized innovation squared above which a position fix is rejected (3 dof)
+    sd_velocity0: float = 0.01
+    sd_level0: float = 0.3 * DEG
+    sd_odo_mount0: float = 1.0 * DEG
+    sd_odo_scale0: float = 0.01
+    p0_scale: float = 1.0
+    q_scale: float = 1.0
+    level_window_s: float = 60.0
+
+    @classmethod
+    def appendix_a(cls, **kw) -> Config:
+        """001 Table 1 / Appendix A: P0 of (A2) (Table 1 values x 3) and Q of (A3) (MTi-G-700 noise x 5)."""
+        imu = ImuNoise(gyro_arw=0.6 * DEG / 60, accel_vrw=0.08e-3 * 9.80665, gyro_bias=720 * DEG / 3600,
+                       accel_bias=3e-3 * 9.80665)
+        return cls(imu=imu, sd_velocity0=0.01, sd_level0=0.3 * DEG, sd_odo_mount0=3 * DEG, sd_odo_scale0=0.05,
+                   p0_scale=3.0, q_scale=5.0, **kw)
+
+
+@dataclass(frozen=True)
+class Log:
+    """The streams the positioning reads (columns as in estimators.logformat)."""
+
+    imu_t: np.ndarray
+    dtheta: np.ndarray
+    dv: np.ndarray
+    odo_t: np.ndarray
+    odo_distance: np.ndarray
+    odo_direction: np.ndarray
+    survey_t: np.ndarray
+    survey_llh: np.ndarray  # (S, 3)
+    survey_yaw: np.ndarray
+    survey_sd: np.ndarray  # (S, 3): horizontal, vertical [m], yaw [rad]
+    ram_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    ram_support: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    ram_extension: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    ram_valid: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+
+
+@dataclass
+class Solution:
+    """One method's output at the filter epochs: body-point navigation, one-sigma, flags, sensor states."""
+
+    t: np.ndarray
+    llh: np.ndarray  # (K, 3)
+    v_n: np.ndarray  # (K, 3)
+    q_nb: np.ndarray  # (K, 4)
+    sd: np.ndarray  # (K, 9): position ENU, velocity ENU, attitude ENU (NaN without covariance)
+    flags: np.ndarray
+    cal: np.ndarray | None = None  # (K, 10) estimators.shearer_kf calibration vector
+    sd_cal: np.ndarray | None = None  # (K, 10)
+    notes: list[str] = field(default_factory=list)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Preparing the log
+
+
+def _odometer_at(log: Log, t_kf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Odometer distance at the epochs and the mode of each interval: 1 moving, 0 standing, -1 no data."""
+    dist = np.interp(t_kf, log.odo_t, log.odo_distance)
+    period = np.median(np.diff(log.odo_t)) if log.odo_t.size > 1 else np.inf
+    moving_samples = np.concatenate([[0], np.cumsum(log.odo_direction != 0)])
+    k0 = np.searchsorted(log.odo_t, t_kf[:-1], side="right")
+    k1 = np.searchsorted(log.odo_t, t_kf[1:], side="right")
+    # An interval is covered if odometer samples bracket it without a gap longer than 2.5 periods.
+    prev_t = log.odo_t[np.clip(k0 - 1, 0, None)]
+    next_t = log.odo_t[np.clip(k1, None, log.odo_t.size - 1)]
+    gaps = np.maximum.reduceat(np.diff(log.odo_t, append=np.inf), np.clip(k0 - 1, 0, None)) \
+        if log.odo_t.size > 1 else np.full(k0.size, np.inf)
+    covered = (k0 > 0) & (k1 < log.odo_t.size) & (prev_t <= t_kf[:-1]) & (next_t >= t_kf[1:]) & \
+        (gaps <= 2.5 * period)
+    moved = (moving_samples[np.clip(k1 + 1, None, moving_samples.size - 1)] - moving_samples[k0] > 0) | \
+        (np.abs(np.diff(dist)) > 0)
+    mode = np.where(covered, np.where(moved, 1, 0), -1).astype(np.int8)
+    return dist, np.concatenate([[0], mode]).astype(np.int8)
+
+
+STRAIGHT_CUT_FRACTION = 0.8
+"""A run of travel in one direction longer than this fraction of the face is a straight cut (a sump or a cut-out
+into the snake covers the snake and the shearer, up to about half of a short face)."""
+
+
+def straight_cuts(u: np.ndarray, mode: np.ndarray, face_travel: float) -> list[tuple[int, int]]:
+    """(first, last) epochs of each run of travel in one direction longer than STRAIGHT_CUT_FRACTION of the
+    face."""
+    du = np.diff(u, prepend=u[0])
+    moving = np.flatnonzero((mode == 1) & (du != 0))
+    if moving.size == 0:
+        return []
+    sign = np.sign(du[moving])
+    breaks = np.flatnonzero(sign[1:] != sign[:-1]) + 1
+    runs = []
+    for grp in np.split(moving, breaks):
+        if abs(u[grp[-1]] - u[grp[0] - 1]) > STRAIGHT_CUT_FRACTION * face_travel:
+            runs.append((int(grp[0]), int(grp[-1])))
+    return runs
+
+
+def _initial_state(log: Log, t_mech: np.ndarray, phi_b: np.ndarray, dv_b: np.ndarray, mode: np.ndarray,
+                   steps: int, cfg: Config) -> tuple[np.ndarray, list[str]]:
+    """Navigation vector at t[0] (IMU point): survey position and heading, level from the accelerometers over
+    the stand before the first motion."""
+    notes = []
+    first_move = np.flatnonzero(mode == 1)
+    stand_end = (first_move[0] - 1) * steps if first_move.size else phi_b.shape[0]
+    dt = t_mech[1] - t_mech[0]
+    n = int(min(stand_end, cfg.level_window_s / dt))
+    if n < max(5, int(1.0 / dt)):
+        raise PositioningError(f"odometer: the shearer moves {n * dt:.2f} s after the start; levelling needs at "
+                               f"least 1 s of standing before the first cut")
+    f_b = dv_b[:n].sum(axis=0) / (n * dt)
+    pitch = np.arcsin(np.clip(f_b[1] / np.linalg.norm(f_b), -1, 1))
+    roll = np.arctan2(-f_b[0], f_b[2])
+    if not np.isfinite(log.survey_yaw[0]):
+        raise PositioningError("survey: the first row needs the start heading (yaw); a MEMS gyro cannot find it")
+    q_nb = euler_to_quat(pitch, roll, log.survey_yaw[0])
+    lat, lon, h = log.survey_llh[0]
+    off = quat_rotate(q_nb, np.asarray(cfg.lever_arm_m, float))
+    r_m, r_n = earth.radii(lat)
+    nav = np.zeros(kf.N_NAV)
+    nav[:3] = lat + off[1] / (r_m + h), lon + off[0] / ((r_n + h) * np.cos(lat)), h + off[2]
+    nav[kf.QUAT] = q_nb
+    notes.append(f"levelled over {n * dt:.1f} s of standing: pitch {np.degrees(pitch):.3f} deg, roll "
+                 f"{np.degrees(roll):.3f} deg")
+    return nav, notes
+
+
+def _p0(cfg: Config, log: Log) -> np.ndarray:
+    sd = np.zeros(kf.N_STATES)
+    sd[kf.DV] = cfg.sd_velocity0
+    sd[kf.PHI] = [cfg.sd_level0, cfg.sd_level0, log.survey_sd[0, 2]]
+    sd[kf.DP] = [log.survey_sd[0, 0], log.survey_sd[0, 0], log.survey_sd[0, 1]]
+    sd[kf.GYRO_BIAS] = cfg.imu.gyro_bias
+    sd[kf.ACCEL_BIAS] = cfg.imu.accel_bias
+    sd[kf.ODO_MOUNT] = cfg.sd_odo_mount0
+    sd[kf.ODO_SCALE] = cfg.sd_odo_scale0
+    return np.diag((cfg.p0_scale * sd) ** 2)
+
+
+def _q_psd(cfg: Config) -> np.ndarray:
+    q = np.zeros(kf.N_STATES)
+    q[kf.DV] = cfg.imu.accel_vrw ** 2
+    q[kf.PHI] = cfg.imu.gyro_arw ** 2
+    q[kf.GYRO_BIAS] = cfg.imu.gyro_bias_psd
+    q[kf.ACCEL_BIAS] = cfg.imu.accel_bias_psd
+    return q * cfg.q_scale ** 2
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Outputs
+
+
+@nb.njit(cache=True)
+def _apply_rows(nav, cal, d):
+    for k in range(nav.shape[0]):
+        kf.apply_correction(nav[k], cal[k], d[k])
+
+
+def _body_llh(nav: np.ndarray, lever: np.ndarray) -> np.ndarray:
+    """Body reference point of IMU-point navigation rows."""
+    off = quat_rotate(nav[:, kf.QUAT], lever)
+    r_m, r_n = earth.radii(nav[:, 0])
+    h = nav[:, 2]
+    return np.column_stack([nav[:, 0] - off[:, 1] / (r_m + h), nav[:, 1] - off[:, 0] / ((r_n + h) *
+                                                                                      np.cos(nav[:, 0])),
+                            h - off[:, 2]])
+
+
+def _sd(p: np.ndarray) -> np.ndarray:
+    d = np.sqrt(np.maximum(np.diagonal(p, axis1=1, axis2=2), 0.0))
+    return d
+
+
+# ------------------------------------------------------------------------------------------------------------
+# The filter over a whole log
+
+
+@dataclass
+class _Prepared:
+    t_mech: np.ndarray
+    phi_b: np.ndarray
+    dv_b: np.ndarray
+    steps: int
+    t_kf: np.ndarray
+    odo: np.ndarray
+    mode: np.ndarray
+    cuts: list[tuple[int, int]]
+    segments: list[tuple[int, int]]
+    survey_epochs: np.ndarray
+    rams: RamLog | None
+    nav0: np.ndarray
+    notes: list[str]
+
+
+def prepare(log: Log, cfg: Config) -> _Prepared:
+    if log.survey_t.size == 0:
+        raise PositioningError("survey: no rows; the start position and heading must be surveyed")
+    imu_rate = 1.0 / np.median(np.diff(log.imu_t))
+    steps_f = imu_rate / cfg.n_samples / cfg.filter_rate_hz
+    if abs(steps_f - round(steps_f)) > 1e-6 or round(steps_f) < 1:
+        raise PositioningError(f"imu: {imu_rate:.6g} Hz is not {cfg.n_samples} x {cfg.filter_rate_hz:g} Hz x an "
+                               f"integer; choose filter_rate_hz to divide the mechanization rate")
+    steps = round(steps_f)
+    t = np.concatenate([[log.imu_t[0] - 1.0 / imu_rate], log.imu_t])
+    zero = np.zeros((1, 3))
+    try:
+        t_mech, phi_b, dv_b = compensated_increments(t, np.concatenate([zero, log.dtheta]),
+                                                     np.concatenate([zero, log.dv]), cfg.n_samples)
+    except ValueError as err:
+        raise PositioningError(f"imu: {err}") from None
+    n_kf = (t_mech.size - 1) // steps
+    t_mech = t_mech[: n_kf * steps + 1]
+    t_kf = t_mech[::steps]
+    odo, mode = _odometer_at(log, t_kf)
+    nav0, notes = _initial_state(log, t_mech, phi_b, dv_b, mode, steps, cfg)
+    u = odo - odo[0]
+    if log.survey_t.size >= 2:
+        d = earth.lla_to_enu(*log.survey_llh[1], *log.survey_llh[0])
+        face_travel = float(np.hypot(d[0], d[1]))
+    else:
+        face_travel = float(np.ptp(u))
+        notes.append("survey has no far face end: face length taken from the odometer")
+    cuts = straight_cuts(u, mode, face_travel)
+    settle = round(cfg.filter_rate_hz)  # one second of the stand after the cut belongs to the pass
+    ends = sorted({min(last + 1 + settle, n_kf) for _, last in cuts})
+    bounds = [0] + [e for e in ends if 0 < e < n_kf] + [n_kf]
+    segments = list(itertools.pairwise(bounds))
+    survey_epochs = np.minimum(np.searchsorted(t_kf, log.survey_t[1:]), n_kf)
+    rams = None
+    if log.ram_t.size and len(cfg.support_u_m) >= 2:
+        rams = RamLog.from_rows(log.ram_t, log.ram_support, log.ram_extension, log.ram_valid, cfg.support_u_m,
+                               cfg.ram_noise_sd)
+    return _Prepared(t_mech, phi_b, dv_b, steps, t_kf, odo, mode, cuts, segments, survey_epochs, rams, nav0,
+                     notes)
+
+
+class _Forward:
+    """Storage of one forward run: per-epoch navigation, calibration, covariance; per-segment smoother data."""
+
+    def __init__(self, n: int, keep_dir: Path | None):
+        self.nav = np.zeros((n + 1, kf.N_NAV))
+        self.cal = np.zeros((n + 1, kf.N_CAL))
+        self.p = np.zeros((n + 1, kf.N_STATES, kf.N_STATES))
+        self.flags = np.zeros(n + 1, np.int32)
+        self.keep_dir = keep_dir
+        self.saved: list[tuple[int, int]] = []
+
+    def save_segment(self, a: int, x_post, p_pred, phi) -> None:
+        if self.keep_dir is not None:
+            np.savez(self.keep_dir / f"{a}.npz", x_post=x_post, p_pred=p_pred, phi=phi)
+            self.saved.append((a, a + x_post.shape[0] - 1))
+
+
+def _fixes_for(prep: _Prepared, cfg: Config, log: Log, a: int, b: int, points: Points | None,
+               notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Position fixes of epochs (a, b]: survey face ends, then CPOEM points crossed on a straight cut."""
+    sel = np.flatnonzero((prep.survey_epochs > a) & (prep.survey_epochs <= b))
+    j = list(prep.survey_epochs[sel])
+    llh = [log.survey_llh[1 + k] for k in sel]
+    r = [np.diag([log.survey_sd[1 + k, 0] ** 2] * 2 + [log.survey_sd[1 + k, 1] ** 2]) for k in sel]
+    if points is not None and points.u.size and prep.rams is not None:
+        u = prep.odo - prep.odo[0]
+        for first, last in prep.cuts:
+            if first > b or last <= a:
+                continue
+            lo, hi = max(first - 1, a), min(last, b)
+            epochs, marks = crossings(u, cfg.cpoem_spacing_m, lo, hi)
+            fj, fllh, fr, skipped = predict_fixes(points, u, prep.t_kf, epochs, marks, prep.rams, cfg.advance_sd,
+                                                  cfg.path_sd, cfg.path_along_sd)
+            j += list(fj)
+            llh += list(fllh)
+            r += list(fr)
+            if skipped.size:
+                notes.append(f"CPOEM: no push-ram stroke at u = {', '.join(f'{v:.1f}' for v in skipped)} m "
+                             f"(t {prep.t_kf[lo]:.0f}-{prep.t_kf[hi]:.0f} s): points skipped")
+    if not j:
+        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3))
+    order = np.argsort(j, kind="stable")
+    return np.array(j, np.int64)[order], np.array(llh)[order], np.array(r)[order]
+
+
+def _segment_points(prep: _Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, p: np.ndarray) -> Points:
+    """CPOEM points of the straight cut inside epochs [a, b] from navigation rows nav (epochs a..b)."""
+    u = prep.odo - prep.odo[0]
+    lever = np.asarray(cfg.lever_arm_m, float)
+    for first, last in prep.cuts:
+        if first > a and last <= b:
+            llh = np.zeros((prep.t_kf.size, 3))
+            cov = np.zeros((prep.t_kf.size, 3, 3))
+            c_bn = np.zeros((prep.t_kf.size, 3, 3))
+            llh[a:b + 1] = _body_llh(nav, lever)
+            cov[a:b + 1] = p[:, kf.DP, kf.DP]
+            c_bn[a:b + 1] = quat_to_mat(nav[:, kf.QUAT])
+            return record(u, prep.t_kf, llh, cov, c_bn, cfg.cpoem_spacing_m, first - 1, last)
+    return Points.empty()
+
+
+def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
+           keep_dir: Path | None = None) -> tuple[Solution, Solution | None, _Forward]:
+    """One forward run; with `smooth`, the online RTS at each pass end (its output and CPOEM points)."""
+    n = prep.t_kf.size - 1
+    fwd = _Forward(n, keep_dir)
+    nav = prep.nav0.copy()
+    cal = np.zeros(kf.N_CAL)
+    p = _p0(cfg, log)
+    fwd.nav[0], fwd.p[0] = nav, p
+    q_psd = _q_psd(cfg)
+    mpp = cfg.metres_per_pulse
+    params = np.zeros(kf.N_PARAMS)
+    dt_kf = 1.0 / cfg.filter_rate_hz
+    params[[kf.P_R_LATERAL, kf.P_R_ALONG, kf.P_R_VERTICAL, kf.P_R_ZUPT, kf.P_R_ZARU, kf.P_GATE]] = [
+        cfg.r_lateral, np.hypot(np.sqrt(mpp ** 2 / 6) / dt_kf, cfg.r_odometer), cfg.r_vertical, cfg.r_zupt,
+        cfg.r_zaru, cfg.fix_gate]
+    params[kf.P_LEVER:kf.P_LEVER + 3] = cfg.lever_arm_m
+    smooth_nav = fwd.nav.copy() if smooth else None
+    smooth_p = fwd.p.copy() if smooth else None
+    points: Points | None = Points.empty() if cpoem else None
+    notes = list(prep.notes)
+    n_fixes = n_gated = 0
+    for a, b in prep.segments:
+        fix_j, fix_llh, fix_r = _fixes_for(prep, cfg, log, a, b, points, notes) if cpoem else \
+            (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)))
+        m = b - a + 1
+        x_post = np.zeros((m, kf.N_STATES))
+        p_post = np.zeros((m, kf.N_STATES, kf.N_STATES))
+        p_pred = np.zeros_like(p_post)
+        phi = np.zeros_like(p_post)
+        p_post[0], p_pred[0], phi[0] = p, p, np.eye(kf.N_STATES)
+        nis_out = np.full(fix_j.size, np.nan)
+        seg_nav = np.zeros((m, kf.N_NAV))
+        seg_cal = np.zeros((m, kf.N_CAL))
+        seg_nav[0], seg_cal[0] = nav, cal
+        seg_flags = np.zeros(m, np.int32)
+        kf.run_filter(0, m - 1, prep.steps, prep.t_mech[a * prep.steps:], prep.phi_b[a * prep.steps:],
+                      prep.dv_b[a * prep.steps:], prep.odo[a:b + 1], prep.mode[a:b + 1], fix_j - a, fix_llh, fix_r,
+                      q_psd, params, nav, cal, p, seg_nav, seg_cal, x_post, p_post, p_pred, phi, seg_flags, nis_out)
+        n_fixes += fix_j.size
+        n_gated += int(np.sum(~(nis_out <= cfg.fix_gate)))
+        fwd.nav[a + 1:b + 1], fwd.cal[a + 1:b + 1] = seg_nav[1:], seg_cal[1:]
+        fwd.p[a + 1:b + 1], fwd.flags[a + 1:b + 1] = p_post[1:], seg_flags[1:]
+        fwd.save_segment(a, x_post, p_pred, phi)
+        if smooth:
+            x_s, p_s = np.empty_like(x_post), np.empty_like(p_post)
+            x_post[0] = 0.0  # the segment starts from the previous posterior
+            rts_backward(x_post, p_post, np.zeros_like(x_post), p_pred, phi, x_s, p_s)
+            s_nav, s_cal = seg_nav.copy(), seg_cal.copy()
+            _apply_rows(s_nav, s_cal, x_s - x_post)
+            smooth_nav[a + 1:b + 1], smooth_p[a + 1:b + 1] = s_nav[1:], p_s[1:]
+            if cpoem:
+                points = _segment_points(prep, cfg, a, b, s_nav, p_s)
+        elif cpoem:
+            points = _segment_points(prep, cfg, a, b, seg_nav, p_post)
+    if n_gated:
+        notes.append(f"{n_gated} of {n_fixes} position fixes rejected by the innovation gate")
+    forward = _solution(prep, cfg, fwd.nav, fwd.p, fwd.flags, fwd.cal, notes)
+    smoothed = None
+    if smooth:
+        smoothed = _solution(prep, cfg, smooth_nav, smooth_p, fwd.flags | FLAG_SMOOTHED, fwd.cal, notes)
+    return forward, smoothed, fwd
+
+
+def _solution(prep: _Prepared, cfg: Config, nav: np.ndarray, p: np.ndarray, flags: np.ndarray, cal: np.ndarray,
+              notes: list[str]) -> Solution:
+    sd_all = _sd(p)
+    sd = np.column_stack([sd_all[:, kf.DP], sd_all[:, kf.DV], sd_all[:, kf.PHI]])
+    sd_cal = np.column_stack([sd_all[:, kf.GYRO_BIAS], sd_all[:, kf.ACCEL_BIAS], sd_all[:, kf.ODO_MOUNT],
+                              sd_all[:, kf.ODO_SCALE]])
+    return Solution(prep.t_kf, _body_llh(nav, np.asarray(cfg.lever_arm_m, float)), nav[:, kf.VEL].copy(),
+                    nav[:, kf.QUAT].copy(), sd, flags.copy(), cal.copy(), sd_cal, list(notes))
+
+
+def rts_offline(prep: _Prepared, cfg: Config, fwd: _Forward) -> Solution:
+    """One backward pass (001 eqs. 29-31) over the whole forward run, segment by segment from the end.
+
+    Row 0 of a stored segment is the previous segment's last epoch: its update is that segment's last row, and
+    the smoothed value at a segment's last epoch is the one the later segment's pass computed."""
+    nav, cal, p = fwd.nav.copy(), fwd.cal.copy(), fwd.p.copy()
+    segs = [(a, b, fwd.keep_dir / f"{a}.npz") for a, b in fwd.saved]
+    last_update = {b: np.load(path)["x_post"][-1] for a, b, path in segs}
+    x_known = p_known = None
+    for a, b, path in reversed(segs):
+        data = np.load(path)
+        x_post, p_pred, phi = data["x_post"].copy(), data["p_pred"], data["phi"]
+        x_post[0] = last_update.get(a, np.zeros(kf.N_STATES))
+        p_post = p[a:b + 1].copy()
+        x_run = x_post.copy()
+        if x_known is not None:
+            x_run[-1], p_post[-1] = x_known, p_known
+        x_s, p_s = np.empty_like(x_post), np.empty_like(p_post)
+        rts_backward(x_run, p_post, np.zeros_like(x_post), p_pred, phi, x_s, p_s)
+        _apply_rows(nav[a:b], cal[a:b], x_s[:-1] - x_post[:-1])
+        p[a:b] = p_s[:-1]
+        x_known, p_known = x_s[0], p_s[0]
+    return _solution(prep, cfg, nav, p, fwd.flags | FLAG_SMOOTHED, cal, [])
+
+
+def dead_reckoning(log: Log, cfg: Config, prep: _Prepared, cal: np.ndarray | None = None) -> Solution:
+    """001's traditional method: the free SINS attitude carries the odometer distance along body y (with `cal`,
+    the biases, odometer mounting and scale of a filter are applied first)."""
+    gyro = cal[kf.CAL_GYRO] if cal is not None else np.zeros(3)
+    accel = cal[kf.CAL_ACCEL] if cal is not None else np.zeros(3)
+    dt = 1.0 / (1.0 / np.median(np.diff(log.imu_t)))
+    t = np.concatenate([[log.imu_t[0] - dt], log.imu_t])
+    zero = np.zeros((1, 3))
+    lat0, lon0, h0 = prep.nav0[:3]
+    sins = mechanize(t, np.concatenate([zero, log.dtheta - gyro * dt]), np.concatenate([zero, log.dv - accel * dt]),
+                     lat0, lon0, h0, np.zeros(3), prep.nav0[kf.QUAT], cfg.n_samples)
+    q = sins.q_nb[:: prep.steps][: prep.t_kf.size]
+    mount = cal[kf.CAL_MOUNT] if cal is not None else np.zeros(3)
+    scale = cal[kf.CAL_SCALE] if cal is not None else 0.0
+    y_m_b = quat_to_mat(np.asarray(euler_to_quat(*_rotvec_euler(mount)), float))[:, 1]
+    dd = np.diff(prep.odo) / (1 + scale)
+    step_n = quat_rotate(q[:-1], np.broadcast_to(y_m_b, (dd.size, 3))) * dd[:, None]
+    enu = np.concatenate([np.zeros((1, 3)), np.cumsum(step_n, axis=0)])
+    body0 = log.survey_llh[0]
+    llh = np.column_stack(earth.enu_to_lla(enu, *body0))
+    v = np.concatenate([np.zeros((1, 3)), step_n / np.diff(prep.t_kf)[:, None]])
+    nan = np.full((prep.t_kf.size, 9), np.nan)
+    return Solution(prep.t_kf, llh, v, q, nan, np.zeros(prep.t_kf.size, np.int32))
+
+
+def _rotvec_euler(r: np.ndarray) -> tuple[float, float, float]:
+    """Euler angles (pitch about x, roll about y, yaw about z) of a small rotation vector (first order)."""
+    return float(r[0]), float(r[1]), float(r[2])
+
+
+def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS) -> dict[str, Solution]:
+    """Run the requested methods on a log; returns method -> Solution."""
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise PositioningError(f"unknown method '{unknown[0]}' (methods: {', '.join(METHODS)})")
+    prep = prepare(log, cfg)
+    out: dict[str, Solution] = {}
+    if "kf" in methods:
+        out["kf"], _, _ = run_kf(log, cfg, prep, cpoem=False, smooth=False)
+    if "kf_cpoem" in methods:
+        out["kf_cpoem"], _, _ = run_kf(log, cfg, prep, cpoem=True, smooth=False)
+    needs_rts = {"kf_cpoem_rts", "rts_offline", "dr_compensated"} & set(methods)
+    if needs_rts:
+        with tempfile.TemporaryDirectory(prefix="longwall-rts-") as tmp:
+            keep = Path(tmp) if "rts_offline" in methods else None
+            _, smoothed, fwd = run_kf(log, cfg, prep, cpoem=True, smooth=True, keep_dir=keep)
+            if "kf_cpoem_rts" in methods:
+                out["kf_cpoem_rts"] = smoothed
+            if "rts_offline" in methods:
+                out["rts_offline"] = rts_offline(prep, cfg, fwd)
+        if "dr_compensated" in methods:
+            out["dr_compensated"] = dead_reckoning(log, cfg, prep, smoothed.cal[-1])
+    if "dr" in methods:
+        out["dr"] = dead_reckoning(log, cfg, prep)
+    return {m: out[m] for m in methods}
+
+
+
+
+def load_log(run_dir: Path) -> Log:
+    """The streams of a run directory the positioning reads (push rams optional), checked on load."""
+    from estimators.logformat import IMU, ODOMETER, PUSHRAM, SURVEY, read_stream
+
+    imu = read_stream(run_dir, IMU)
+    odo = read_stream(run_dir, ODOMETER)
+    sur = read_stream(run_dir, SURVEY)
+
+    def col(table, name):
+        return table.column(name).to_numpy()
+
+    ram = {}
+    if (Path(run_dir) / PUSHRAM.filename).is_file():
+        rt = read_stream(run_dir, PUSHRAM)
+        ram = {"ram_t": col(rt, "t"), "ram_support": col(rt, "support"), "ram_extension": col(rt, "extension"),
+                   "ram_valid": col(rt, "valid")}
+    return Log(imu_t=col(imu, "t"), dtheta=np.column_stack([col(imu, f"dtheta_{a}") for a in "xyz"]),
+               dv=np.column_stack([col(imu, f"dv_{a}") for a in "xyz"]), odo_t=col(odo, "t"),
+               odo_distance=col(odo, "distance"), odo_direction=col(odo, "direction"), survey_t=col(sur, "t"),
+               survey_llh=np.column_stack([col(sur, k) for k in ("lat", "lon", "h")]),
+               survey_yaw=col(sur, "yaw"),
+               survey_sd=np.column_stack([col(sur, k) for k in ("sd_horizontal", "sd_vertical", "sd_yaw")]),
+               **ram)
+
+
+def estimate_columns(sol: Solution) -> dict[str, np.ndarray]:
+    """A Solution as ESTIMATE columns (estimators.logformat)."""
+    out = {"t": sol.t, "lat": sol.llh[:, 0], "lon": sol.llh[:, 1], "h": sol.llh[:, 2], "flags": sol.flags}
+    for i, a in enumerate("enu"):
+        out[f"v_n_{a}"] = sol.v_n[:, i]
+        out[f"sd_pos_{a}"], out[f"sd_vel_{a}"], out[f"sd_att_{a}"] = sol.sd[:, i], sol.sd[:, 3 + i], sol.sd[:, 6 + i]
+    for i, a in enumerate("wxyz"):
+        out[f"q_nb_{a}"] = sol.q_nb[:, i]
+    return out
+
+
+def state_columns(sol: Solution) -> dict[str, np.ndarray]:
+    """A filter Solution's calibration as ESTIMATE_STATES columns."""
+    out = {"t": sol.t, "odo_scale": sol.cal[:, kf.CAL_SCALE], "sd_odo_scale": sol.sd_cal[:, 9]}
+    for i, a in enumerate("xyz"):
+        for name, start in (("gyro_bias", 0), ("accel_bias", 3), ("odo_mount", 6)):
+            out[f"{name}_{a}"] = sol.cal[:, start + i]
+            out[f"sd_{name}_{a}"] = sol.sd_cal[:, start + i]
+    return out

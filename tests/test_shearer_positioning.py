@@ -1,0 +1,116 @@
+"""The 001 shearer positioning: the filter kernel on a standing IMU, and the whole chain on a simulated face."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from estimators import earth
+from estimators import shearer_kf as kf
+from estimators import shearer_positioning as sp
+from estimators.logformat import FLAG_SKIPPED, FLAG_VELOCITY, FLAG_ZUPT
+from estimators.rotations import (
+    euler_to_quat,
+    quat_conj,
+    quat_mul,
+    quat_rotate,
+    quat_to_rotvec,
+)
+from twin.estimate import positioning_config
+from twin.sensors import imu_truth, sensor_streams
+
+from .conftest import simulated
+
+DEG_H = np.pi / 180 / 3600
+
+
+def test_standing_filter_finds_the_gyro_bias_and_leaves_the_heading_alone():
+    """At rest the zero-rate update makes the gyro bias observable (a MEMS heading would drift 0.3 deg/s
+    otherwise); the heading itself is not (no gyrocompassing with such a gyro): it must not move."""
+    lat, h = np.radians(34.0), 100.0
+    q = euler_to_quat(0.01, 0.02, 0.3)
+    bias = np.array([600.0, -1400.0, 1170.0]) * DEG_H
+    w_b = quat_rotate(quat_conj(q), earth.earth_rate_n(lat)) + bias
+    f_b = quat_rotate(quat_conj(q), np.array([0, 0, earth.normal_gravity(lat, h)]))
+    steps, n_kf, dt = 5, 100, 0.02
+    t_mech = np.arange(n_kf * steps + 1) * dt
+    phi_b, dv_b = np.tile(w_b * dt, (n_kf * steps, 1)), np.tile(f_b * dt, (n_kf * steps, 1))
+    nav = np.zeros(kf.N_NAV)
+    nav[:3] = lat, 0.0, h
+    q0 = euler_to_quat(0.015, 0.015, 0.32)
+    nav[kf.QUAT] = q0
+    sd = np.array([0.01] * 3 + [0.005, 0.005, 0.02] + [0.05] * 3 + [720 * DEG_H] * 3 + [1e-4] * 3 + [0.02] * 3 +
+                  [0.01])
+    p = np.diag(sd ** 2)
+    params = np.zeros(kf.N_PARAMS)
+    params[:6] = [0.01, 0.01, 0.01, 0.002, 5e-4, 40.0]
+    z = np.zeros
+    out_nav, out_cal = z((n_kf + 1, kf.N_NAV)), z((n_kf + 1, kf.N_CAL))
+    store = [z((n_kf + 1, kf.N_STATES))] + [z((n_kf + 1, kf.N_STATES, kf.N_STATES)) for _ in range(3)]
+    flags = np.zeros(n_kf + 1, np.int32)
+    cal = z(kf.N_CAL)
+    kf.run_filter(0, n_kf, steps, t_mech, phi_b, dv_b, z(n_kf + 1), np.zeros(n_kf + 1, np.int8),
+                  np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), np.full(kf.N_STATES, 1e-12), params, nav, cal, p,
+                  out_nav, out_cal, *store, flags, z(0))
+    assert np.all(flags[1:] & FLAG_ZUPT)
+    assert np.abs(cal[kf.CAL_GYRO] - bias).max() < 10 * DEG_H
+    # Level converges to the truth (an accelerometer known to 10 ug: level and accel bias are one at rest),
+    # the heading keeps its initial error (0.02 rad).
+    err = quat_to_rotvec(quat_mul(q, quat_conj(nav[kf.QUAT])))
+    assert np.abs(err[:2]).max() < np.radians(0.01)
+    err0 = quat_to_rotvec(quat_mul(q, quat_conj(q0)))
+    assert abs(err[2] - err0[2]) < np.radians(0.01) and abs(err0[2]) > np.radians(1.0)
+
+
+@pytest.fixture(scope="module")
+def default_log():
+    scn, result = simulated("default")
+    streams = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), 0)
+    imu, odo, sur, ram = streams["imu"], streams["odometer"], streams["survey"], streams["pushram"]
+    log = sp.Log(imu_t=imu["t"], dtheta=np.column_stack([imu[f"dtheta_{a}"] for a in "xyz"]),
+                 dv=np.column_stack([imu[f"dv_{a}"] for a in "xyz"]), odo_t=odo["t"], odo_distance=odo["distance"],
+                 odo_direction=odo["direction"], survey_t=sur["t"],
+                 survey_llh=np.column_stack([sur["lat"], sur["lon"], sur["h"]]), survey_yaw=sur["yaw"],
+                 survey_sd=np.column_stack([sur["sd_horizontal"], sur["sd_vertical"], sur["sd_yaw"]]),
+                 ram_t=ram["t"], ram_support=ram["support"], ram_extension=ram["extension"], ram_valid=ram["valid"])
+    return scn, log
+
+
+def test_every_method_runs_on_a_simulated_face_without_nan(default_log):
+    scn, log = default_log
+    sols = sp.estimate(log, positioning_config(scn))
+    assert set(sols) == set(sp.METHODS)
+    for name, sol in sols.items():
+        assert np.isfinite(sol.llh).all() and np.isfinite(sol.q_nb).all(), name
+    flags = sols["kf"].flags
+    assert (flags & FLAG_ZUPT).any() and (flags & FLAG_VELOCITY).any()
+
+
+def test_odometer_dropout_is_skipped_and_flagged(default_log):
+    scn, log = default_log
+    keep = (log.odo_t < 100.0) | (log.odo_t > 110.0)
+    cut = dataclasses.replace(log, odo_t=log.odo_t[keep], odo_distance=log.odo_distance[keep],
+                              odo_direction=log.odo_direction[keep])
+    sol = sp.estimate(cut, positioning_config(scn), ("kf",))["kf"]
+    gap = (sol.t > 100.5) & (sol.t < 109.5)
+    assert np.all(sol.flags[gap] & FLAG_SKIPPED) and np.isfinite(sol.llh).all()
+
+
+@pytest.mark.parametrize("change, words", [
+    ({"survey_t": np.zeros(0), "survey_llh": np.zeros((0, 3)), "survey_yaw": np.zeros(0), "survey_sd": np.zeros((0, 3))},
+     "survey: no rows"),
+    ({"survey_yaw": np.array([np.nan, np.nan])}, "start heading"),
+])
+def test_unusable_log_is_one_clear_line(default_log, change, words):
+    scn, log = default_log
+    with pytest.raises(sp.PositioningError, match=words) as err:
+        sp.estimate(dataclasses.replace(log, **change), positioning_config(scn), ("kf",))
+    assert "\n" not in str(err.value)
+
+
+def test_nan_increment_names_the_row(default_log):
+    scn, log = default_log
+    dtheta = log.dtheta.copy()
+    dtheta[1234, 1] = np.nan
+    with pytest.raises(sp.PositioningError, match=r"imu: dtheta row 1235 is not finite"):
+        sp.estimate(dataclasses.replace(log, dtheta=dtheta), positioning_config(scn), ("kf",))

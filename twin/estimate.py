@@ -1,0 +1,107 @@
+"""Run the shearer positioning estimators on a run directory: estimates Parquet, metrics, estimates.rrd.
+
+The estimators read only the log (estimators.shearer_positioning.load_log); what they are told about the machine
+(IMU error budget, lever arm, odometer pulse length, where the supports sit along the face) comes from the
+scenario, as a mining engineer would enter it from the datasheets and the face layout. The truth is used only to
+score the result (estimators.metrics) and to give the true sensor states beside the estimated ones.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from estimators import metrics
+from estimators import shearer_positioning as sp
+from estimators.logformat import STREAMS, read_estimate, read_stream, write_estimate
+from twin.imu_grades import grade
+from twin.layout import support_stations
+from twin.scenario import Scenario
+
+
+def _psd(sigma: float, tau: float) -> float:
+    """Random-walk density matching a Gauss-Markov in-run bias over its correlation time: 2 sigma^2 / tau."""
+    return 2 * sigma ** 2 / tau if sigma > 0 and tau > 0 else 0.0
+
+
+def positioning_config(scn: Scenario) -> sp.Config:
+    """The filter configuration a user would write for this face and machine."""
+    est = scn.estimators.shearer
+    g = grade(scn.sensors.imu.grade)
+    kw = {"lever_arm_m": tuple(scn.sensors.imu.lever_arm_m), "metres_per_pulse": scn.sensors.odometer.metres_per_pulse,
+              "support_u_m": tuple((support_stations(scn) + 0.5) * scn.face.pan_length_m - scn.shearer.length_m / 2),
+              "n_samples": est.n_samples, "filter_rate_hz": est.filter_rate_hz, "cpoem_spacing_m": est.cpoem_spacing_m,
+              "advance_sd": max(scn.sensors.pushram.noise_m, 0.002)}
+    if est.tuning == "appendix_a":
+        return sp.Config.appendix_a(**kw)
+    imu = sp.ImuNoise(gyro_arw=max(g.gyro_arw, 1e-6), accel_vrw=max(g.accel_vrw, 1e-5),
+                      gyro_bias=max(g.gyro_bias, g.gyro_bias_instability, 1e-7),
+                      accel_bias=max(g.accel_bias, g.accel_bias_instability, 1e-5),
+                      gyro_bias_psd=_psd(g.gyro_bias_instability, g.gyro_bias_tau),
+                      accel_bias_psd=_psd(g.accel_bias_instability, g.accel_bias_tau))
+    return sp.Config(imu=imu, **kw)
+
+
+def true_states(scn: Scenario) -> dict[str, float]:
+    """True odometer scale-factor error and mounting angles (twin.odometer: dk_D = 1 / (1 + e) - 1)."""
+    odo = scn.sensors.odometer
+    out = {"odo_scale": 1.0 / (1.0 + odo.scale_error) - 1.0}
+    for a, v in zip("xyz", odo.mounting_deg):
+        out[f"odo_mount_{a}"] = math.radians(v)
+    return out
+
+
+def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict:
+    """Run the scenario's shearer estimators on run_dir; writes estimates/, estimates.rrd (with `recording`) and
+    returns the metrics. A log the estimators cannot use raises PositioningError (one line)."""
+    from twin.estimate_recording import write_estimate_recording
+
+    methods = tuple(scn.estimators.shearer.methods)
+    if not methods:
+        return {}
+    log = sp.load_log(run_dir)
+    sols = sp.estimate(log, positioning_config(scn), methods)
+    truth = read_stream(run_dir, STREAMS["truth_shearer"])
+    cycles = read_stream(run_dir, STREAMS["truth_cycles"])
+    states_truth = true_states(scn)
+    out = {}
+    for name, sol in sols.items():
+        write_estimate(run_dir, name, sp.estimate_columns(sol))
+        if sol.cal is not None:
+            write_estimate(run_dir, name, sp.state_columns(sol), states=True)
+        table = read_estimate(run_dir, name)
+        t, err = metrics.position_errors(table, truth)
+        entry = {"cycles": metrics.cycle_metrics(t, err, cycles), "notes": sol.notes}
+        if sol.cal is not None:
+            entry["odo_scale"] = {"estimate": float(sol.cal[-1, 9]), "truth": states_truth["odo_scale"]}
+            entry["odo_mount_deg"] = {a: {"estimate": float(np.degrees(sol.cal[-1, 6 + i])),
+                                          "truth": math.degrees(states_truth[f"odo_mount_{a}"])}
+                                      for i, a in enumerate("xyz")}
+        out[name] = entry
+    if recording:
+        estimates = {name: read_estimate(run_dir, name) for name in sols}
+        states = {name: read_estimate(run_dir, name, states=True) for name, sol in sols.items() if sol.cal is not None}
+        write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, truth, estimates, states, states_truth)
+    return out
+
+
+def format_estimators(estimators: dict) -> str:
+    """Per-method SEP per cutting cycle [m] as a table."""
+    if not estimators:
+        return ""
+    n = max(len(e["cycles"]) - 1 for e in estimators.values())
+    lines = ["", "shearer position, SEP per cutting cycle [m] (001 Table 3: 0.50 0.32 0.13 0.17)",
+             f"{'method':16s}" + "".join(f"{'A' + str(k + 1):>8s}" for k in range(n)) + f"{'all':>8s}"]
+    for name, e in estimators.items():
+        lines.append(f"{name:16s}" + "".join(f"{c['sep']:8.3f}" for c in e["cycles"]))
+    return "\n".join(lines)
+
+
+def write_metrics(run_dir: Path, estimators: dict) -> None:
+    path = Path(run_dir) / "metrics.json"
+    data = json.loads(path.read_text()) if path.is_file() else {}
+    data["estimators"] = estimators
+    path.write_text(json.dumps(data, indent=2) + "\n")
