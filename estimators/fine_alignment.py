@@ -64,9 +64,11 @@ So phi_N settles at accel bias / g (east), phi_U at the gyrocompassing floor (ea
 plus tan L phi_N, and phi_E at the information-weighted mean of what the north accelerometer and the north and
 up gyros each say: -nabla_N / g where the accelerometer prior is the tighter reference (every MEMS grade: the
 Earth rate is far below the gyro bias), while a navigation-grade gyro (004: 0.001 deg/h against 30 ug) takes
-about a sixth of the weight. The covariance says so when the bias priors are given (gyro_bias_sigma,
-accel_bias_sigma, e.g. the grade's turn-on bias). A gyro whose heading floor exceeds the initial heading
-uncertainty leaves the heading where it started, with its sigma.
+about a sixth of the weight (less the ARW that is not yet averaged down). The start attitude's prior
+(initial_sigma_rad) is a source too: with the 3 deg start errors at one sigma it pulls the MEMS level by
+(accel sigma / g) / 3 deg = 6 % of accel sigma / g towards the start; and a gyro whose heading floor exceeds the
+initial heading uncertainty leaves the heading where it started, with its sigma. The covariance says all this
+when the bias priors are given (gyro_bias_sigma, accel_bias_sigma, e.g. the grade's turn-on bias).
 
 Bad input. The zero-velocity and zero-rate innovations of a standing IMU are white with the covariance the
 filter predicts; their normalized squares (NIS) averaged over MOTION_WINDOW_S windows are tested against the
@@ -127,10 +129,22 @@ class FineAlignment:
         """(K, 3) one-sigma attitude error [rad] in n: east, north, up (up = heading)."""
         return self.sigma[:, PHI]
 
-    def errors(self, q_true: np.ndarray, k: int = -1) -> tuple[np.ndarray, np.ndarray]:
-        """Errors against the truth at update k: (estimate - truth of pitch, roll, yaw [rad]; the error angles
-        phi [rad] of the filter's state, C_b^n_true = Rz(phi_U) Rx(phi_E) Ry(phi_N) C_b^n_estimated)."""
-        q_est = self.q_nb[k]
+    def attitude(self, window_s: float = 0.0, k: int = -1) -> np.ndarray:
+        """q_nb at update k, or with window_s > 0 the mean of the estimates over the window_s before it: the
+        standing IMU has one attitude, and the mean removes the update-to-update tracking noise of the filter
+        (gyro ARW against accelerometer VRW: ~8 mdeg per axis for the MTi-G-700) that a single update carries.
+        The sigma stays the filter's (conservative for the mean)."""
+        k = k % self.t.size
+        if window_s <= 0.0:
+            return self.q_nb[k]
+        q = self.q_nb[np.searchsorted(self.t, self.t[k] - window_s, side="right"): k + 1]
+        q = q * np.sign(q @ q[-1])[:, None]  # one hemisphere; then the chordal mean
+        return q.mean(axis=0) / np.linalg.norm(q.mean(axis=0))
+
+    def errors(self, q_true: np.ndarray, k: int = -1, window_s: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+        """Errors against the truth of `attitude(window_s, k)`: (estimate - truth of pitch, roll, yaw [rad]; the
+        error angles phi [rad] of the filter's state, C_b^n_true = Rz(phi_U) Rx(phi_E) Ry(phi_N) C_b^n_est)."""
+        q_est = self.attitude(window_s, k)
         e_est, e_true = np.array(quat_to_euler(q_est)), np.array(quat_to_euler(q_true))
         d = (e_est - e_true + np.pi) % (2 * np.pi) - np.pi
         phi = np.array(mat_to_euler(quat_to_mat(q_true) @ quat_to_mat(q_est).T))
@@ -143,14 +157,21 @@ class FineAlignment:
 
 
 def alignment_floors(c_nb, accel_bias_b, gyro_bias_b, lat: float, accel_sigma: float, gyro_sigma: float,
-                     h: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Final attitude errors phi = (phi_E, phi_N, phi_U) [rad] no stationary alignment can beat, for the true
-    attitude c_nb (C_b^n) and effective biases in b (reported - true, whatever their cause: turn-on bias, the
-    non-orthogonality times the sensed gravity, the in-run drift). Returns (floors, classical): classical =
-    (-nabla_N / g, nabla_E / g, tan L phi_N - eps_E / (w_ie cos L)), the accelerometer and gyrocompassing
-    floors (estimators.alignment `level_limit`, `heading_limit`); floors = the same with phi_E the
-    information-weighted mean of the accelerometer's and the north and up gyros' verdicts (module docstring),
-    weights gamma^2 / accel_sigma^2, w_U^2 / gyro_sigma^2, w_N^2 / gyro_sigma^2 (the per-axis bias priors)."""
+                     h: float = 0.0, *, arw: float = 0.0, seconds: float = np.inf, start_error=None,
+                     start_sigma=None) -> tuple[np.ndarray, np.ndarray]:
+    """Final attitude errors phi = (phi_E, phi_N, phi_U) [rad] of an ideal stationary alignment, for the attitude
+    c_nb (C_b^n; the tilt is about the axes of the estimate once its heading error is taken out, so pass the
+    estimate's) and effective biases in b (reported - true, whatever their cause: turn-on bias, non-orthogonality
+    times the sensed gravity, in-run drift).
+
+    Returns (floors, classical). classical = (-nabla_N / g, nabla_E / g, tan L phi_N - eps_E / (w_ie cos L)):
+    the accelerometer and gyrocompassing floors (estimators.alignment `level_limit`, `heading_limit`). floors:
+    each angle the information-weighted mean of every source's verdict on it (module docstring, "Limits"):
+    phi_E of the north accelerometer (weight gamma^2 / accel_sigma^2), the north gyro (w_U^2 / s_g^2) and the up
+    gyro (w_N^2 / s_g^2); phi_N of the east accelerometer; phi_U of the gyrocompass (w_N^2 / s_g^2); with
+    s_g^2 = gyro_sigma^2 + arw^2 / seconds (the ARW [rad/sqrt(s)] averaged over the alignment). With the start
+    attitude's error and sigma (3,) [rad] (the filter's prior) each angle also weighs the start's verdict
+    (start_error, weight 1 / start_sigma^2): a gyro that cannot gyrocompass leaves the heading at its start."""
     acc_n = np.asarray(c_nb) @ np.asarray(accel_bias_b, float)
     gyr_n = np.asarray(c_nb) @ np.asarray(gyro_bias_b, float)
     w = earth.earth_rate_n(lat)
@@ -158,11 +179,16 @@ def alignment_floors(c_nb, accel_bias_b, gyro_bias_b, lat: float, accel_sigma: f
     classical = np.array([-level_limit(acc_n[1], lat, h), phi_n,
                           np.tan(lat) * phi_n - heading_limit(gyr_n[0], lat)])
     gamma = float(earth.normal_gravity(lat, h))
-    info = np.array([gamma ** 2 / max(accel_sigma, 1e-30) ** 2, w[2] ** 2 / max(gyro_sigma, 1e-30) ** 2,
-                     w[1] ** 2 / max(gyro_sigma, 1e-30) ** 2])
-    verdicts = np.array([classical[0], -gyr_n[1] / w[2], gyr_n[2] / w[1]])
-    floors = classical.copy()
-    floors[0] = float(info @ verdicts / info.sum())
+    s_g2 = max(gyro_sigma ** 2 + arw ** 2 / seconds, 1e-60)
+    i_acc = gamma ** 2 / max(accel_sigma, 1e-30) ** 2
+    verdicts = [[classical[0], -gyr_n[1] / w[2], gyr_n[2] / w[1]], [classical[1]], [classical[2]]]
+    info = [[i_acc, w[2] ** 2 / s_g2, w[1] ** 2 / s_g2], [i_acc], [w[1] ** 2 / s_g2]]
+    floors = np.empty(3)
+    for i in range(3):
+        v, wt = verdicts[i], info[i]
+        if start_error is not None:
+            v, wt = v + [start_error[i]], wt + [1.0 / start_sigma[i] ** 2]
+        floors[i] = np.dot(wt, v) / np.sum(wt)
     return floors, classical
 
 

@@ -32,6 +32,7 @@ RATE = 200.0
 YAW = np.radians(-90.0)  # 000 section 5.3: heading 270 deg
 ERR0 = np.radians([3.0, 3.0, 5.0])  # phi_E, phi_N, phi_U of the start attitude
 GAMMA = earth.normal_gravity(LAT, 0.0)
+WINDOW = 10.0  # [s] the result is the mean attitude over the last 10 s (FineAlignment.attitude)
 
 
 def stationary(grade_name: str, seconds: float, seed: int):
@@ -62,23 +63,26 @@ def run(grade_name, seconds, seed, method, **kw):
     return res, q_true, info, g
 
 
-def floors(res, q_true, info, g):
-    """(floors, classical) of the draw, the tilt in the axes of the estimate (alignment_floors)."""
+def floors(res, q_true, info, g, seconds):
+    """(floors, classical) of the draw (alignment_floors: the tilt in the axes of the estimate, the gyro ARW
+    averaged over the run, the start error at one sigma as the filter's prior)."""
     c = quat_to_mat(q_true)
     acc = info.accel_bias + (info.accel_matrix - np.eye(3)) @ (c.T @ [0.0, 0.0, GAMMA])
     gyr = info.gyro_bias + (info.gyro_matrix - np.eye(3)) @ (c.T @ earth.earth_rate_n(LAT))
-    return alignment_floors(quat_to_mat(res.q_nb[-1]), acc, gyr, LAT, accel_sigma(g), g.gyro_bias)
+    return alignment_floors(quat_to_mat(res.attitude(WINDOW)), acc, gyr, LAT, accel_sigma(g), g.gyro_bias,
+                            arw=g.gyro_arw, seconds=seconds, start_error=ERR0, start_sigma=ERR0)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_nav_grade_reaches_the_floors(seed):
-    """Navigation grade of 004 after 1800 s (EKF): the level within 10 % of its floor plus the gyro ARW
-    allowance (the up and north gyros' share of the level is averaged down like the heading), phi_N within
-    10 % of east accel bias / g, the heading within 10 % of the gyrocompassing floor plus 3 ARW sigma."""
+    """Navigation grade of 004 after 1800 s (EKF): the level within 10 % of its floor plus 3 sigma of the gyro
+    ARW in the gyros' share of it (a sixth; the heading's ARW allowance), phi_N within 10 % of east accel bias /
+    g, the heading within 10 % of the gyrocompassing floor plus 3 ARW sigma (8 seeds: level 0.7-9.6 %, phi_N
+    0.1-2.6 %, heading inside the allowance, which is 0.2-1 times the floor at 1800 s)."""
     seconds = 1800.0
     res, q_true, info, g = run("nav-004", seconds, seed, "ekf")
-    _, phi = res.errors(q_true)
-    fl, classical = floors(res, q_true, info, g)
+    _, phi = res.errors(q_true, window_s=WINDOW)
+    fl, classical = floors(res, q_true, info, g, seconds)
     arw_angle = g.gyro_arw / np.sqrt(seconds) / (earth.OMEGA_IE * np.cos(LAT))
     assert np.hypot(*(phi[:2] - fl[:2])) <= 0.1 * np.hypot(*fl[:2]) + 0.2 * 3 * arw_angle
     assert abs(phi[1] - classical[1]) <= 0.1 * abs(classical[1])
@@ -89,28 +93,29 @@ def test_nav_grade_reaches_the_floors(seed):
 @pytest.mark.parametrize("method", ["ukf", "optimized_ukf"])
 def test_nav_grade_unscented_filters_reach_the_level(method):
     res, q_true, info, g = run("nav-004", 600.0, 0, method)
-    d, phi = res.errors(q_true)
-    fl, _ = floors(res, q_true, info, g)
+    d, phi = res.errors(q_true, window_s=WINDOW)
+    fl, _ = floors(res, q_true, info, g, 600.0)
     assert np.hypot(*(phi[:2] - fl[:2])) <= 0.1 * np.hypot(*fl[:2])
     assert np.all(np.abs(np.degrees(d)) < 0.02)  # from 3, 3, 5 deg
     assert np.all(res.attitude_sigma[-1] < ERR0 / 100)
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_mti_g_700_levels_honestly_and_keeps_its_heading(seed):
     """720 deg/h gyro bias: no gyrocompassing (floor tens of degrees), so the heading keeps its 5 deg start
     error and its 5 deg sigma instead of turning with the vertical gyro bias; the level reaches its floor
-    (accel bias and non-orthogonality / g, 0.1-0.3 deg) with a sigma that is the prior accel sigma / g."""
+    (accel bias and non-orthogonality / g, 0.1-0.3 deg) within 10 % (12 seeds: 0.8-7.1 %) with a sigma that is
+    the prior accel sigma / g."""
     res, q_true, info, g = run("mti-g-700", 300.0, seed, "ekf")
-    _, phi = res.errors(q_true)
-    fl, _ = floors(res, q_true, info, g)
+    _, phi = res.errors(q_true, window_s=WINDOW)
+    fl, _ = floors(res, q_true, info, g, 300.0)
     sig = res.attitude_sigma[-1]
     assert abs(heading_limit(g.gyro_bias, LAT)) > np.radians(10.0)
     assert sig[2] >= 0.99 * ERR0[2]
-    assert abs(phi[2] - ERR0[2]) < np.radians(0.5)
+    assert abs(phi[2] - fl[2]) <= 0.1 * abs(fl[2])
     assert np.all(sig[:2] > 0.95 * accel_sigma(g) / GAMMA)
     assert np.all(np.abs(phi) < 3 * sig)
-    assert np.hypot(*(phi[:2] - fl[:2])) <= 0.35 * np.hypot(*fl[:2])
+    assert np.hypot(*(phi[:2] - fl[:2])) <= 0.1 * np.hypot(*fl[:2])
 
 
 @pytest.mark.parametrize("grade_name", ["nav-004", "mti-g-700"])
