@@ -32,16 +32,20 @@ Measurements, one linear (z, H, R) per update (000 eqs. 23, 25, 28, 30 and one a
 * zero vertical rate (not in 000; ``zero_rate=True``): the standing shearer turns only with the Earth, so the
   gyro output over the block resolved on the computed vertical minus the Earth rate's vertical component is the
   vertical gyro bias: z = [C_b^n' dtheta]_U - w_U T = -w_N T phi_E + T [C_b^n' eps_w]_U + ARW noise,
-  R = ARW^2 T. Without it a MEMS gyro (hundreds of deg/h) turns the computed frame by tens of degrees during the
-  alignment; the first-order covariance does not rotate the tilt with the frame while it does rotate the
-  body-fixed accelerometer bias, so the filter takes the accelerometer bias for observable and the level ends
-  several times accel bias / g off with a sigma that is too small (measured: 0.8 deg off, sigma 0.05 deg on the
-  MTi-G-700). The horizontal gyro outputs are left to the velocity channel (their Earth-rate part depends on
-  the unknown heading, the gyrocompassing 000 relies on), so nothing is counted twice there.
+  R = ARW^2 T. Without it the vertical bias of a MEMS gyro (hundreds of deg/h) turns the computed heading by
+  tens of degrees during the alignment: the heading sigma grows to match (measured ~55 deg after 300 s on the
+  MTi-G-700, honest, but the start heading is lost); with it the heading keeps its start value and sigma. The
+  horizontal gyro outputs are left to the velocity channel (their Earth-rate part depends on the unknown
+  heading, the gyrocompassing 000 relies on), so nothing is counted twice there.
 
 Loop: increments are summed over blocks of `update_rate` (default 10 Hz); per block the nominal solution
 (C_b^n', v') is mechanized, the filter predicts and updates, and the estimated phi and dV are fed back into the
-nominal (error-state reset: C_b^n' <- E(phi) C_b^n', v' <- v' - dV, phi = dV = 0; biases stay in the state).
+nominal (error-state reset: C_b^n' <- E(phi) C_b^n', v' <- v' - dV, phi = dV = 0; biases stay in the state),
+and the covariance follows the reset, P <- G P G^T with G the Jacobian of the remaining error E(phi) E(phi_hat)^T
+in phi (a heading correction turns the tilt axes). Without it the tilt covariance stays in the old axes while
+the body-fixed accelerometer bias is mapped through the corrected nominal, and the filter takes that bias for
+partly observable: measured, a level sigma of 0.66 accel bias / g on nav-004, and on the MTi-G-700, whose
+heading sigma is tens of degrees without the zero-rate update, a level 0.8 deg off with a sigma of 0.05 deg.
 The measurements are linear, so all three filters share the exact linear (Kalman, Joseph form) update; they
 differ in the time update only:
 
@@ -317,12 +321,9 @@ def _update(x, p, z, hm, r):
 
 @nb.njit(cache=True)
 def _reset(c, v, x, p):
-    """Feed phi and dV into the nominal and zero them (the biases stay in the state); P follows the reset.
-
-    The remaining error is E(phi) E(phi_hat)^T; its Jacobian G in phi at phi_hat (central differences) is not the
-    identity while phi_hat is large: a heading correction turns the tilt axes. Without P <- G P G^T the tilt
-    covariance stays in the old axes while the body-fixed accelerometer bias is mapped through the turned
-    nominal, and the filter takes the bias for partly observable (level sigma 0.66 accel bias / g measured)."""
+    """Feed phi and dV into the nominal and zero them (the biases stay in the state); P <- G P G^T with G the
+    Jacobian (central differences) of the remaining error E(phi) E(phi_hat)^T in phi at phi_hat (module
+    docstring, "Loop")."""
     e_hat = _err_mat(x[_PE], x[_PN], x[_PU])
     g = np.zeros((3, 3))
     step = 1e-5

@@ -4,7 +4,8 @@ Floors (estimators.fine_alignment `alignment_floors`, per axis and signed, of th
 accelerometer non-orthogonality times gravity counted as bias): phi_N = east accel bias / g, phi_U = the
 gyrocompassing floor east gyro bias / (w_ie cos L) plus tan L phi_N, phi_E = the information-weighted mean of
 -north accel bias / g and the north and up gyros' verdicts (a navigation-grade gyro measures the Earth-rate
-direction well enough to take a sixth of the weight; for MEMS gyros it is -north accel bias / g).
+direction well enough to take a sixth of the weight; for MEMS gyros it is -north accel bias / g); every angle also
+weighs the start error (the filter's prior), so a MEMS heading floor is its start error.
 """
 
 from __future__ import annotations
@@ -116,6 +117,18 @@ def test_mti_g_700_levels_honestly_and_keeps_its_heading(seed):
     assert np.all(sig[:2] > 0.95 * accel_sigma(g) / GAMMA)
     assert np.all(np.abs(phi) < 3 * sig)
     assert np.hypot(*(phi[:2] - fl[:2])) <= 0.1 * np.hypot(*fl[:2])
+
+
+def test_mti_g_700_without_the_zero_rate_update_says_the_heading_is_unknown():
+    """Without the vertical zero-rate update the 720 deg/h vertical bias turns the computed heading: the heading
+    sigma must grow to tens of degrees and cover the error, and the level must stay honest."""
+    for seed in (0, 1):
+        res, q_true, _, g = run("mti-g-700", 300.0, seed, "ekf", zero_rate=False)
+        _, phi = res.errors(q_true, window_s=WINDOW)
+        sig = res.attitude_sigma[-1]
+        assert sig[2] > np.radians(20.0)
+        assert np.all(np.abs(phi) < 3 * sig)
+        assert np.all(sig[:2] > 0.95 * accel_sigma(g) / GAMMA)
 
 
 @pytest.mark.parametrize("grade_name", ["nav-004", "mti-g-700"])
