@@ -20,7 +20,9 @@ Measurements, each a (z, H, R) block applied in sequence with the Joseph update 
 
 * odometer + motion constraint (001 eqs. 18-20): z = C_b^m C_n^b v_n - [0, v_od, 0], with v_n the SINS mean
   velocity over the step (its displacement / T) and v_od the odometer distance over the step / T corrected by the
-  estimated scale, H = [C_b^m C_n^b, -C_b^m C_n^b [v_n x], 0, 0, 0, -C_b^m [v_b x], -v_m];
+  estimated scale, H = [C_b^m C_n^b, -C_b^m C_n^b [v_n x], 0, 0, 0, -C_b^m [v_b x], -v_m] evaluated at the
+  nominal motion v_b = [0, running-mean odometer speed, 0] (see the kernel: measured velocities there bias the
+  scale and mounting estimates);
 * zero-velocity update at a stand (004 eq. 2): z = v_n, H = [I 0 ...];
 * zero-rate update at a stand: the mean gyro output minus the Earth rate resolved in b must be the residual gyro
   bias, z = w_ib_b - C_n^b w_ie = eps + C_n^b [w_ie x] phi. It makes the vertical gyro bias, and so the heading
@@ -80,8 +82,8 @@ CAL_SCALE = 9
 N_CAL = 10
 
 # Indices of the kernel's parameter vector.
-P_R_LATERAL, P_R_ALONG, P_R_VERTICAL, P_R_ZUPT, P_R_ZARU, P_GATE, P_LEVER = 0, 1, 2, 3, 4, 5, 6  # lever: 6..8
-N_PARAMS = 9
+P_R_LATERAL, P_R_ALONG, P_R_VERTICAL, P_R_ZUPT, P_R_ZARU, P_GATE, P_TAU_FWD, P_TAU_FORCE, P_LEVER = range(9)
+N_PARAMS = 12  # the lever arm takes 8..10, one spare
 
 
 @nb.njit(cache=True)
@@ -231,12 +233,16 @@ def _fix_innovation(nav, lever, fix_llh):
 
 @nb.njit(cache=True)
 def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch, fix_llh, fix_r, q_psd, params,
-               nav, cal, p, out_nav, out_cal, x_post, p_post, p_pred, phi_store, flags, nis_out):
+               nav, cal, p, nominal, out_nav, out_cal, x_post, p_post, p_pred, phi_store, flags, nis_out,
+               vel_innov):
     """Filter epochs j0+1 .. j1 (epoch j ends mechanization step j * steps); state (nav, cal, p) in place.
 
     odo_mode[j]: 1 moving with a valid odometer over (j-1, j], 0 standing, -1 odometer missing (skipped).
+    nominal (4,): the running means of the odometer speed and of the specific force in n that H and F are
+    evaluated at (carried across calls).
     Fixes (fix_epoch sorted, fix_llh (F, 3) lat/lon/h, fix_r (F, 3, 3) ENU covariance) apply at their epoch.
-    Stores per epoch: posterior navigation and calibration, covariance, the update x+ and Phi for the smoother.
+    Stores per epoch: posterior navigation and calibration, covariance, the update x+ and Phi for the smoother,
+    the velocity innovation in m (NaN where none) and, per fix, its normalized innovation squared.
     """
     lever = params[P_LEVER:P_LEVER + 3]
     r_vel = np.diag(np.array([params[P_R_LATERAL], params[P_R_ALONG], params[P_R_VERTICAL]]) ** 2)
@@ -255,8 +261,14 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
             f_sum += dv_n
             disp += v_bar * dt
             w_sum += ph
-        f_n = f_sum / t_span
-        phi, qd = discretize(system_matrix(nav, f_n), q_psd, t_span)
+        # F is evaluated at the nominal specific force: the running mean over P_TAU_FORCE, not this step's, which
+        # carries the machine's vibration whose velocity is also in the innovations (errors in variables again:
+        # the vibration would "reveal" a heading error through f x phi that is not there).
+        if nominal[1] == 0.0 and nominal[2] == 0.0 and nominal[3] == 0.0:
+            nominal[1:4] = f_sum / t_span
+        else:
+            nominal[1:4] += (f_sum / t_span - nominal[1:4]) * min(1.0, t_span / params[P_TAU_FORCE])
+        phi, qd = discretize(system_matrix(nav, nominal[1:4].copy()), q_psd, t_span)
         p[:, :] = phi @ p @ phi.T + qd
         phi_store[j] = phi
         p_pred[j] = p
@@ -270,15 +282,23 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
             v_n = disp / t_span
             v_b = c_nb @ v_n
             v_od = (odo_dist[j] - odo_dist[j - 1]) / t_span / (1 + cal[CAL_SCALE])
-            v_m = np.array([0.0, v_od, 0.0])
+            # 001 eq. 20 evaluates H at the true velocity. Measured velocities there (the odometer's quantization,
+            # the IMU's vibration) would put the same noise into H and z, and that correlation biases the scale and
+            # mounting estimates at every update (errors in variables). H uses the nominal motion instead: along
+            # the odometer axis at the odometer speed averaged over the previous epochs (not this one).
+            v_b_nom = np.array([0.0, nominal[0], 0.0])
             h = np.zeros((3, N_STATES))
             h[:, _DV:_DV + 3] = c_bm @ c_nb
-            h[:, _PHI:_PHI + 3] = -c_bm @ c_nb @ skew3(v_n)
-            h[:, _AL:_AL + 3] = -c_bm @ skew3(v_b)
-            h[:, ODO_SCALE] = -v_m
-            joseph_update(x, p, c_bm @ v_b - v_m, h, r_vel)
+            h[:, _PHI:_PHI + 3] = -c_bm @ c_nb @ skew3(c_bn @ v_b_nom)
+            h[:, _AL:_AL + 3] = -c_bm @ skew3(v_b_nom)
+            h[1, ODO_SCALE] = -(c_bm @ v_b_nom)[1]
+            z = c_bm @ v_b - np.array([0.0, v_od, 0.0])
+            nominal[0] += (v_od - nominal[0]) * min(1.0, t_span / params[P_TAU_FWD])
+            vel_innov[j] = z - h @ x
+            joseph_update(x, p, z, h, r_vel)
             flag |= FLAG_VELOCITY
         elif odo_mode[j] == 0:
+            nominal[0] = 0.0
             h = np.zeros((3, N_STATES))
             for i in range(3):
                 h[i, _DV + i] = 1.0

@@ -86,6 +86,11 @@ class Config:
     p0_scale: float = 1.0
     q_scale: float = 1.0
     level_window_s: float = 60.0
+    speed_tau_s: float = 1.0  # time constant of the odometer speed the velocity measurement is linearized at [s]
+    force_tau_s: float = 2.0  # time constant of the specific force the error dynamics are linearized at [s]
+    vibration_vrw: float = 5e-4
+    """Velocity random walk [m/s/sqrt(s)] added for the cutting machine's vibration: what sculling compensation at
+    the IMU rate leaves of a 30 Hz pick band (about 1e-4 m/s^2 that comes and goes with the cutting)."""
 
     @classmethod
     def appendix_a(cls, **kw) -> Config:
@@ -219,7 +224,7 @@ def _p0(cfg: Config, log: Log) -> np.ndarray:
 
 def _q_psd(cfg: Config) -> np.ndarray:
     q = np.zeros(kf.N_STATES)
-    q[kf.DV] = cfg.imu.accel_vrw ** 2
+    q[kf.DV] = cfg.imu.accel_vrw ** 2 + cfg.vibration_vrw ** 2
     q[kf.PHI] = cfg.imu.gyro_arw ** 2
     q[kf.GYRO_BIAS] = cfg.imu.gyro_bias_psd
     q[kf.ACCEL_BIAS] = cfg.imu.accel_bias_psd
@@ -322,6 +327,7 @@ class _Forward:
         self.cal = np.zeros((n + 1, kf.N_CAL))
         self.p = np.zeros((n + 1, kf.N_STATES, kf.N_STATES))
         self.flags = np.zeros(n + 1, np.int32)
+        self.innov = np.full((n + 1, 3), np.nan)  # velocity innovation, m frame
         self.keep_dir = keep_dir
         self.saved: list[tuple[int, int]] = []
 
@@ -388,10 +394,11 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     mpp = cfg.metres_per_pulse
     params = np.zeros(kf.N_PARAMS)
     dt_kf = 1.0 / cfg.filter_rate_hz
-    params[[kf.P_R_LATERAL, kf.P_R_ALONG, kf.P_R_VERTICAL, kf.P_R_ZUPT, kf.P_R_ZARU, kf.P_GATE]] = [
-        cfg.r_lateral, np.hypot(np.sqrt(mpp ** 2 / 6) / dt_kf, cfg.r_odometer), cfg.r_vertical, cfg.r_zupt,
-        cfg.r_zaru, cfg.fix_gate]
+    params[[kf.P_R_LATERAL, kf.P_R_ALONG, kf.P_R_VERTICAL, kf.P_R_ZUPT, kf.P_R_ZARU, kf.P_GATE, kf.P_TAU_FWD,
+            kf.P_TAU_FORCE]] = [cfg.r_lateral, np.hypot(np.sqrt(mpp ** 2 / 6) / dt_kf, cfg.r_odometer), cfg.r_vertical,
+                                cfg.r_zupt, cfg.r_zaru, cfg.fix_gate, cfg.speed_tau_s, cfg.force_tau_s]
     params[kf.P_LEVER:kf.P_LEVER + 3] = cfg.lever_arm_m
+    nominal = np.zeros(4)
     smooth_nav = fwd.nav.copy() if smooth else None
     smooth_p = fwd.p.copy() if smooth else None
     points: Points | None = Points.empty() if cpoem else None
@@ -411,13 +418,16 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
         seg_cal = np.zeros((m, kf.N_CAL))
         seg_nav[0], seg_cal[0] = nav, cal
         seg_flags = np.zeros(m, np.int32)
+        seg_innov = np.full((m, 3), np.nan)
         kf.run_filter(0, m - 1, prep.steps, prep.t_mech[a * prep.steps:], prep.phi_b[a * prep.steps:],
                       prep.dv_b[a * prep.steps:], prep.odo[a:b + 1], prep.mode[a:b + 1], fix_j - a, fix_llh, fix_r,
-                      q_psd, params, nav, cal, p, seg_nav, seg_cal, x_post, p_post, p_pred, phi, seg_flags, nis_out)
+                      q_psd, params, nav, cal, p, nominal, seg_nav, seg_cal, x_post, p_post, p_pred, phi, seg_flags, nis_out,
+                      seg_innov)
         n_fixes += fix_j.size
         n_gated += int(np.sum(~(nis_out <= cfg.fix_gate)))
         fwd.nav[a + 1:b + 1], fwd.cal[a + 1:b + 1] = seg_nav[1:], seg_cal[1:]
         fwd.p[a + 1:b + 1], fwd.flags[a + 1:b + 1] = p_post[1:], seg_flags[1:]
+        fwd.innov[a + 1:b + 1] = seg_innov[1:]
         fwd.save_segment(a, x_post, p_pred, phi)
         if smooth:
             x_s, p_s = np.empty_like(x_post), np.empty_like(p_post)

@@ -77,6 +77,16 @@ def machine_state(scn: Scenario, phase: np.ndarray, s: np.ndarray) -> np.ndarray
     return state
 
 
+def state_envelope(state: np.ndarray, t: np.ndarray, n_states: int = 3) -> np.ndarray:
+    """Weights (K, n_states) of each machine state's tones: one-hot per sample, smoothed over about a second
+    (a boxcar twice, so the envelope's slope is continuous and its curvature bounded)."""
+    amp = np.zeros((t.size, n_states))
+    amp[np.arange(t.size), state] = 1.0
+    width = max(1, int(0.5 / np.median(np.diff(t))))
+    kernel = np.convolve(np.ones(width), np.ones(width)) / width ** 2
+    return np.column_stack([np.convolve(amp[:, j], kernel, mode="same") for j in range(n_states)])
+
+
 @nb.njit(cache=True, inline="always")
 def _hermite(y0, y1, d0, d1, h, x):
     """Cubic Hermite value and derivative at x in [0, 1] of an interval of length h."""
@@ -87,19 +97,26 @@ def _hermite(y0, y1, d0, d1, h, x):
 
 
 @nb.njit(cache=True, inline="always")
+def _hermite2(y0, y1, d0, d1, h, x):
+    """Second derivative of the same cubic Hermite at x."""
+    return ((12 * x - 6) * (y0 - y1) / h + (6 * x - 4) * d0 + (6 * x - 2) * d1) / h
+
+
+@nb.njit(cache=True, inline="always")
 def _cross3(a0, a1, a2, b0, b1, b2):
     return a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
 
 
 @nb.njit(cache=True)
-def _interval(k, t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs, nodes, weights,
-              dtheta, dv, sin0, cos0, vib):
+def _interval(k, t, w, dw, f, df, amp_state, amp_rate, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs, nodes,
+              weights, dtheta, dv, sin0, cos0, vib):
     """Increments of interval k (scratch: sin0/cos0 (n_states, n_tones, 6) sines and cosines at t[k-1],
     vib (5, 3) the vibration at a node)."""
     n_states, n_tones = freq.shape
     h = t[k] - t[k - 1]
     for st in range(n_states):
-        if amp_state[k - 1, st] == 0.0 and amp_state[k, st] == 0.0:
+        if amp_state[k - 1, st] == 0.0 and amp_state[k, st] == 0.0 and amp_rate[k - 1, st] == 0.0 \
+                and amp_rate[k, st] == 0.0:
             continue
         for tone in range(n_tones):
             om = 2 * np.pi * freq[st, tone]
@@ -119,30 +136,34 @@ def _interval(k, t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_
         fb2, _ = _hermite(f[k - 1, 2], f[k, 2], df[k - 1, 2], df[k, 2], h, x)
         vib[:] = 0.0  # rows: phi, dphi/dt, u, du/dt, d2u/dt2 (columns x, y, z)
         for st in range(n_states):
-            wgt = (1 - x) * amp_state[k - 1, st] + x * amp_state[k, st]
-            if wgt == 0.0:
+            e0, e1, r0_, r1_ = amp_state[k - 1, st], amp_state[k, st], amp_rate[k - 1, st], amp_rate[k, st]
+            if e0 == 0.0 and e1 == 0.0 and r0_ == 0.0 and r1_ == 0.0:
                 continue
+            # The envelope and its first two derivatives (cubic Hermite, C1 across samples), so that the
+            # displacement, velocity and acceleration of the vibration stay one consistent motion: a switch of
+            # machine state leaves no velocity offset behind.
+            wgt, wgt_d = _hermite(e0, e1, r0_, r1_, h, x)
+            wgt_dd = _hermite2(e0, e1, r0_, r1_, h, x)
             for tone in range(n_tones):
                 om = 2 * np.pi * freq[st, tone]
                 cn, sn = np.cos(om * x * h), np.sin(om * x * h)
                 for i in range(3):
-                    a_ang, a_lin = wgt * ang_amp[st, tone, i], wgt * lin_amp[st, tone, i]
+                    aa, al = ang_amp[st, tone, i], lin_amp[st, tone, i]
                     s_a = sin0[st, tone, i] * cn + cos0[st, tone, i] * sn
                     c_a = cos0[st, tone, i] * cn - sin0[st, tone, i] * sn
                     s_l = sin0[st, tone, 3 + i] * cn + cos0[st, tone, 3 + i] * sn
                     c_l = cos0[st, tone, 3 + i] * cn - sin0[st, tone, 3 + i] * sn
-                    vib[0, i] += a_ang * s_a
-                    vib[1, i] += a_ang * om * c_a
-                    vib[2, i] += a_lin * s_l
-                    vib[3, i] += a_lin * om * c_l
-                    vib[4, i] -= a_lin * om * om * s_l
+                    vib[0, i] += wgt * aa * s_a
+                    vib[1, i] += aa * (wgt * om * c_a + wgt_d * s_a)
+                    vib[2, i] += wgt * al * s_l
+                    vib[3, i] += al * (wgt * om * c_l + wgt_d * s_l)
+                    vib[4, i] += al * (-wgt * om * om * s_l + 2 * wgt_d * om * c_l + wgt_dd * s_l)
         p0, p1, p2 = vib[0, 0], vib[0, 1], vib[0, 2]
         pd0, pd1, pd2 = vib[1, 0], vib[1, 1], vib[1, 2]
         u0, u1, u2 = vib[2, 0], vib[2, 1], vib[2, 2]
         ud0, ud1, ud2 = vib[3, 0], vib[3, 1], vib[3, 2]
         uu0, uu1, uu2 = vib[4, 0], vib[4, 1], vib[4, 2]
-        # C_s^b = M Exp(phi): Exp(phi) = I + a [phi]x + b [phi]x^2, J_r = I - b [phi]x + c [phi]x^2;
-        # the envelope's own slope is neglected (it changes over seconds).
+        # C_s^b = M Exp(phi): Exp(phi) = I + a [phi]x + b [phi]x^2, J_r = I - b [phi]x + c [phi]x^2.
         theta2 = p0 * p0 + p1 * p1 + p2 * p2
         theta = np.sqrt(theta2)
         if theta < 1e-4:
@@ -184,12 +205,12 @@ def _interval(k, t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_
 
 
 @nb.njit(cache=True, parallel=True)
-def _increments_kernel(t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs,
+def _increments_kernel(t, w, dw, f, df, amp_state, amp_rate, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs,
                        nodes, weights, dtheta, dv):
     """Gauss-Legendre integration of the sensor's rate and specific force over each interval (t[k-1], t[k]].
 
-    amp_state (K, n_states) weighs each machine state's tones at each sample (a smooth envelope, linear
-    between samples). The sines at the nodes come from one sine and cosine per interval and tone, turned by
+    amp_state (K, n_states) weighs each machine state's tones at each sample and amp_rate is its time
+    derivative (a smooth envelope, cubic Hermite between samples). The sines at the nodes come from one sine and cosine per interval and tone, turned by
     the node offsets (angle addition). Intervals are independent: they run in parallel, in chunks with
     their own scratch arrays."""
     n_chunks = 64
@@ -199,18 +220,21 @@ def _increments_kernel(t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_an
         cos0 = np.zeros((freq.shape[0], freq.shape[1], 6))
         vib = np.zeros((5, 3))
         for k in range(1 + chunk * size, min(t.size, 1 + (chunk + 1) * size)):
-            _interval(k, t, w, dw, f, df, amp_state, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs, nodes,
-                      weights, dtheta, dv, sin0, cos0, vib)
+            _interval(k, t, w, dw, f, df, amp_state, amp_rate, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs,
+                      nodes, weights, dtheta, dv, sin0, cos0, vib)
 
 
 def sensor_increments(t: np.ndarray, w_ib_b: np.ndarray, f_b: np.ndarray, amp_state: np.ndarray,
                       tones: VibrationTones, lever_arm_b: np.ndarray, mat_bs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Increments (K, 3) of a sensor at lever_arm_b with axes C_s^b = mat_bs Exp(phi(t)) on a body with
-    samples of w_ib^b and f^b at times t; amp_state (K, n_states) weighs the tones of each state."""
+    samples of w_ib^b and f^b at times t; amp_state (K, n_states) weighs the tones of each state (its time
+    derivative is taken from the samples)."""
     dtheta, dv = np.zeros_like(w_ib_b), np.zeros_like(f_b)
+    amp_state = np.ascontiguousarray(amp_state, float)
+    amp_rate = np.gradient(amp_state, t, axis=0) if t.size > 1 else np.zeros_like(amp_state)
     dw = np.gradient(w_ib_b, t, axis=0, edge_order=2)
     df = np.gradient(f_b, t, axis=0, edge_order=2)
-    _increments_kernel(t, w_ib_b, dw, f_b, df, amp_state, tones.freq_hz, tones.ang_amp, tones.lin_amp,
+    _increments_kernel(t, w_ib_b, dw, f_b, df, amp_state, amp_rate, tones.freq_hz, tones.ang_amp, tones.lin_amp,
                        tones.phase_ang, tones.phase_lin, np.asarray(lever_arm_b, float), mat_bs, GL_NODES,
                        GL_WEIGHTS, dtheta, dv)
     return dtheta, dv
@@ -249,13 +273,7 @@ def ideal_increments(scn: Scenario, shearer: dict[str, np.ndarray], rng: np.rand
     vib = cfg.vibration
     on = vib.enabled if vibration is None else vibration
     tones = vibration_tones([vib.idle, vib.cutting_coal, vib.cutting_rock], rng)
-    amp_state = np.zeros((t.size, 3))
-    if on:
-        amp_state[np.arange(t.size), machine_state(scn, shearer["phase"], shearer["s"])] = 1.0
-        # Smooth the switching between states over about half a second (the envelope).
-        width = max(1, int(0.5 / np.median(np.diff(t))))
-        kernel = np.ones(width) / width
-        amp_state = np.column_stack([np.convolve(amp_state[:, j], kernel, mode="same") for j in range(3)])
+    amp_state = state_envelope(machine_state(scn, shearer["phase"], shearer["s"]), t) if on else np.zeros((t.size, 3))
     lever = np.asarray(cfg.imu.lever_arm_m, float)
     # f = a - g: the sensor's specific force loses what its own gravity adds over the reference point's.
     f = f - gravity_at_lever_arm_b(shearer, lever)
