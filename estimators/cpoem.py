@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba as nb
 import numpy as np
 
 from estimators import earth
@@ -71,32 +72,55 @@ def record(u: np.ndarray, t: np.ndarray, llh: np.ndarray, cov_enu: np.ndarray, c
                   cov_enu[j], c_bn[j])
 
 
-RAM_WINDOW = 9
-"""Readings in the running median that finds the plateaus of a push-ram record."""
+RAM_WINDOW = 3
+"""Readings in the running median that cleans a noisy push-ram record before its rises are summed (a precise
+sensor, below 1 mm of noise, is used as it reads: a fast end push may leave a single reading at the top)."""
+
+
+@nb.njit(cache=True)
+def _rises(x, threshold):
+    """Sum of the up-swings of x that the swing detector confirms: a swing ends when x turns back by more than
+    `threshold` from its extreme, so noise below the threshold adds nothing."""
+    trough = peak = x[0]
+    rising = True
+    total = 0.0
+    for v in x[1:]:
+        if rising:
+            if v > peak:
+                peak = v
+            elif peak - v > threshold:
+                total += peak - trough
+                rising, trough = False, v
+        else:
+            if v < trough:
+                trough = v
+            elif v - trough > threshold:
+                rising, peak = True, v
+    if rising and peak - trough > threshold:
+        total += peak - trough
+    return total
 
 
 def ram_stroke(t: np.ndarray, ext: np.ndarray, valid: np.ndarray, t0: float, t1: float, noise_sd: float) -> float:
-    """The pan's advance at one support between t0 and t1: the sum of the rises between the plateaus of its
-    push-ram reading (NaN when fewer than RAM_WINDOW valid readings).
+    """The pan's advance at one support between t0 and t1: the sum of the rises of its push-ram reading (NaN
+    when fewer than RAM_WINDOW valid readings).
 
-    The ram extends while the support pushes the pan (possibly in several partial strokes as the snake forms)
-    and retracts while the support pulls itself up to the pan; only the rises move the pan. Plateaus are runs of
-    at least 3 readings of a running median that moves less than 5 of its noise sigmas (>= 2 mm) per sample;
-    each plateau's level is the median of its raw readings, so the sensor noise averages out."""
+    The ram extends while the support pushes the pan (possibly in several partial strokes as the snake forms,
+    or in one stroke followed at once by the support's advance at the face end) and retracts while the support
+    pulls itself up to the pan; only the rises move the pan. The readings are cleaned by a running median and
+    the rises summed by a swing detector with a threshold of 6 of the median's noise sigmas (at least 5 mm); a
+    short window keeps the two-reading peak of a fast end push. With noisy sensors (0.02 m) the sum is good to a few
+    centimetres."""
     sel = (t > t0) & (t <= t1) & (valid > 0) & np.isfinite(ext)
     r = ext[sel]
     if r.size < RAM_WINDOW:
         return np.nan
+    if noise_sd < 1e-3:
+        return float(_rises(r, max(6 * noise_sd, 0.005)))
     half = RAM_WINDOW // 2
     pad = np.concatenate([np.full(half, r[0]), r, np.full(half, r[-1])])
     smooth = np.median(np.lib.stride_tricks.sliding_window_view(pad, RAM_WINDOW), axis=1)
-    # The running median's noise is about 1.25 sigma / sqrt(window); 5 of those per sample is a move.
-    still = np.abs(np.diff(smooth, prepend=smooth[0])) < max(5 * 1.25 * noise_sd / np.sqrt(RAM_WINDOW), 0.002)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], still.astype(int), [0]])))
-    levels = [np.median(r[a:b]) for a, b in zip(edges[::2], edges[1::2]) if b - a >= 3]
-    if not levels:
-        return np.nan
-    return float(np.sum(np.maximum(np.diff(levels), 0.0)))
+    return float(_rises(smooth, 6 * 1.25 * noise_sd / np.sqrt(RAM_WINDOW)))
 
 
 @dataclass(frozen=True)

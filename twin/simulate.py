@@ -118,7 +118,10 @@ def window_sizes(scn: Scenario) -> list[int]:
 def shearer_chunks(scn: Scenario, timeline: Timeline) -> np.ndarray:
     """Chunk boundaries [s] of the shearer's ride: the middle of each reversal stop, where it stands still."""
     stop = scn.haulage.reversal_stop_s
-    inner = [p.t_start + stop / 2 for p in timeline.cycles[1:]] if stop >= 1.0 else []
+    # On the ride clock, so that a chunk's ride ends exactly where the next begins and no truth sample between
+    # them is lost.
+    ride_hz = scn.rates.ride_hz
+    inner = [round((p.t_start + stop / 2) * ride_hz) / ride_hz for p in timeline.cycles[1:]] if stop >= 1.0 else []
     return np.array([0.0, *inner, timeline.duration])
 
 
@@ -126,12 +129,10 @@ def shearer_chunk(scn: Scenario, timeline: Timeline, versions: list[PanVersion],
                   last: bool) -> dict[str, np.ndarray]:
     """Ride and truth columns for times in [t0, t1) ([t0, t1] for the last chunk)."""
     ride_hz, truth_hz = scn.rates.ride_hz, scn.rates.truth_hz
-    # The ride reaches one ride step beyond the chunk on both sides (the shearer stands there), so every truth
-    # sample in [t0, t1) lies inside the ride whatever the two rates.
-    t_ride = sample_times(max(0.0, t0 - 1.0 / ride_hz), min(timeline.duration, t1 + 1.0 / ride_hz), ride_hz)
+    t_ride = sample_times(t0, t1, ride_hz)
     pos, quat = simulate_ride(scn, *ride_targets_t(versions, t_ride, timeline.sample(t_ride)["s"], scn))
     t = sample_times(t0, t1, truth_hz)
-    t = t[(t >= t_ride[0]) & (t <= t_ride[-1]) & ((t < t1) | last)]
+    t = t[(t <= t_ride[-1]) & ((t < t1) | last)]
     haul = timeline.sample(t)
     site, frame = scn.site, FaceFrame(np.radians(scn.face.azimuth_deg))
     truth = shearer_truth(t_ride, pos, quat, t, mat_to_quat(frame.mat_tf), np.radians(site.lat_deg),
@@ -202,13 +203,21 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
         lowered = np.flatnonzero(advancing)
         if lowered.size:
             recorder.record(t_begin, state, np.zeros(0, int), lowered, lowered)
-        travel = np.abs(push - state.ram)[moved].max() + np.abs(target - push)[moved].max()
-        pans, sups = sim.step_event(state, moved, push, target, advancing)
+        stroke = np.abs(push - state.ram)[moved].max()
+        travel = stroke + np.abs(target - push)[moved].max()
         # The rams take their stroke at the ram speed, but the controller keeps pace with the shearer: an
         # event is over before the next one is due (the pans never move under the shearer).
         duration = max(MIN_EVENT_S, travel / ram_speed + (SET_TIME_S if lowered.size else 0.0))
         t_done = t_begin + min(duration, 0.9 * (t_next - t_begin))
-        recorder.record(t_done, state, pans, sups, t_begin=t_begin)
+        t_push = t_begin
+        if np.any(advancing & (np.abs(push - state.ram) > RAM_DEADBAND_M)):
+            # Push and advance in one event (the end push of snake sumping): the rams extend first, then the
+            # supports pull themselves up. Recorded in two steps, so the strokes show in the ram readings.
+            pans, sups = sim.step_event(state, moved, push, push, np.zeros_like(advancing))
+            t_push = t_begin + (t_done - t_begin) * stroke / max(travel, 1e-9)
+            recorder.record(t_push, state, pans, sups, lowered, t_begin=t_begin)
+        pans, sups = sim.step_event(state, moved, push, target, advancing)
+        recorder.record(t_done, state, pans, sups, t_begin=t_push)
         events += 1
         return True
 
