@@ -33,23 +33,22 @@ support acts on that support's canopy unit instead (twin.support_units).
 
 from __future__ import annotations
 
-import datetime
 from collections.abc import Iterable
-from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
-from pygeomag import GeoMag, decimal_year_from_date
 
+from estimators.magnetic import (
+    GeomagneticReference,
+    geomagnetic_reference,
+    tilt_compensated_yaw,
+)
 from estimators.rotations import quat_conj, quat_rotate
 from twin.clock import sample_times
 from twin.faults import faults_of, window_mask
 from twin.haulage import STOPPED
 from twin.scenario import Scenario
 from twin.sensor_config import Fault
-
-NT = 1e-9
-"""One nanotesla in tesla (pygeomag works in nT)."""
 
 
 class FieldElements(NamedTuple):
@@ -63,20 +62,9 @@ class FieldElements(NamedTuple):
     """Total field strength [T]."""
 
 
-@lru_cache(maxsize=64)
-def _wmm(lat_deg: float, lon_deg: float, height_m: float, date: str) -> tuple[float, ...]:
-    """(declination [deg], inclination [deg], intensity [nT], north, east, down [nT]) from pygeomag."""
-    try:
-        day = datetime.date.fromisoformat(date)
-    except ValueError:
-        raise ValueError(f"magnetometer date {date!r} is not a date YYYY-MM-DD") from None
-    try:
-        model = GeoMag(base_year=day.year)
-        res = model.calculate(glat=float(lat_deg), glon=float(lon_deg), alt=float(height_m) / 1000.0,
-                              time=decimal_year_from_date(day))
-    except ValueError as err:
-        raise ValueError(f"magnetometer date {date}: no World Magnetic Model for it ({err})") from None
-    return res.d, res.i, res.f, res.x, res.y, res.z
+def _reference(lat_deg: float, lon_deg: float, height_m: float, date: str) -> GeomagneticReference:
+    """The WMM field at a point through estimators.magnetic (one model for the twin and the estimators)."""
+    return geomagnetic_reference(np.radians(float(lat_deg)), np.radians(float(lon_deg)), float(height_m), date)
 
 
 def field_elements(lat_deg: float, lon_deg: float, height_m: float, date: str) -> FieldElements:
@@ -84,17 +72,13 @@ def field_elements(lat_deg: float, lon_deg: float, height_m: float, date: str) -
 
     `height_m` is the ellipsoidal height (WMM altitudes refer to the WGS-84 ellipsoid); `date` is "YYYY-MM-DD".
     """
-    d, i, f, *_ = _wmm(float(lat_deg), float(lon_deg), float(height_m), date)
-    return FieldElements(float(np.radians(d)), float(np.radians(i)), float(f * NT))
+    ref = _reference(lat_deg, lon_deg, height_m, date)
+    return FieldElements(ref.declination, ref.inclination, ref.intensity)
 
 
 def earth_field_n(lat_deg: float, lon_deg: float, height_m: float, date: str) -> np.ndarray:
-    """The WMM geomagnetic field in the local-level frame n (East, North, Up) [T], shape (3,).
-
-    pygeomag gives north (x), east (y) and down (z) components in nT; ENU = (east, north, -down).
-    """
-    *_, north, east, down = _wmm(float(lat_deg), float(lon_deg), float(height_m), date)
-    return np.array([east, north, -down]) * NT
+    """The WMM geomagnetic field in the local-level frame n (East, North, Up) [T], shape (3,)."""
+    return _reference(lat_deg, lon_deg, height_m, date).field_n.copy()
 
 
 def site_field_n(scn: Scenario) -> np.ndarray:
@@ -192,29 +176,5 @@ def mag_stream(scn: Scenario, shearer: dict, rng: np.random.Generator,
     return {"t": t, "b_x": b_b[:, 0], "b_y": b_b[:, 1], "b_z": b_b[:, 2]}
 
 
-def tilt_compensated_heading(b_b: np.ndarray, pitch, roll, declination) -> np.ndarray:
-    """Yaw [rad] (counter-clockwise from true north, in (-pi, pi]) from a magnetometer reading and tilt.
-
-    002 eqs. 3-6 in this project's convention (C_b^n = Rz(yaw) Rx(pitch) Ry(roll), ENU): levelling the
-    reading, h = Rx(pitch) Ry(roll) b_b = Rz(yaw)^T B_n, leaves the horizontal components
-
-        h_x = cos(roll) b_x + sin(roll) b_z
-        h_y = cos(pitch) b_y + sin(pitch) (sin(roll) b_x - cos(roll) b_z)
-
-    (002 eq. 4) and, since B_n's horizontal part points to magnetic north at `declination` D east of true
-    north, h_x = H sin(yaw + D), h_y = H cos(yaw + D), so (002 eqs. 5-6; the paper's yaw is clockwise, so
-    its psi_m + alpha is -yaw here)
-
-        yaw = atan2(h_x, h_y) - D.
-
-    Arrays broadcast: b_b (..., 3), pitch, roll, declination (...). Issue 6 moves this function to
-    `estimators` (the magnetometer measurement model); it lives here until then.
-    """
-    b_b = np.asarray(b_b, float)
-    bx, by, bz = b_b[..., 0], b_b[..., 1], b_b[..., 2]
-    sp, cp = np.sin(pitch), np.cos(pitch)
-    sr, cr = np.sin(roll), np.cos(roll)
-    h_x = cr * bx + sr * bz
-    h_y = cp * by + sp * (sr * bx - cr * bz)
-    yaw = np.arctan2(h_x, h_y) - declination
-    return np.pi - np.mod(np.pi - yaw, 2 * np.pi)
+tilt_compensated_heading = tilt_compensated_yaw
+"""Yaw from a magnetometer reading and tilt (002 eqs. 3-6): estimators.magnetic.tilt_compensated_yaw."""
