@@ -31,6 +31,11 @@ from estimators.rotations import (
     rotvec_to_quat,
     skew,
 )
+from twin.haulage import CUTTING
+from twin.magnetometer import shearer_attitude_at
+from twin.sensors import imu_truth, sensor_streams
+
+from .conftest import simulated
 
 SITE_DEG = (36.67, 117.06, 50.0)  # Jinan (003's authors, Shandong University)
 DATE = "2020-09-01"
@@ -190,3 +195,23 @@ def test_ellipsoid_fit_refuses_data_from_a_shearer_on_its_face():
         fit_ellipsoid(raw, REF.intensity)
     with pytest.raises(ValueError, match="shape"):
         fit_ellipsoid(raw[:, :2], REF.intensity)
+
+
+def test_seed003_interference_disturbs_the_straight_cut_and_is_caught():
+    """scenarios/seed003_interference.toml: the 10-30 s window lies in the straight cut; there the magnetic yaw
+    is off by tens of degrees and the disturbance test flags every reading, elsewhere none."""
+    scn, res = simulated("seed003_interference")
+    shearer = res.tables["truth_shearer"]
+    mag = sensor_streams(scn, res.tables, imu_truth(scn, shearer))["mag"]
+    ref = geomagnetic_reference(np.radians(scn.site.lat_deg), np.radians(scn.site.lon_deg), scn.site.height_m,
+                                scn.sensors.mag.date)
+    t = mag["t"]
+    b = np.column_stack([mag["b_x"], mag["b_y"], mag["b_z"]])
+    pitch, roll, yaw = mat_to_euler(quat_to_mat(shearer_attitude_at(shearer, t)))
+    err = np.degrees(np.abs(wrap_angle(tilt_compensated_yaw(b, pitch, roll, ref.declination) - yaw)))
+    inside = (t >= 10.0) & (t < 30.0)
+    phase = np.asarray(shearer["phase"])[np.searchsorted(shearer["t"], t[inside])]
+    assert np.all(phase == CUTTING)
+    assert err[inside].min() > 10.0 and err[~inside].max() < 2.0
+    ok = field_check(b, pitch, roll, ref).ok
+    assert not ok[inside].any() and ok[~inside].all()
