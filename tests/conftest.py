@@ -14,9 +14,10 @@ import pytest
 from twin.experiment import is_experiment
 from twin.scenario import Scenario, load_scenario, parse_scenario
 from twin.simulate import SimResult, simulate
+from twin.support_turntable import is_turntable
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
-SCENARIOS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml") if not is_experiment(p))
+SCENARIOS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml") if not (is_experiment(p) or is_turntable(p)))
 """The shipped face scenarios; the SINS experiment files (kind = "sins_experiment") are tests/test_experiment.py's."""
 EXPERIMENTS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml") if is_experiment(p))
 TEST_CYCLES = 2

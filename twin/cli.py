@@ -34,6 +34,9 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
     from twin.experiment import is_experiment, run_experiment_file
     if is_experiment(scenario):  # a SINS experiment file (kind = "sins_experiment"): twin.experiment
         return run_experiment_file(scenario, out, seed, force, quiet)
+    from twin.support_turntable import is_turntable, run_turntable_file
+    if is_turntable(scenario):  # 002's turntable (kind = "support_turntable"): twin.support_turntable
+        return run_turntable_file(scenario, out, seed, force, quiet)
     from twin.faults import check_faults_in_run
     from twin.haulage import Timeline
     from twin.recording import write_recording
