@@ -104,13 +104,18 @@ def _mat(q, c):
 @nb.njit(cache=True, inline="always")
 def _update(p, x, h, y, r, m):
     """Kalman update of the 6-state x, P with m rows of h (m x 6), innovation y, diagonal R r (m,)."""
-    s = h[:m] @ p @ h[:m].T
+    hp = h[:m] @ p
+    s = hp @ h[:m].T
     for i in range(m):
         s[i, i] += r[i]
-    gain = p @ h[:m].T @ np.linalg.inv(s)
+    gain = np.linalg.solve(s, hp).T
     x += gain @ y[:m]
-    ikh = np.eye(6) - gain @ h[:m]
-    p[:, :] = ikh @ p @ ikh.T + gain @ np.diag(r[:m]) @ gain.T
+    p -= gain @ hp
+    for i in range(6):
+        for j in range(i):
+            v = 0.5 * (p[i, j] + p[j, i])
+            p[i, j] = v
+            p[j, i] = v
 
 
 @nb.njit(cache=True, parallel=True)
