@@ -29,13 +29,7 @@ OURS = {"dr": "traditional without compensation", "dr_compensated": "traditional
 
 
 def log_of(streams: dict) -> sp.Log:
-    imu, odo, sur, ram = streams["imu"], streams["odometer"], streams["survey"], streams["pushram"]
-    return sp.Log(imu_t=imu["t"], dtheta=np.column_stack([imu[f"dtheta_{a}"] for a in "xyz"]),
-                  dv=np.column_stack([imu[f"dv_{a}"] for a in "xyz"]), odo_t=odo["t"], odo_distance=odo["distance"],
-                  odo_direction=odo["direction"], survey_t=sur["t"],
-                  survey_llh=np.column_stack([sur["lat"], sur["lon"], sur["h"]]), survey_yaw=sur["yaw"],
-                  survey_sd=np.column_stack([sur["sd_horizontal"], sur["sd_vertical"], sur["sd_yaw"]]),
-                  ram_t=ram["t"], ram_support=ram["support"], ram_extension=ram["extension"], ram_valid=ram["valid"])
+    return sp.log_from_columns(streams["imu"], streams["odometer"], streams["survey"], streams["pushram"])
 
 
 def sep_row(sol: sp.Solution, truth: dict, cycles: dict) -> list[float]:

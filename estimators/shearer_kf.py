@@ -82,8 +82,8 @@ CAL_SCALE = 9
 N_CAL = 10
 
 # Indices of the kernel's parameter vector.
-P_R_LATERAL, P_R_ALONG, P_R_VERTICAL, P_R_ZUPT, P_R_ZARU, P_GATE, P_TAU_FWD, P_TAU_FORCE, P_LEVER = range(9)
-N_PARAMS = 12  # the lever arm takes 8..10, one spare
+P_R_LATERAL, P_R_ALONG, P_R_VERTICAL, P_R_ZUPT, P_R_ZARU, P_TAU_FWD, P_TAU_FORCE, P_LEVER = range(8)
+N_PARAMS = 11  # the lever arm takes 7..9, one spare
 
 
 @nb.njit(cache=True)
@@ -232,7 +232,8 @@ def _fix_innovation(nav, lever, fix_llh):
 
 
 @nb.njit(cache=True)
-def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch, fix_llh, fix_r, q_psd, params,
+def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch, fix_llh, fix_r, fix_gate, q_psd,
+               params,
                nav, cal, p, nominal, out_nav, out_cal, x_post, p_post, p_pred, phi_store, flags, nis_out,
                vel_innov):
     """Filter epochs j0+1 .. j1 (epoch j ends mechanization step j * steps); state (nav, cal, p) in place.
@@ -240,7 +241,8 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
     odo_mode[j]: 1 moving with a valid odometer over (j-1, j], 0 standing, -1 odometer missing (skipped).
     nominal (4,): the running means of the odometer speed and of the specific force in n that H and F are
     evaluated at (carried across calls).
-    Fixes (fix_epoch sorted, fix_llh (F, 3) lat/lon/h, fix_r (F, 3, 3) ENU covariance) apply at their epoch.
+    Fixes (fix_epoch sorted, fix_llh (F, 3) lat/lon/h, fix_r (F, 3, 3) ENU covariance, fix_gate (F,) the largest
+    normalized innovation squared accepted) apply at their epoch.
     Stores per epoch: posterior navigation and calibration, covariance, the update x+ and Phi for the smoother,
     the velocity innovation in m (NaN where none) and, per fix, its normalized innovation squared.
     """
@@ -320,7 +322,7 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
             z = _fix_innovation(nav, lever, fix_llh[k_fix])
             gamma = nis(x, p, z, h, fix_r[k_fix])
             nis_out[k_fix] = gamma
-            if gamma <= params[P_GATE]:
+            if gamma <= fix_gate[k_fix]:
                 joseph_update(x, p, z, h, fix_r[k_fix])
                 flag |= FLAG_POSITION
             else:

@@ -32,7 +32,7 @@ from estimators import earth
 from estimators import shearer_kf as kf
 from estimators.cpoem import Points, RamLog, crossings, predict_fixes, record
 from estimators.logformat import FLAG_SMOOTHED
-from estimators.rotations import euler_to_quat, quat_rotate, quat_to_mat
+from estimators.rotations import euler_to_mat, euler_to_quat, quat_rotate, quat_to_mat
 from estimators.rts import rts_backward
 from estimators.strapdown import compensated_increments, mechanize
 
@@ -63,22 +63,27 @@ class Config:
     imu: ImuNoise
     lever_arm_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     """IMU position relative to the body reference point (the point reported), body frame."""
+    imu_mounting_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Calibrated mounting of the IMU axes s in the body frame, C_s^b = Rz Rx Ry of (about x, about y, about z):
+    pitch and roll from the static calibration of 000 section 6.1-6.2; about z what the installation survey says.
+    The increments are turned into b before the mechanization."""
     metres_per_pulse: float = 0.002
     support_u_m: tuple[float, ...] = ()
     """Face coordinate (odometer travel from the start pose) of each support, for the CPOEM advance."""
     n_samples: int = 4
     filter_rate_hz: float = 10.0
     cpoem_spacing_m: float = 2.0
-    r_lateral: float = 0.01  # motion-constraint noise across the face [m/s]
-    r_vertical: float = 0.01
+    r_lateral: float = 0.02  # motion-constraint noise across the face [m/s] (suspension, drum vibration)
+    r_vertical: float = 0.02
     r_odometer: float = 0.002  # odometer velocity noise besides quantization [m/s]
     r_zupt: float = 0.002  # [m/s]
     r_zaru: float = 5e-4  # zero-rate noise: idle vibration of the machine [rad/s]
     advance_sd: float = 0.005  # advance from the ram strokes [m]
     ram_noise_sd: float = 1e-4  # one-sigma noise of a push-ram reading [m]
-    path_sd: float = 0.01  # the pans' running line between cycles beyond the measured advance [m]
+    path_sd: float = 0.03  # the pans' running line between cycles beyond the measured advance [m]
     path_along_sd: float = 0.05  # the same along the face: bent pans in the snake shift the chain along it [m]
-    fix_gate: float = 40.0  # normalized innovation squared above which a position fix is rejected (3 dof)
+    fix_gate: float = 40.0  # normalized innovation squared above which a CPOEM fix is rejected (3 dof); surveyed
+    # face ends are trusted, never gated
     sd_velocity0: float = 0.01
     sd_level0: float = 0.3 * DEG
     sd_odo_mount0: float = 1.0 * DEG
@@ -277,6 +282,12 @@ class _Prepared:
     notes: list[str]
 
 
+def body_increments(log: Log, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
+    """The IMU increments turned from the sensor axes into b with the calibrated mounting."""
+    mat_bs = euler_to_mat(*cfg.imu_mounting_rad)
+    return log.dtheta @ mat_bs.T, log.dv @ mat_bs.T
+
+
 def prepare(log: Log, cfg: Config) -> _Prepared:
     if log.survey_t.size == 0:
         raise PositioningError("survey: no rows; the start position and heading must be surveyed")
@@ -288,9 +299,10 @@ def prepare(log: Log, cfg: Config) -> _Prepared:
     steps = round(steps_f)
     t = np.concatenate([[log.imu_t[0] - 1.0 / imu_rate], log.imu_t])
     zero = np.zeros((1, 3))
+    dtheta_b, dv_b = body_increments(log, cfg)
     try:
-        t_mech, phi_b, dv_b = compensated_increments(t, np.concatenate([zero, log.dtheta]),
-                                                     np.concatenate([zero, log.dv]), cfg.n_samples)
+        t_mech, phi_b, dv_b = compensated_increments(t, np.concatenate([zero, dtheta_b]),
+                                                     np.concatenate([zero, dv_b]), cfg.n_samples)
     except ValueError as err:
         raise PositioningError(f"imu: {err}") from None
     n_kf = (t_mech.size - 1) // steps
@@ -337,13 +349,29 @@ class _Forward:
             self.saved.append((a, a + x_post.shape[0] - 1))
 
 
+@dataclass
+class _Fixes:
+    """Position fixes of a segment, in epoch order: epoch, lat/lon/h, ENU covariance, NIS gate."""
+
+    epoch: np.ndarray
+    llh: np.ndarray
+    r: np.ndarray
+    gate: np.ndarray
+
+    @classmethod
+    def empty(cls) -> _Fixes:
+        return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0))
+
+
 def _fixes_for(prep: _Prepared, cfg: Config, log: Log, a: int, b: int, points: Points | None,
-               notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Position fixes of epochs (a, b]: survey face ends, then CPOEM points crossed on a straight cut."""
+               notes: list[str]) -> _Fixes:
+    """Position fixes of epochs (a, b]: surveyed face ends (trusted: never gated), then CPOEM points crossed on a
+    straight cut (gated at cfg.fix_gate)."""
     sel = np.flatnonzero((prep.survey_epochs > a) & (prep.survey_epochs <= b))
     j = list(prep.survey_epochs[sel])
     llh = [log.survey_llh[1 + k] for k in sel]
     r = [np.diag([log.survey_sd[1 + k, 0] ** 2] * 2 + [log.survey_sd[1 + k, 1] ** 2]) for k in sel]
+    gate = [np.inf] * len(j)
     if points is not None and points.u.size and prep.rams is not None:
         u = prep.odo - prep.odo[0]
         for first, last in prep.cuts:
@@ -356,13 +384,14 @@ def _fixes_for(prep: _Prepared, cfg: Config, log: Log, a: int, b: int, points: P
             j += list(fj)
             llh += list(fllh)
             r += list(fr)
+            gate += [cfg.fix_gate] * fj.size
             if skipped.size:
                 notes.append(f"CPOEM: no push-ram stroke at u = {', '.join(f'{v:.1f}' for v in skipped)} m "
                              f"(t {prep.t_kf[lo]:.0f}-{prep.t_kf[hi]:.0f} s): points skipped")
     if not j:
-        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3))
+        return _Fixes.empty()
     order = np.argsort(j, kind="stable")
-    return np.array(j, np.int64)[order], np.array(llh)[order], np.array(r)[order]
+    return _Fixes(np.array(j, np.int64)[order], np.array(llh)[order], np.array(r)[order], np.array(gate)[order])
 
 
 def _segment_points(prep: _Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, p: np.ndarray) -> Points:
@@ -394,9 +423,9 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     mpp = cfg.metres_per_pulse
     params = np.zeros(kf.N_PARAMS)
     dt_kf = 1.0 / cfg.filter_rate_hz
-    params[[kf.P_R_LATERAL, kf.P_R_ALONG, kf.P_R_VERTICAL, kf.P_R_ZUPT, kf.P_R_ZARU, kf.P_GATE, kf.P_TAU_FWD,
-            kf.P_TAU_FORCE]] = [cfg.r_lateral, np.hypot(np.sqrt(mpp ** 2 / 6) / dt_kf, cfg.r_odometer), cfg.r_vertical,
-                                cfg.r_zupt, cfg.r_zaru, cfg.fix_gate, cfg.speed_tau_s, cfg.force_tau_s]
+    params[[kf.P_R_LATERAL, kf.P_R_ALONG, kf.P_R_VERTICAL, kf.P_R_ZUPT, kf.P_R_ZARU, kf.P_TAU_FWD, kf.P_TAU_FORCE]] = [
+        cfg.r_lateral, np.hypot(np.sqrt(mpp ** 2 / 6) / dt_kf, cfg.r_odometer), cfg.r_vertical, cfg.r_zupt,
+        cfg.r_zaru, cfg.speed_tau_s, cfg.force_tau_s]
     params[kf.P_LEVER:kf.P_LEVER + 3] = cfg.lever_arm_m
     nominal = np.zeros(4)
     smooth_nav = fwd.nav.copy() if smooth else None
@@ -405,26 +434,25 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     notes = list(prep.notes)
     n_fixes = n_gated = 0
     for a, b in prep.segments:
-        fix_j, fix_llh, fix_r = _fixes_for(prep, cfg, log, a, b, points, notes) if cpoem else \
-            (np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)))
+        fixes = _fixes_for(prep, cfg, log, a, b, points, notes) if cpoem else _Fixes.empty()
         m = b - a + 1
         x_post = np.zeros((m, kf.N_STATES))
         p_post = np.zeros((m, kf.N_STATES, kf.N_STATES))
         p_pred = np.zeros_like(p_post)
         phi = np.zeros_like(p_post)
         p_post[0], p_pred[0], phi[0] = p, p, np.eye(kf.N_STATES)
-        nis_out = np.full(fix_j.size, np.nan)
+        nis_out = np.full(fixes.epoch.size, np.nan)
         seg_nav = np.zeros((m, kf.N_NAV))
         seg_cal = np.zeros((m, kf.N_CAL))
         seg_nav[0], seg_cal[0] = nav, cal
         seg_flags = np.zeros(m, np.int32)
         seg_innov = np.full((m, 3), np.nan)
         kf.run_filter(0, m - 1, prep.steps, prep.t_mech[a * prep.steps:], prep.phi_b[a * prep.steps:],
-                      prep.dv_b[a * prep.steps:], prep.odo[a:b + 1], prep.mode[a:b + 1], fix_j - a, fix_llh, fix_r,
-                      q_psd, params, nav, cal, p, nominal, seg_nav, seg_cal, x_post, p_post, p_pred, phi, seg_flags, nis_out,
-                      seg_innov)
-        n_fixes += fix_j.size
-        n_gated += int(np.sum(~(nis_out <= cfg.fix_gate)))
+                      prep.dv_b[a * prep.steps:], prep.odo[a:b + 1], prep.mode[a:b + 1], fixes.epoch - a, fixes.llh,
+                      fixes.r, fixes.gate, q_psd, params, nav, cal, p, nominal, seg_nav, seg_cal, x_post, p_post, p_pred,
+                      phi, seg_flags, nis_out, seg_innov)
+        n_fixes += fixes.epoch.size
+        n_gated += int(np.sum(~(nis_out <= fixes.gate)))
         fwd.nav[a + 1:b + 1], fwd.cal[a + 1:b + 1] = seg_nav[1:], seg_cal[1:]
         fwd.p[a + 1:b + 1], fwd.flags[a + 1:b + 1] = p_post[1:], seg_flags[1:]
         fwd.innov[a + 1:b + 1] = seg_innov[1:]
@@ -493,7 +521,8 @@ def dead_reckoning(log: Log, cfg: Config, prep: _Prepared, cal: np.ndarray | Non
     t = np.concatenate([[log.imu_t[0] - dt], log.imu_t])
     zero = np.zeros((1, 3))
     lat0, lon0, h0 = prep.nav0[:3]
-    sins = mechanize(t, np.concatenate([zero, log.dtheta - gyro * dt]), np.concatenate([zero, log.dv - accel * dt]),
+    dtheta_b, dv_b = body_increments(log, cfg)
+    sins = mechanize(t, np.concatenate([zero, dtheta_b - gyro * dt]), np.concatenate([zero, dv_b - accel * dt]),
                      lat0, lon0, h0, np.zeros(3), prep.nav0[kf.QUAT], cfg.n_samples)
     q = sins.q_nb[:: prep.steps][: prep.t_kf.size]
     mount = cal[kf.CAL_MOUNT] if cal is not None else np.zeros(3)
@@ -543,29 +572,32 @@ def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS) -> dict[
 
 
 
+def log_from_columns(imu, odometer, survey, pushram=None) -> Log:
+    """A Log from stream columns (pyarrow tables or mappings of arrays, logformat column names)."""
+    def col(table, name):
+        c = table[name] if isinstance(table, dict) else table.column(name)
+        return np.asarray(c if isinstance(c, np.ndarray) else c.to_numpy())
+
+    ram = {}
+    if pushram is not None:
+        ram = {"ram_t": col(pushram, "t"), "ram_support": col(pushram, "support"),
+                   "ram_extension": col(pushram, "extension"), "ram_valid": col(pushram, "valid")}
+    return Log(imu_t=col(imu, "t"), dtheta=np.column_stack([col(imu, f"dtheta_{a}") for a in "xyz"]),
+               dv=np.column_stack([col(imu, f"dv_{a}") for a in "xyz"]), odo_t=col(odometer, "t"),
+               odo_distance=col(odometer, "distance"), odo_direction=col(odometer, "direction"),
+               survey_t=col(survey, "t"), survey_llh=np.column_stack([col(survey, k) for k in ("lat", "lon", "h")]),
+               survey_yaw=col(survey, "yaw"),
+               survey_sd=np.column_stack([col(survey, k) for k in ("sd_horizontal", "sd_vertical", "sd_yaw")]),
+               **ram)
+
+
 def load_log(run_dir: Path) -> Log:
     """The streams of a run directory the positioning reads (push rams optional), checked on load."""
     from estimators.logformat import IMU, ODOMETER, PUSHRAM, SURVEY, read_stream
 
-    imu = read_stream(run_dir, IMU)
-    odo = read_stream(run_dir, ODOMETER)
-    sur = read_stream(run_dir, SURVEY)
-
-    def col(table, name):
-        return table.column(name).to_numpy()
-
-    ram = {}
-    if (Path(run_dir) / PUSHRAM.filename).is_file():
-        rt = read_stream(run_dir, PUSHRAM)
-        ram = {"ram_t": col(rt, "t"), "ram_support": col(rt, "support"), "ram_extension": col(rt, "extension"),
-                   "ram_valid": col(rt, "valid")}
-    return Log(imu_t=col(imu, "t"), dtheta=np.column_stack([col(imu, f"dtheta_{a}") for a in "xyz"]),
-               dv=np.column_stack([col(imu, f"dv_{a}") for a in "xyz"]), odo_t=col(odo, "t"),
-               odo_distance=col(odo, "distance"), odo_direction=col(odo, "direction"), survey_t=col(sur, "t"),
-               survey_llh=np.column_stack([col(sur, k) for k in ("lat", "lon", "h")]),
-               survey_yaw=col(sur, "yaw"),
-               survey_sd=np.column_stack([col(sur, k) for k in ("sd_horizontal", "sd_vertical", "sd_yaw")]),
-               **ram)
+    ram = read_stream(run_dir, PUSHRAM) if (Path(run_dir) / PUSHRAM.filename).is_file() else None
+    return log_from_columns(read_stream(run_dir, IMU), read_stream(run_dir, ODOMETER), read_stream(run_dir, SURVEY),
+                            ram)
 
 
 def estimate_columns(sol: Solution) -> dict[str, np.ndarray]:

@@ -43,14 +43,14 @@ def test_standing_filter_finds_the_gyro_bias_and_leaves_the_heading_alone():
                   [0.01])
     p = np.diag(sd ** 2)
     params = np.zeros(kf.N_PARAMS)
-    params[:8] = [0.01, 0.01, 0.01, 0.002, 5e-4, 40.0, 1.0, 2.0]
+    params[:7] = [0.01, 0.01, 0.01, 0.002, 5e-4, 1.0, 2.0]
     z = np.zeros
     out_nav, out_cal = z((n_kf + 1, kf.N_NAV)), z((n_kf + 1, kf.N_CAL))
     store = [z((n_kf + 1, kf.N_STATES))] + [z((n_kf + 1, kf.N_STATES, kf.N_STATES)) for _ in range(3)]
     flags = np.zeros(n_kf + 1, np.int32)
     cal = z(kf.N_CAL)
     kf.run_filter(0, n_kf, steps, t_mech, phi_b, dv_b, z(n_kf + 1), np.zeros(n_kf + 1, np.int8),
-                  np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), np.full(kf.N_STATES, 1e-12), params, nav, cal, p, z(4),
+                  np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), z(0), np.full(kf.N_STATES, 1e-12), params, nav, cal, p, z(4),
                   out_nav, out_cal, *store, flags, z(0), z((n_kf + 1, 3)))
     assert np.all(flags[1:] & FLAG_ZUPT)
     assert np.abs(cal[kf.CAL_GYRO] - bias).max() < 10 * DEG_H
@@ -66,13 +66,7 @@ def test_standing_filter_finds_the_gyro_bias_and_leaves_the_heading_alone():
 def default_log():
     scn, result = simulated("default")
     streams = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), 0)
-    imu, odo, sur, ram = streams["imu"], streams["odometer"], streams["survey"], streams["pushram"]
-    log = sp.Log(imu_t=imu["t"], dtheta=np.column_stack([imu[f"dtheta_{a}"] for a in "xyz"]),
-                 dv=np.column_stack([imu[f"dv_{a}"] for a in "xyz"]), odo_t=odo["t"], odo_distance=odo["distance"],
-                 odo_direction=odo["direction"], survey_t=sur["t"],
-                 survey_llh=np.column_stack([sur["lat"], sur["lon"], sur["h"]]), survey_yaw=sur["yaw"],
-                 survey_sd=np.column_stack([sur["sd_horizontal"], sur["sd_vertical"], sur["sd_yaw"]]),
-                 ram_t=ram["t"], ram_support=ram["support"], ram_extension=ram["extension"], ram_valid=ram["valid"])
+    log = sp.log_from_columns(streams["imu"], streams["odometer"], streams["survey"], streams["pushram"])
     return scn, log
 
 

@@ -31,10 +31,15 @@ def positioning_config(scn: Scenario) -> sp.Config:
     """The filter configuration a user would write for this face and machine."""
     est = scn.estimators.shearer
     g = grade(scn.sensors.imu.grade)
-    kw = {"lever_arm_m": tuple(scn.sensors.imu.lever_arm_m), "metres_per_pulse": scn.sensors.odometer.metres_per_pulse,
-              "support_u_m": tuple((support_stations(scn) + 0.5) * scn.face.pan_length_m - scn.shearer.length_m / 2),
-              "n_samples": est.n_samples, "filter_rate_hz": est.filter_rate_hz, "cpoem_spacing_m": est.cpoem_spacing_m,
-              "advance_sd": max(scn.sensors.pushram.noise_m, 0.002)}
+    ram = scn.sensors.pushram
+    # The IMU's pitch and roll mounting come from the static calibration (000 section 6.1-6.2, taken as exact
+    # here); its yaw mounting is not found statically and is left to the filter (inside the survey's heading).
+    mount = np.radians(scn.sensors.imu.misalignment_deg)
+    kw = {"lever_arm_m": tuple(scn.sensors.imu.lever_arm_m), "imu_mounting_rad": (float(mount[0]), float(mount[1]), 0.0),
+          "metres_per_pulse": scn.sensors.odometer.metres_per_pulse,
+          "support_u_m": tuple((support_stations(scn) + 0.5) * scn.face.pan_length_m - scn.shearer.length_m / 2),
+          "n_samples": est.n_samples, "filter_rate_hz": est.filter_rate_hz, "cpoem_spacing_m": est.cpoem_spacing_m,
+          "ram_noise_sd": max(ram.noise_m, ram.resolution_m), "advance_sd": max(5 * ram.noise_m, 0.003)}
     if est.tuning == "appendix_a":
         return sp.Config.appendix_a(**kw)
     imu = sp.ImuNoise(gyro_arw=max(g.gyro_arw, 1e-6), accel_vrw=max(g.accel_vrw, 1e-5),
