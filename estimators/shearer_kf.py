@@ -239,8 +239,8 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
     """Filter epochs j0+1 .. j1 (epoch j ends mechanization step j * steps); state (nav, cal, p) in place.
 
     odo_mode[j]: 1 moving with a valid odometer over (j-1, j], 0 standing, -1 odometer missing (skipped).
-    nominal (4,): the running means of the odometer speed and of the specific force in n that H and F are
-    evaluated at (carried across calls).
+    nominal (5,): the running means of the odometer speed and of the specific force in n that H and F are
+    evaluated at, and the last odometer speed (carried across calls).
     Fixes (fix_epoch sorted, fix_llh (F, 3) lat/lon/h, fix_r (F, 3, 3) ENU covariance, fix_gate (F,) the largest
     normalized innovation squared accepted) apply at their epoch.
     Stores per epoch: posterior navigation and calibration, covariance, the update x+ and Phi for the smoother,
@@ -287,7 +287,8 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
             # 001 eq. 20 evaluates H at the true velocity. Measured velocities there (the odometer's quantization,
             # the IMU's vibration) would put the same noise into H and z, and that correlation biases the scale and
             # mounting estimates at every update (errors in variables). H uses the nominal motion instead: along
-            # the odometer axis at the odometer speed averaged over the previous epochs (not this one).
+            # the odometer axis at the odometer speed averaged up to two epochs back (the quantization error of
+            # the last reading is also in this one's, with the opposite sign).
             v_b_nom = np.array([0.0, nominal[0], 0.0])
             h = np.zeros((3, N_STATES))
             h[:, _DV:_DV + 3] = c_bm @ c_nb
@@ -295,12 +296,13 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
             h[:, _AL:_AL + 3] = -c_bm @ skew3(v_b_nom)
             h[1, ODO_SCALE] = -(c_bm @ v_b_nom)[1]
             z = c_bm @ v_b - np.array([0.0, v_od, 0.0])
-            nominal[0] += (v_od - nominal[0]) * min(1.0, t_span / params[P_TAU_FWD])
+            nominal[0] += (nominal[4] - nominal[0]) * min(1.0, t_span / params[P_TAU_FWD])
+            nominal[4] = v_od
             vel_innov[j] = z - h @ x
             joseph_update(x, p, z, h, r_vel)
             flag |= FLAG_VELOCITY
         elif odo_mode[j] == 0:
-            nominal[0] = 0.0
+            nominal[0] = nominal[4] = 0.0
             h = np.zeros((3, N_STATES))
             for i in range(3):
                 h[i, _DV + i] = 1.0

@@ -81,7 +81,9 @@ class Config:
     advance_sd: float = 0.005  # advance from the ram strokes [m]
     ram_noise_sd: float = 1e-4  # one-sigma noise of a push-ram reading [m]
     path_sd: float = 0.03  # the pans' running line between cycles beyond the measured advance [m]
-    path_along_sd: float = 0.05  # the same along the face: bent pans in the snake shift the chain along it [m]
+    path_along_sd: float = 0.05
+    """The same along the face [m]: the odometer counts path length, and the cut-out runs diagonally through the
+    snake (a web over a snake of 8 pans adds about 5 cm), so a face coordinate shifts at every face end."""
     fix_gate: float = 40.0  # normalized innovation squared above which a CPOEM fix is rejected (3 dof); surveyed
     # face ends are trusted, never gated
     sd_velocity0: float = 0.01
@@ -91,7 +93,9 @@ class Config:
     p0_scale: float = 1.0
     q_scale: float = 1.0
     level_window_s: float = 60.0
-    speed_tau_s: float = 1.0  # time constant of the odometer speed the velocity measurement is linearized at [s]
+    speed_tau_s: float = 20.0
+    """Time constant [s] of the odometer speed the velocity measurement is linearized at: long, because the
+    quantization error of an encoder at constant speed is a sawtooth, correlated over many epochs."""
     force_tau_s: float = 2.0  # time constant of the specific force the error dynamics are linearized at [s]
     vibration_vrw: float = 5e-4
     """Velocity random walk [m/s/sqrt(s)] added for the cutting machine's vibration: what sculling compensation at
@@ -427,7 +431,7 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
         cfg.r_lateral, np.hypot(np.sqrt(mpp ** 2 / 6) / dt_kf, cfg.r_odometer), cfg.r_vertical, cfg.r_zupt,
         cfg.r_zaru, cfg.speed_tau_s, cfg.force_tau_s]
     params[kf.P_LEVER:kf.P_LEVER + 3] = cfg.lever_arm_m
-    nominal = np.zeros(4)
+    nominal = np.zeros(5)
     smooth_nav = fwd.nav.copy() if smooth else None
     smooth_p = fwd.p.copy() if smooth else None
     points: Points | None = Points.empty() if cpoem else None

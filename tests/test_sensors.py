@@ -17,7 +17,7 @@ from twin.sensors import imu_truth, sensor_streams
 from twin.simulate import simulate
 from twin.survey import survey_stream
 
-from .conftest import capped
+from .conftest import capped, simulated
 
 FAULTS = [
     {"kind": "ram_offset", "t_start_s": 300.0, "t_end_s": 500.0, "target": 10, "value": 0.05},
@@ -183,3 +183,16 @@ def test_survey_is_reproducible_per_trial_and_leaves_the_other_streams():
     direct = survey_stream(scn, truth["truth_shearer"], truth["truth_cycles"],
                            np.random.default_rng([scn.seed, 0, 5]))
     np.testing.assert_array_equal(direct["lat"], streams["survey"]["lat"])
+
+
+def test_survey_fixes_both_ends_of_every_cut_or_only_the_first():
+    scn, result = simulated("default")
+    shearer, cycles = result.tables["truth_shearer"], result.tables["truth_cycles"]
+    every = survey_stream(scn, shearer, cycles, np.random.default_rng(0))["t"]
+    want = [0.0, cycles["t_cut_end"][0], cycles["t"][1], cycles["t_cut_end"][1]]
+    np.testing.assert_array_equal(every[:4], want)
+    assert every.size in (4, 5) and every[-1] <= shearer["t"][-1]
+    data = scn.model_dump()
+    data["sensors"]["survey"]["face_ends"] = "first_cut"
+    first = survey_stream(parse_scenario(data, "first"), shearer, cycles, np.random.default_rng(0))["t"]
+    np.testing.assert_array_equal(first, want[:2])

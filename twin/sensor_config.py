@@ -119,6 +119,9 @@ class Survey(_Section):
     """One-sigma error of the height of a fix."""
     sd_yaw_deg: NonNegative = 1.0
     """One-sigma error of the surveyed yaw of the start pose (the face-end fix B carries no heading)."""
+    face_ends: Literal["first_cut", "every_cut"] = "every_cut"
+    """first_cut: only the ends of the first straight cut are fixed (001's experiment); every_cut: both ends of
+    every straight cut, as the gate-road survey marks them ahead of each advance."""
 
 
 class Sensors(_Section):

@@ -2,7 +2,9 @@
 
 Before the first cut the shearer stands at face end A and its pose is surveyed (position and yaw); face end B,
 where the first straight cut ends, is surveyed in advance (position only; 001: "the two optimal points
-corresponding to both ends of the longwall face can be accurately measured in advance"). Each fix is the
+corresponding to both ends of the longwall face can be accurately measured in advance"). With face_ends =
+"every_cut" (the default) both ends of every straight cut are fixed: the gate-road survey marks where the face
+ends stand after each advance; "first_cut" is 001's experiment. Each fix is the
 true body point plus independent N(0, sd) errors in East, North and Up; the start yaw is the true body yaw
 plus N(0, sd_yaw). Errors come from 001 Table 1 by default (twin.sensor_config.Survey).
 """
@@ -19,12 +21,17 @@ from twin.scenario import Scenario
 def survey_stream(scn: Scenario, truth_shearer: dict[str, np.ndarray], truth_cycles: dict[str, np.ndarray] | None,
                   rng: np.random.Generator) -> dict[str, np.ndarray]:
     """The SURVEY columns (estimators.logformat): the start pose at t = 0 (face end A, with yaw) and face end B
-    at the end of cycle 0's straight cut (t_cut_end, yaw NaN) when the run reaches it."""
+    at the end of cycle 0's straight cut (t_cut_end, yaw NaN) when the run reaches it; with face_ends =
+    "every_cut", also both ends of every later straight cut (its start and t_cut_end) and the last face end."""
     cfg = scn.sensors.survey
     t = [0.0]
-    if truth_cycles is not None and len(truth_cycles["t"]) and truth_cycles["t_cut_end"][0] <= truth_shearer["t"][-1]:
-        t.append(float(truth_cycles["t_cut_end"][0]))
-    t = np.asarray(t)
+    if truth_cycles is not None and len(truth_cycles["t"]):
+        starts, ends = np.asarray(truth_cycles["t"], float), np.asarray(truth_cycles["t_cut_end"], float)
+        cuts = range(len(starts)) if cfg.face_ends == "every_cut" else range(1)
+        t += [float(x) for k in cuts for x in ((starts[k],) if k else ()) + (ends[k],)]
+        if cfg.face_ends == "every_cut":
+            t.append(float(truth_cycles["t_end"][-1]))  # where the last cycle leaves the shearer
+    t = np.asarray([x for x in t if x <= truth_shearer["t"][-1]])
     true = truth_at(truth_shearer, t)
     sd = np.array([cfg.sd_horizontal_m, cfg.sd_horizontal_m, cfg.sd_vertical_m])
     lat, lon, h = enu_offset_to_geodetic(rng.normal(size=(t.size, 3)) * sd, true["lat"], true["lon"], true["h"])
