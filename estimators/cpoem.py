@@ -78,27 +78,41 @@ sensor, below 1 mm of noise, is used as it reads: a fast end push may leave a si
 
 
 @nb.njit(cache=True)
-def _rises(x, threshold):
-    """Sum of the up-swings of x that the swing detector confirms: a swing ends when x turns back by more than
-    `threshold` from its extreme, so noise below the threshold adds nothing."""
-    trough = peak = x[0]
+def _swings(x, threshold):
+    """(trough, peak) indices of the up-swings of x that a swing detector confirms: a swing ends when x turns back
+    by more than `threshold` from its extreme, so noise below the threshold makes no swing."""
+    lo_i = hi_i = 0
     rising = True
-    total = 0.0
-    for v in x[1:]:
+    out = []
+    for i in range(1, x.size):
         if rising:
-            if v > peak:
-                peak = v
-            elif peak - v > threshold:
-                total += peak - trough
-                rising, trough = False, v
+            if x[i] > x[hi_i]:
+                hi_i = i
+            elif x[hi_i] - x[i] > threshold:
+                if x[hi_i] - x[lo_i] > threshold:
+                    out.append((lo_i, hi_i))
+                rising, lo_i = False, i
         else:
-            if v < trough:
-                trough = v
-            elif v - trough > threshold:
-                rising, peak = True, v
-    if rising and peak - trough > threshold:
-        total += peak - trough
-    return total
+            if x[i] < x[lo_i]:
+                lo_i = i
+            elif x[i] - x[lo_i] > threshold:
+                rising, hi_i = True, i
+    if rising and x[hi_i] - x[lo_i] > threshold:
+        out.append((lo_i, hi_i))
+    return out
+
+
+def _level(raw: np.ndarray, smooth: np.ndarray, i: int, tol: float) -> float:
+    """The level at extreme i: the median of the raw readings of the run around i that stays within tol of it
+    (a plateau averages its noise away; a one-reading peak is that reading)."""
+    near = np.abs(smooth - smooth[i]) <= tol
+    a = i
+    while a > 0 and near[a - 1]:
+        a -= 1
+    b = i
+    while b + 1 < near.size and near[b + 1]:
+        b += 1
+    return float(np.median(raw[a:b + 1]))
 
 
 def ram_stroke(t: np.ndarray, ext: np.ndarray, valid: np.ndarray, t0: float, t1: float, noise_sd: float) -> float:
@@ -107,20 +121,24 @@ def ram_stroke(t: np.ndarray, ext: np.ndarray, valid: np.ndarray, t0: float, t1:
 
     The ram extends while the support pushes the pan (possibly in several partial strokes as the snake forms,
     or in one stroke followed at once by the support's advance at the face end) and retracts while the support
-    pulls itself up to the pan; only the rises move the pan. The readings are cleaned by a running median and
-    the rises summed by a swing detector with a threshold of 6 of the median's noise sigmas (at least 5 mm); a
-    short window keeps the two-reading peak of a fast end push. With noisy sensors (0.02 m) the sum is good to a few
-    centimetres."""
+    pulls itself up to the pan; only the rises move the pan. A swing detector finds the rises on the readings
+    (cleaned by a short running median when the sensor is noisy) with a threshold of 6 noise sigmas (at least
+    5 mm); each rise is measured between the medians of the readings at its two ends, so the extremes of the
+    noise do not add up over the partial strokes."""
     sel = (t > t0) & (t <= t1) & (valid > 0) & np.isfinite(ext)
     r = ext[sel]
     if r.size < RAM_WINDOW:
         return np.nan
     if noise_sd < 1e-3:
-        return float(_rises(r, max(6 * noise_sd, 0.005)))
-    half = RAM_WINDOW // 2
-    pad = np.concatenate([np.full(half, r[0]), r, np.full(half, r[-1])])
-    smooth = np.median(np.lib.stride_tricks.sliding_window_view(pad, RAM_WINDOW), axis=1)
-    return float(_rises(smooth, 6 * 1.25 * noise_sd / np.sqrt(RAM_WINDOW)))
+        smooth, threshold = r, max(6 * noise_sd, 0.005)
+    else:
+        half = RAM_WINDOW // 2
+        pad = np.concatenate([np.full(half, r[0]), r, np.full(half, r[-1])])
+        smooth = np.median(np.lib.stride_tricks.sliding_window_view(pad, RAM_WINDOW), axis=1)
+        threshold = 6 * 1.25 * noise_sd / np.sqrt(RAM_WINDOW)
+    tol = threshold
+    return float(sum(max(0.0, _level(r, smooth, hi, tol) - _level(r, smooth, lo, tol))
+                     for lo, hi in _swings(smooth, threshold)))
 
 
 @dataclass(frozen=True)
