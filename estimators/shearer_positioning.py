@@ -31,8 +31,15 @@ import numpy as np
 from estimators import earth
 from estimators import shearer_kf as kf
 from estimators.cpoem import Points, RamLog, crossings, predict_fixes, record
+from estimators.fine_alignment import fine_align
 from estimators.logformat import FLAG_SMOOTHED
-from estimators.rotations import euler_to_mat, euler_to_quat, quat_rotate, quat_to_mat
+from estimators.rotations import (
+    euler_to_mat,
+    euler_to_quat,
+    quat_rotate,
+    quat_to_euler,
+    quat_to_mat,
+)
 from estimators.rts import rts_backward
 from estimators.strapdown import compensated_increments, mechanize
 
@@ -190,13 +197,15 @@ def straight_cuts(u: np.ndarray, mode: np.ndarray, face_travel: float) -> list[t
     return runs
 
 
-def _initial_state(log: Log, t_mech: np.ndarray, phi_b: np.ndarray, dv_b: np.ndarray, mode: np.ndarray,
-                   steps: int, cfg: Config) -> tuple[np.ndarray, list[str]]:
-    """Navigation vector at t[0] (IMU point): survey position and heading, level from the accelerometers over
-    the stand before the first motion."""
+def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndarray, steps: int,
+                   cfg: Config) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Navigation vector at t[0] (IMU point) and the start calibration, from the stand before the first cut:
+    survey position and heading, level from the accelerometers (coarse), then the fine alignment of 000
+    (estimators.fine_alignment, EKF) over the stand, whose mean attitude over its last seconds and bias estimates
+    start the filter. A stand the fine alignment finds moving is levelled only (noted)."""
     notes = []
     first_move = np.flatnonzero(mode == 1)
-    stand_end = (first_move[0] - 1) * steps if first_move.size else phi_b.shape[0]
+    stand_end = (first_move[0] - 1) * steps if first_move.size else dv_b.shape[0]
     dt = t_mech[1] - t_mech[0]
     n = int(min(stand_end, cfg.level_window_s / dt))
     if n < max(5, int(1.0 / dt)):
@@ -209,14 +218,30 @@ def _initial_state(log: Log, t_mech: np.ndarray, phi_b: np.ndarray, dv_b: np.nda
         raise PositioningError("survey: the first row needs the start heading (yaw); a MEMS gyro cannot find it")
     q_nb = euler_to_quat(pitch, roll, log.survey_yaw[0])
     lat, lon, h = log.survey_llh[0]
+    cal = np.zeros(kf.N_CAL)
+    imu_dt = float(np.median(np.diff(log.imu_t)))
+    n_imu = round(n * dt / imu_dt)
+    dtheta_s, dv_s = body_increments(log, cfg)
+    res = fine_align(dtheta_s[:n_imu], dv_s[:n_imu], imu_dt, lat, q_nb, (cfg.imu.gyro_arw, cfg.imu.accel_vrw),
+                     np.array([cfg.sd_level0, cfg.sd_level0, log.survey_sd[0, 2]]), "ekf", h=h,
+                     gyro_bias_sigma=cfg.imu.gyro_bias, accel_bias_sigma=cfg.imu.accel_bias,
+                     velocity_sigma=cfg.r_zupt, on_motion="flag")
+    if res.motion_t is None:
+        q_nb = res.attitude(min(10.0, 0.5 * n * dt))
+        cal[kf.CAL_ACCEL.start:kf.CAL_ACCEL.start + 2] = res.bias[-1, :2]
+        cal[kf.CAL_GYRO] = res.bias[-1, 2:5]
+        p0, r0, _ = quat_to_euler(q_nb)
+        notes.append(f"fine alignment over {n * dt:.1f} s of standing: pitch {np.degrees(p0):.3f} deg, roll "
+                     f"{np.degrees(r0):.3f} deg, gyro bias {np.round(np.degrees(cal[kf.CAL_GYRO]) * 3600, 1)} deg/h")
+    else:
+        notes.append(f"the stand looks moving from {res.motion_t:.1f} s: levelled only, pitch "
+                     f"{np.degrees(pitch):.3f} deg, roll {np.degrees(roll):.3f} deg")
     off = quat_rotate(q_nb, np.asarray(cfg.lever_arm_m, float))
     r_m, r_n = earth.radii(lat)
     nav = np.zeros(kf.N_NAV)
     nav[:3] = lat + off[1] / (r_m + h), lon + off[0] / ((r_n + h) * np.cos(lat)), h + off[2]
     nav[kf.QUAT] = q_nb
-    notes.append(f"levelled over {n * dt:.1f} s of standing: pitch {np.degrees(pitch):.3f} deg, roll "
-                 f"{np.degrees(roll):.3f} deg")
-    return nav, notes
+    return nav, cal, notes
 
 
 def _p0(cfg: Config, log: Log) -> np.ndarray:
@@ -283,6 +308,7 @@ class _Prepared:
     survey_epochs: np.ndarray
     rams: RamLog | None
     nav0: np.ndarray
+    cal0: np.ndarray
     notes: list[str]
 
 
@@ -313,7 +339,7 @@ def prepare(log: Log, cfg: Config) -> _Prepared:
     t_mech = t_mech[: n_kf * steps + 1]
     t_kf = t_mech[::steps]
     odo, mode = _odometer_at(log, t_kf)
-    nav0, notes = _initial_state(log, t_mech, phi_b, dv_b, mode, steps, cfg)
+    nav0, cal0, notes = _initial_state(log, t_mech, dv_b, mode, steps, cfg)
     u = odo - odo[0]
     if log.survey_t.size >= 2:
         d = earth.lla_to_enu(*log.survey_llh[1], *log.survey_llh[0])
@@ -332,7 +358,7 @@ def prepare(log: Log, cfg: Config) -> _Prepared:
         rams = RamLog.from_rows(log.ram_t, log.ram_support, log.ram_extension, log.ram_valid, cfg.support_u_m,
                                cfg.ram_noise_sd)
     return _Prepared(t_mech, phi_b, dv_b, steps, t_kf, odo, mode, cuts, segments, survey_epochs, rams, nav0,
-                     notes)
+                     cal0, notes)
 
 
 class _Forward:
@@ -420,7 +446,7 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     n = prep.t_kf.size - 1
     fwd = _Forward(n, keep_dir)
     nav = prep.nav0.copy()
-    cal = np.zeros(kf.N_CAL)
+    cal = prep.cal0.copy()
     p = _p0(cfg, log)
     fwd.nav[0], fwd.p[0] = nav, p
     q_psd = _q_psd(cfg)
