@@ -1,6 +1,6 @@
 """Shearer positioning benchmark on the experiment of 001 (scenarios/seed001.toml): our SEP per cutting cycle
-beside 001 Table 3, the Table 2 sweep (Par 1-12: the same motion with degraded IMUs), and the throughput of the
-filter plus the online RTS smoother.
+beside 001 Table 3, the Table 2 sweep (Par 1-12: the same motion with degraded IMUs), the CPOEM spacings of
+001 section 4, and the throughput of the filter plus the online RTS smoother.
 
 Physics once: seed001 is simulated once; each row redraws the sensor errors for its IMU grade.
 Run: python benchmarks/bench_positioning.py [--no-sweep]
@@ -9,6 +9,7 @@ Run: python benchmarks/bench_positioning.py [--no-sweep]
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 
@@ -71,6 +72,10 @@ def main(sweep: bool = True) -> None:
     print(f"odometer scale error: estimated {e.cal[-1, 9]:+.4f}, true {1 / (1 + scn.sensors.odometer.scale_error) - 1:+.4f}; "
           f"mounting x, z [deg]: estimated {np.degrees(e.cal[-1, 6]):+.3f}, {np.degrees(e.cal[-1, 8]):+.3f}, true "
           f"{scn.sensors.odometer.mounting_deg[0]:+.3f}, {scn.sensors.odometer.mounting_deg[2]:+.3f}")
+    print("\nCPOEM point spacing Delta (001 section 4: 2, 6, 10 m), KF + CPOEM + RTS, SEP per cycle [m]")
+    for delta in (2.0, 6.0, 10.0):
+        sol = sp.estimate(log, dataclasses.replace(cfg, cpoem_spacing_m=delta), ("kf_cpoem_rts",))["kf_cpoem_rts"]
+        print(f"Delta {delta:4.0f} m " + " ".join(f"{v:6.3f}" for v in sep_row(sol, truth, cycles)[:4]))
     t0 = time.perf_counter()
     sp.estimate(log, cfg, ("kf_cpoem_rts",))
     one = time.perf_counter() - t0
