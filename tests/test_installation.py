@@ -22,6 +22,7 @@ from estimators.installation import (
 )
 from estimators.rotations import euler_to_mat, mat_to_quat, quat_to_mat
 from estimators.strapdown import mechanize
+from twin.experiment import sway as experiment_sway
 
 LAT, LON, H = np.radians(34.27), np.radians(117.18), 36.0  # 000 section 5.3's site
 AMP = np.radians(10.0)
@@ -36,20 +37,8 @@ PAPER = {
 
 
 def sway(t):
-    """Eq. 54 motion at a fixed point: C_b^n (K, 3, 3), w_ib^b (K, 3), f^b (K, 3), analytic.
-
-    C_b^n = Rz(y) Rx(p) Ry(r) gives w_nb^b = [cr p' - sr cp y', r' + sp y', sr p' + cr cp y']; the body rate
-    adds the Earth rate C_n^b w_ie^n (no transport rate at rest), and f^b = C_n^b [0, 0, gamma]."""
-    t = np.asarray(t, float)
-    om = 2 * np.pi / PERIODS
-    p, r, y = (AMP * np.sin(o * t) for o in om)
-    pd, rd, yd = (AMP * o * np.cos(o * t) for o in om)
-    c = euler_to_mat(p, r, y)
-    sp, cp, sr, cr = np.sin(p), np.cos(p), np.sin(r), np.cos(r)
-    w_nb = np.stack([cr * pd - sr * cp * yd, rd + sp * yd, sr * pd + cr * cp * yd], axis=-1)
-    w_ib = w_nb + np.einsum("...ji,j->...i", c, earth.earth_rate_n(LAT))
-    f_b = earth.normal_gravity(LAT, H) * c[..., 2, :]
-    return c, w_ib, f_b
+    """Eq. 54 motion at a fixed point (twin.experiment.sway with this file's amplitudes, periods and site)."""
+    return experiment_sway(t, [AMP] * 3, PERIODS, LAT, H)
 
 
 def sway_rate_derivative(t, step=1e-4):
