@@ -94,6 +94,7 @@ from scipy.stats import chi2
 from estimators import earth
 from estimators.alignment import AlignmentError, heading_limit, level_limit
 from estimators.rotations import mat_to_euler, mat_to_quat, quat_to_euler, quat_to_mat
+from estimators.strapdown import rotvec_mat
 
 DV = slice(0, 2)
 PHI = slice(2, 5)
@@ -222,23 +223,10 @@ def _err_angles(c):
 
 
 @nb.njit(cache=True)
-def _exp_mat(r):
-    """Rotation matrix of the rotation vector r (Rodrigues; series for tiny angles)."""
-    a2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
-    if a2 < 1e-16:
-        s, c = 1.0 - a2 / 6.0, 0.5 - a2 / 24.0
-    else:
-        a = math.sqrt(a2)
-        s, c = math.sin(a) / a, (1.0 - math.cos(a)) / a2
-    k = np.array([[0.0, -r[2], r[1]], [r[2], 0.0, -r[0]], [-r[1], r[0], 0.0]])
-    return np.eye(3) + s * k + c * (k @ k)
-
-
-@nb.njit(cache=True)
 def _propagate(x, c1, r_ie, w_u, gamma, T):
     """The nonlinear error model over one block (module docstring) for one state x."""
     e0 = _err_mat(x[_PE], x[_PN], x[_PU])
-    e1 = r_ie @ e0 @ r_ie.T @ _exp_mat(-(c1 @ x[_WX:_WX + 3]) * T)
+    e1 = r_ie @ e0 @ r_ie.T @ rotvec_mat(-(c1 @ x[_WX:_WX + 3]) * T)
     pe, pn, pu = _err_angles(e1)
     mid = _err_mat(0.5 * (x[_PE] + pe), 0.5 * (x[_PN] + pn), 0.5 * (x[_PU] + pu))
     acc_e = gamma * mid[2, 0] + c1[0, 0] * x[_AX] + c1[0, 1] * x[_AY] + 2 * w_u * x[_DVN]  # minus [2 w x dV]
@@ -280,7 +268,7 @@ def _transition(c1, w, gamma, T, q_psd):
 @nb.njit(cache=True)
 def _mechanize(c, v, dth, dvb, r_ie, g_n, w_u, T):
     """Nominal C_b^n' and (v_E, v_N) over one block (stationary: no transport rate; coning negligible)."""
-    c1 = r_ie @ c @ _exp_mat(dth)
+    c1 = r_ie @ c @ rotvec_mat(dth)
     c1 = 1.5 * c1 - 0.5 * (c1 @ c1.T @ c1)  # keep it orthonormal
     dvn = 0.5 * (c + c1) @ dvb
     v1 = np.array([v[0] + dvn[0] + g_n[0] * T + 2 * w_u * v[1] * T,
@@ -474,7 +462,7 @@ def fine_align(dtheta, dv, dt: float, lat: float, q0_nb, grade_noise: tuple[floa
     s_out = np.empty((n_upd, N_STATES))
     b_out = np.empty((n_upd, 5))
     nis = np.empty(n_upd)
-    args = (dth_b, dv_b, c, np.zeros(2), np.zeros(N_STATES), T, w, _exp_mat(-w * T), g_n, gamma, q_psd, P, r_vel, r_rate, zero_rate, c_out, s_out, b_out, nis)
+    args = (dth_b, dv_b, c, np.zeros(2), np.zeros(N_STATES), T, w, rotvec_mat(-w * T), g_n, gamma, q_psd, P, r_vel, r_rate, zero_rate, c_out, s_out, b_out, nis)
     P = _ekf_kernel(*args) if method == "ekf" else _ukf_loop(method, *args)
     t_out = np.arange(1, n_upd + 1) * T
     res = FineAlignment(method, t_out, mat_to_quat(c_out), s_out, b_out, P, nis,

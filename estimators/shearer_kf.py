@@ -51,11 +51,15 @@ from estimators.logformat import (
 from estimators.strapdown import (
     cross3,
     gravity_nb,
+    mat_rotvec,
     nav_rates,
     qexp,
     qmul,
     qrot,
+    quat_mat,
     radii_nb,
+    rotvec_mat,
+    skew3,
 )
 
 DV = slice(0, 3)
@@ -84,40 +88,6 @@ N_CAL = 10
 # Indices of the kernel's parameter vector.
 P_R_LATERAL, P_R_ALONG, P_R_VERTICAL, P_R_ZUPT, P_R_ZARU, P_TAU_FWD, P_TAU_FORCE, P_LEVER = range(8)
 N_PARAMS = 11  # the lever arm takes 7..9, one spare
-
-
-@nb.njit(cache=True)
-def skew3(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-@nb.njit(cache=True)
-def quat_mat(q):
-    """C_b^n of q_nb."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
-@nb.njit(cache=True)
-def rotvec_mat(r):
-    """Rotation matrix of the rotation vector r (Rodrigues)."""
-    a = np.sqrt(r[0] ** 2 + r[1] ** 2 + r[2] ** 2)
-    k = skew3(r)
-    if a < 1e-9:
-        return np.eye(3) + k
-    return np.eye(3) + np.sin(a) / a * k + (1 - np.cos(a)) / a ** 2 * (k @ k)
-
-
-@nb.njit(cache=True)
-def mat_rotvec(c):
-    """Rotation vector of a rotation matrix (angles below pi)."""
-    cos_a = min(1.0, max(-1.0, 0.5 * (c[0, 0] + c[1, 1] + c[2, 2] - 1)))
-    a = np.arccos(cos_a)
-    v = np.array([c[2, 1] - c[1, 2], c[0, 2] - c[2, 0], c[1, 0] - c[0, 1]])
-    return 0.5 * v if a < 1e-9 else a / (2 * np.sin(a)) * v
 
 
 @nb.njit(cache=True)

@@ -39,6 +39,7 @@ from estimators.rotations import (
     quat_rotate,
     quat_to_euler,
     quat_to_mat,
+    rotvec_to_quat,
 )
 from estimators.rts import rts_backward
 from estimators.strapdown import compensated_increments, mechanize
@@ -157,22 +158,23 @@ class Solution:
 
 
 def _odometer_at(log: Log, t_kf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Odometer distance at the epochs and the mode of each interval: 1 moving, 0 standing, -1 no data."""
-    dist = np.interp(t_kf, log.odo_t, log.odo_distance)
-    period = np.median(np.diff(log.odo_t)) if log.odo_t.size > 1 else np.inf
-    moving_samples = np.concatenate([[0], np.cumsum(log.odo_direction != 0)])
-    k0 = np.searchsorted(log.odo_t, t_kf[:-1], side="right")
-    k1 = np.searchsorted(log.odo_t, t_kf[1:], side="right")
-    # An interval is covered if odometer samples bracket it without a gap longer than 2.5 periods.
-    prev_t = log.odo_t[np.clip(k0 - 1, 0, None)]
-    next_t = log.odo_t[np.clip(k1, None, log.odo_t.size - 1)]
-    gaps = np.maximum.reduceat(np.diff(log.odo_t, append=np.inf), np.clip(k0 - 1, 0, None)) \
-        if log.odo_t.size > 1 else np.full(k0.size, np.inf)
-    covered = (k0 > 0) & (k1 < log.odo_t.size) & (prev_t <= t_kf[:-1]) & (next_t >= t_kf[1:]) & \
-        (gaps <= 2.5 * period)
-    moved = (moving_samples[np.clip(k1 + 1, None, moving_samples.size - 1)] - moving_samples[k0] > 0) | \
-        (np.abs(np.diff(dist)) > 0)
-    mode = np.where(covered, np.where(moved, 1, 0), -1).astype(np.int8)
+    """Odometer distance at the epochs and the mode of each interval (t[j-1], t[j]]: 1 moving, 0 standing, -1 no
+    data. An interval has no data outside the log or where it overlaps a dropout: two consecutive samples more
+    than 2.5 nominal periods apart."""
+    t = log.odo_t
+    dist = np.interp(t_kf, t, log.odo_distance)
+    lo, hi = t_kf[:-1], t_kf[1:]
+    covered = (lo >= t[0]) & (hi <= t[-1])
+    if t.size > 1:
+        step = np.diff(t)
+        gap = np.flatnonzero(step > 2.5 * np.median(step))
+        if gap.size:
+            gap_start, gap_end = t[gap], t[gap + 1]  # disjoint and sorted
+            k = np.searchsorted(gap_end, lo, side="right")  # the first dropout ending after the interval starts
+            covered &= ~((k < gap.size) & (gap_start[np.minimum(k, gap.size - 1)] < hi))
+    moving = np.concatenate([[0], np.cumsum(log.odo_direction != 0)])[np.searchsorted(t, t_kf, side="right")]
+    moved = (np.diff(moving) > 0) | (np.abs(np.diff(dist)) > 0)
+    mode = np.where(covered, np.where(moved, 1, 0), -1)
     return dist, np.concatenate([[0], mode]).astype(np.int8)
 
 
@@ -500,6 +502,10 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
             points = _segment_points(prep, cfg, a, b, seg_nav, p_post)
     if n_gated:
         notes.append(f"{n_gated} of {n_fixes} position fixes rejected by the innovation gate")
+    missing = np.flatnonzero(prep.mode[1:] < 0) + 1
+    if missing.size:
+        notes.append(f"odometer: no data over {missing.size} filter steps ({missing.size / cfg.filter_rate_hz:.1f} s, "
+                     f"first at t = {prep.t_kf[missing[0]]:.1f} s): velocity updates skipped")
     forward = _solution(prep, cfg, fwd.nav, fwd.p, fwd.flags, fwd.cal, notes)
     smoothed = None
     if smooth:
@@ -557,7 +563,7 @@ def dead_reckoning(log: Log, cfg: Config, prep: _Prepared, cal: np.ndarray | Non
     q = sins.q_nb[:: prep.steps][: prep.t_kf.size]
     mount = cal[kf.CAL_MOUNT] if cal is not None else np.zeros(3)
     scale = cal[kf.CAL_SCALE] if cal is not None else 0.0
-    y_m_b = quat_to_mat(np.asarray(euler_to_quat(*_rotvec_euler(mount)), float))[:, 1]
+    y_m_b = quat_to_mat(rotvec_to_quat(mount))[:, 1]  # odometer axis in b (C_m^b as a rotation vector)
     dd = np.diff(prep.odo) / (1 + scale)
     step_n = quat_rotate(q[:-1], np.broadcast_to(y_m_b, (dd.size, 3))) * dd[:, None]
     enu = np.concatenate([np.zeros((1, 3)), np.cumsum(step_n, axis=0)])
@@ -566,11 +572,6 @@ def dead_reckoning(log: Log, cfg: Config, prep: _Prepared, cal: np.ndarray | Non
     v = np.concatenate([np.zeros((1, 3)), step_n / np.diff(prep.t_kf)[:, None]])
     nan = np.full((prep.t_kf.size, 9), np.nan)
     return Solution(prep.t_kf, llh, v, q, nan, np.zeros(prep.t_kf.size, np.int32))
-
-
-def _rotvec_euler(r: np.ndarray) -> tuple[float, float, float]:
-    """Euler angles (pitch about x, roll about y, yaw about z) of a small rotation vector (first order)."""
-    return float(r[0]), float(r[1]), float(r[2])
 
 
 def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS) -> dict[str, Solution]:

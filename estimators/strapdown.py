@@ -82,6 +82,43 @@ def nav_rates(lat, h, v):
     return w_ie, w_en
 
 
+@nb.njit(cache=True)
+def skew3(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+@nb.njit(cache=True)
+def quat_mat(q):
+    """C_b^n of q_nb."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+@nb.njit(cache=True)
+def rotvec_mat(r):
+    """Rotation matrix of the rotation vector r (Rodrigues; series for tiny angles)."""
+    a2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    if a2 < 1e-16:
+        s, c = 1.0 - a2 / 6.0, 0.5 - a2 / 24.0
+    else:
+        a = np.sqrt(a2)
+        s, c = np.sin(a) / a, (1.0 - np.cos(a)) / a2
+    k = skew3(r)
+    return np.eye(3) + s * k + c * (k @ k)
+
+
+@nb.njit(cache=True)
+def mat_rotvec(c):
+    """Rotation vector of a rotation matrix (angles below pi)."""
+    cos_a = min(1.0, max(-1.0, 0.5 * (c[0, 0] + c[1, 1] + c[2, 2] - 1)))
+    a = np.arccos(cos_a)
+    v = np.array([c[2, 1] - c[1, 2], c[0, 2] - c[2, 0], c[1, 0] - c[0, 1]])
+    return 0.5 * v if a < 1e-9 else a / (2 * np.sin(a)) * v
+
+
 def compensate(dtheta: np.ndarray, dv: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
     """Per update of N increments (rows 1.., grouped by N): the rotation vector with coning compensation and
     the body velocity increment with rotation and sculling compensation (000 eqs. 60-61, 68-69), (U, 3) each.

@@ -88,6 +88,7 @@ def test_odometer_dropout_is_skipped_and_flagged(default_log):
     sol = sp.estimate(cut, positioning_config(scn), ("kf",))["kf"]
     gap = (sol.t > 100.5) & (sol.t < 109.5)
     assert np.all(sol.flags[gap] & FLAG_SKIPPED) and np.isfinite(sol.llh).all()
+    assert any("odometer: no data" in n for n in sol.notes)
 
 
 @pytest.mark.parametrize("change, words", [
