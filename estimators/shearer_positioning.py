@@ -288,8 +288,8 @@ def _body_llh(nav: np.ndarray, lever: np.ndarray) -> np.ndarray:
 
 
 def _sd(p: np.ndarray) -> np.ndarray:
-    d = np.sqrt(np.maximum(np.diagonal(p, axis1=1, axis2=2), 0.0))
-    return d
+    """One-sigma of every state from covariances (..., n, n)."""
+    return np.sqrt(np.maximum(np.diagonal(p, axis1=-2, axis2=-1), 0.0))
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -364,20 +364,21 @@ def prepare(log: Log, cfg: Config) -> _Prepared:
 
 
 class _Forward:
-    """Storage of one forward run: per-epoch navigation, calibration, covariance; per-segment smoother data."""
+    """Storage of one forward run: per-epoch navigation, calibration and state sigmas (full covariances only per
+    segment, on disk for the offline smoother)."""
 
     def __init__(self, n: int, keep_dir: Path | None):
         self.nav = np.zeros((n + 1, kf.N_NAV))
         self.cal = np.zeros((n + 1, kf.N_CAL))
-        self.p = np.zeros((n + 1, kf.N_STATES, kf.N_STATES))
+        self.sd = np.zeros((n + 1, kf.N_STATES))
         self.flags = np.zeros(n + 1, np.int32)
         self.innov = np.full((n + 1, 3), np.nan)  # velocity innovation, m frame
         self.keep_dir = keep_dir
         self.saved: list[tuple[int, int]] = []
 
-    def save_segment(self, a: int, x_post, p_pred, phi) -> None:
+    def save_segment(self, a: int, x_post, p_post, p_pred, phi) -> None:
         if self.keep_dir is not None:
-            np.savez(self.keep_dir / f"{a}.npz", x_post=x_post, p_pred=p_pred, phi=phi)
+            np.savez(self.keep_dir / f"{a}.npz", x_post=x_post, p_post=p_post, p_pred=p_pred, phi=phi)
             self.saved.append((a, a + x_post.shape[0] - 1))
 
 
@@ -450,7 +451,7 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     nav = prep.nav0.copy()
     cal = prep.cal0.copy()
     p = _p0(cfg, log)
-    fwd.nav[0], fwd.p[0] = nav, p
+    fwd.nav[0], fwd.sd[0] = nav, _sd(p)
     q_psd = _q_psd(cfg)
     mpp = cfg.metres_per_pulse
     params = np.zeros(kf.N_PARAMS)
@@ -461,7 +462,7 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     params[kf.P_LEVER:kf.P_LEVER + 3] = cfg.lever_arm_m
     nominal = np.zeros(5)
     smooth_nav = fwd.nav.copy() if smooth else None
-    smooth_p = fwd.p.copy() if smooth else None
+    smooth_sd = fwd.sd.copy() if smooth else None
     points: Points | None = Points.empty() if cpoem else None
     notes = list(prep.notes)
     n_fixes = n_gated = 0
@@ -486,16 +487,16 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
         n_fixes += fixes.epoch.size
         n_gated += int(np.sum(~(nis_out <= fixes.gate)))
         fwd.nav[a + 1:b + 1], fwd.cal[a + 1:b + 1] = seg_nav[1:], seg_cal[1:]
-        fwd.p[a + 1:b + 1], fwd.flags[a + 1:b + 1] = p_post[1:], seg_flags[1:]
+        fwd.sd[a + 1:b + 1], fwd.flags[a + 1:b + 1] = _sd(p_post[1:]), seg_flags[1:]
         fwd.innov[a + 1:b + 1] = seg_innov[1:]
-        fwd.save_segment(a, x_post, p_pred, phi)
+        fwd.save_segment(a, x_post, p_post, p_pred, phi)
         if smooth:
             x_s, p_s = np.empty_like(x_post), np.empty_like(p_post)
             x_post[0] = 0.0  # the segment starts from the previous posterior
             rts_backward(x_post, p_post, np.zeros_like(x_post), p_pred, phi, x_s, p_s)
             s_nav, s_cal = seg_nav.copy(), seg_cal.copy()
             _apply_rows(s_nav, s_cal, x_s - x_post)
-            smooth_nav[a + 1:b + 1], smooth_p[a + 1:b + 1] = s_nav[1:], p_s[1:]
+            smooth_nav[a + 1:b + 1], smooth_sd[a + 1:b + 1] = s_nav[1:], _sd(p_s[1:])
             if cpoem:
                 points = _segment_points(prep, cfg, a, b, s_nav, p_s)
         elif cpoem:
@@ -506,16 +507,15 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     if missing.size:
         notes.append(f"odometer: no data over {missing.size} filter steps ({missing.size / cfg.filter_rate_hz:.1f} s, "
                      f"first at t = {prep.t_kf[missing[0]]:.1f} s): velocity updates skipped")
-    forward = _solution(prep, cfg, fwd.nav, fwd.p, fwd.flags, fwd.cal, notes)
+    forward = _solution(prep, cfg, fwd.nav, fwd.sd, fwd.flags, fwd.cal, notes)
     smoothed = None
     if smooth:
-        smoothed = _solution(prep, cfg, smooth_nav, smooth_p, fwd.flags | FLAG_SMOOTHED, fwd.cal, notes)
+        smoothed = _solution(prep, cfg, smooth_nav, smooth_sd, fwd.flags | FLAG_SMOOTHED, fwd.cal, notes)
     return forward, smoothed, fwd
 
 
-def _solution(prep: _Prepared, cfg: Config, nav: np.ndarray, p: np.ndarray, flags: np.ndarray, cal: np.ndarray,
+def _solution(prep: _Prepared, cfg: Config, nav: np.ndarray, sd_all: np.ndarray, flags: np.ndarray, cal: np.ndarray,
               notes: list[str]) -> Solution:
-    sd_all = _sd(p)
     sd = np.column_stack([sd_all[:, kf.DP], sd_all[:, kf.DV], sd_all[:, kf.PHI]])
     sd_cal = np.column_stack([sd_all[:, kf.GYRO_BIAS], sd_all[:, kf.ACCEL_BIAS], sd_all[:, kf.ODO_MOUNT],
                               sd_all[:, kf.ODO_SCALE]])
@@ -528,7 +528,7 @@ def rts_offline(prep: _Prepared, cfg: Config, fwd: _Forward) -> Solution:
 
     Row 0 of a stored segment is the previous segment's last epoch: its update is that segment's last row, and
     the smoothed value at a segment's last epoch is the one the later segment's pass computed."""
-    nav, cal, p = fwd.nav.copy(), fwd.cal.copy(), fwd.p.copy()
+    nav, cal, sd = fwd.nav.copy(), fwd.cal.copy(), fwd.sd.copy()
     segs = [(a, b, fwd.keep_dir / f"{a}.npz") for a, b in fwd.saved]
     last_update = {b: np.load(path)["x_post"][-1] for a, b, path in segs}
     x_known = p_known = None
@@ -536,16 +536,16 @@ def rts_offline(prep: _Prepared, cfg: Config, fwd: _Forward) -> Solution:
         data = np.load(path)
         x_post, p_pred, phi = data["x_post"].copy(), data["p_pred"], data["phi"]
         x_post[0] = last_update.get(a, np.zeros(kf.N_STATES))
-        p_post = p[a:b + 1].copy()
+        p_post = data["p_post"].copy()
         x_run = x_post.copy()
         if x_known is not None:
             x_run[-1], p_post[-1] = x_known, p_known
         x_s, p_s = np.empty_like(x_post), np.empty_like(p_post)
         rts_backward(x_run, p_post, np.zeros_like(x_post), p_pred, phi, x_s, p_s)
         _apply_rows(nav[a:b], cal[a:b], x_s[:-1] - x_post[:-1])
-        p[a:b] = p_s[:-1]
+        sd[a:b] = _sd(p_s[:-1])
         x_known, p_known = x_s[0], p_s[0]
-    return _solution(prep, cfg, nav, p, fwd.flags | FLAG_SMOOTHED, cal, [])
+    return _solution(prep, cfg, nav, sd, fwd.flags | FLAG_SMOOTHED, cal, [])
 
 
 def dead_reckoning(log: Log, cfg: Config, prep: _Prepared, cal: np.ndarray | None = None) -> Solution:
