@@ -219,6 +219,7 @@ FLAG_ZUPT = 4  # zero-velocity update applied
 FLAG_SKIPPED = 8  # a measurement was due but skipped (dropout, missing push-ram reading, gated)
 FLAG_COVARIANCE_REPAIRED = 16  # the covariance was re-symmetrized / clipped to stay positive definite
 FLAG_SMOOTHED = 32  # the row is an RTS-smoothed estimate
+FLAG_MAG = 64  # magnetometer yaw update applied
 
 ESTIMATE = Stream(
     "estimate",
@@ -256,9 +257,30 @@ ESTIMATE_STATES = Stream(
     ),
 )
 
+ESTIMATE_FUSION = Stream(
+    "estimate_fusion",
+    "A federated filter's fusion (estimates/NAME_fusion.parquet, 003 section 4): information-sharing coefficients, "
+    "the magnetometer sub-filter's estimated yaw noise and innovation, and each sub-filter's own estimate "
+    "relative to the global one (NaN where the filter has no sub-filters).",
+    (
+        T,
+        Column("beta_odometer", "1", "f8", "information-sharing coefficient of the SINS/odometer sub-filter",
+               nan_ok=True),
+        Column("beta_mag", "1", "f8", "information-sharing coefficient of the SINS/magnetometer sub-filter",
+               nan_ok=True),
+        Column("r_yaw", "rad^2", "f8", "yaw measurement noise variance used (estimated from the innovations)"),
+        Column("yaw_innovation", "rad", "f8", "yaw closing-error innovation (NaN without a reading)", nan_ok=True),
+        Column("mag_flags", "1", "i4", "bitmask of estimators.federated_kf MAG_* (read, disturbed, gated, used)"),
+        *(Column(f"{sub}_d_pos_{a}", "m", "f8", f"{sub} sub-filter position minus the global one, {a}",
+                 nan_ok=True) for sub in ("odometer", "mag") for a in "enu"),
+        *(Column(f"{sub}_d_yaw", "rad", "f8", f"{sub} sub-filter yaw minus the global one", nan_ok=True)
+          for sub in ("odometer", "mag")),
+    ),
+)
+
 TRUTH_STREAMS = (TRUTH_SHEARER, TRUTH_PANS, TRUTH_SUPPORTS, TRUTH_CYCLES)
 SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, MAG, SUPPORT_IMU, FAULTS, SURVEY)
-ESTIMATE_STREAMS = (ESTIMATE, ESTIMATE_STATES)
+ESTIMATE_STREAMS = (ESTIMATE, ESTIMATE_STATES, ESTIMATE_FUSION)
 STREAMS = {s.name: s for s in TRUTH_STREAMS + SENSOR_STREAMS}
 
 
@@ -325,19 +347,20 @@ def read_stream(run_dir: Path, stream: Stream) -> pa.Table:
 ESTIMATES_DIR = "estimates"
 
 
-def estimate_path(run_dir: Path, method: str, states: bool = False) -> Path:
-    """Where estimator `method` writes its solution (or its sensor states) in a run directory."""
-    return Path(run_dir) / ESTIMATES_DIR / f"{method}{'_states' if states else ''}.parquet"
+_ESTIMATE_SUFFIX = {"estimate": "", "estimate_states": "_states", "estimate_fusion": "_fusion"}
 
 
-def write_estimate(run_dir: Path, method: str, data: dict[str, np.ndarray], states: bool = False) -> Path:
-    stream = ESTIMATE_STATES if states else ESTIMATE
-    path = estimate_path(run_dir, method, states)
+def estimate_path(run_dir: Path, method: str, stream: Stream = ESTIMATE) -> Path:
+    """Where estimator `method` writes its solution (or its ESTIMATE_STATES, ESTIMATE_FUSION) in a run directory."""
+    return Path(run_dir) / ESTIMATES_DIR / f"{method}{_ESTIMATE_SUFFIX[stream.name]}.parquet"
+
+
+def write_estimate(run_dir: Path, method: str, data: dict[str, np.ndarray], stream: Stream = ESTIMATE) -> Path:
+    path = estimate_path(run_dir, method, stream)
     path.parent.mkdir(parents=True, exist_ok=True)
     return write_stream(path.parent, Stream(path.stem, stream.doc, stream.columns), make_table(stream, data))
 
 
-def read_estimate(run_dir: Path, method: str, states: bool = False) -> pa.Table:
-    path = estimate_path(run_dir, method, states)
-    stream = ESTIMATE_STATES if states else ESTIMATE
+def read_estimate(run_dir: Path, method: str, stream: Stream = ESTIMATE) -> pa.Table:
+    path = estimate_path(run_dir, method, stream)
     return read_stream(path.parent, Stream(path.stem, stream.doc, stream.columns))

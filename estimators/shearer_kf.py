@@ -127,7 +127,7 @@ def joseph_update(x, p, z, h, r):
     s_inv = np.linalg.inv(s)
     k = p @ h.T @ s_inv
     x += k @ y
-    ikh = np.eye(N_STATES) - k @ h
+    ikh = np.eye(x.size) - k @ h
     p[:, :] = ikh @ p @ ikh.T + k @ r @ k.T
     return y @ s_inv @ y
 
@@ -202,6 +202,100 @@ def _fix_innovation(nav, lever, fix_llh):
 
 
 @nb.njit(cache=True)
+def mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, u0, steps):
+    """Mechanize steps u0 .. u0+steps-1 with the calibration's corrections (nav in place).
+
+    Returns (t_span, f_sum: specific-force increment in n, disp: displacement in n, w_sum: corrected angle
+    increment in b)."""
+    t_span = t_mech[u0 + steps] - t_mech[u0]
+    f_sum = np.zeros(3)
+    disp = np.zeros(3)
+    w_sum = np.zeros(3)
+    for u in range(u0, u0 + steps):
+        dt = t_mech[u + 1] - t_mech[u]
+        ph = phi_b[u] - cal[CAL_GYRO] * dt
+        dv_n, v_bar = _mech_step(nav, ph, dv_b[u] - cal[CAL_ACCEL] * dt, dt)
+        f_sum += dv_n
+        disp += v_bar * dt
+        w_sum += ph
+    return t_span, f_sum, disp, w_sum
+
+
+@nb.njit(cache=True)
+def transition(nav, nominal, f_sum, t_span, q_psd, tau_force):
+    """(Phi, Q_d) over the epoch, F evaluated at the nominal specific force (nominal[1:4], updated here).
+
+    F uses the running mean of the specific force over tau_force, not this step's, which carries the machine's
+    vibration whose velocity is also in the innovations (errors in variables again: the vibration would "reveal"
+    a heading error through f x phi that is not there)."""
+    if nominal[1] == 0.0 and nominal[2] == 0.0 and nominal[3] == 0.0:
+        nominal[1:4] = f_sum / t_span
+    else:
+        nominal[1:4] += (f_sum / t_span - nominal[1:4]) * min(1.0, t_span / tau_force)
+    return discretize(system_matrix(nav, nominal[1:4].copy()), q_psd, t_span)
+
+
+@nb.njit(cache=True)
+def odometer_update(x, p, nav, cal, disp, t_span, d_odo, nominal, r_vel, tau_fwd):
+    """Odometer + motion-constraint velocity update (001 eqs. 18-20) of (x, P); returns the innovation (3,).
+
+    d_odo is the odometer distance over the epoch. 001 eq. 20 evaluates H at the true velocity. Measured
+    velocities there (the odometer's quantization, the IMU's vibration) would put the same noise into H and z, and
+    that correlation biases the scale and mounting estimates at every update (errors in variables). H uses the
+    nominal motion instead: along the odometer axis at the odometer speed averaged up to two epochs back
+    (nominal[0]; the quantization error of the last reading, nominal[4], is also in this one's, with the opposite
+    sign)."""
+    c_bn = quat_mat(nav[QUAT])
+    c_nb = c_bn.T
+    c_bm = rotvec_mat(cal[CAL_MOUNT]).T
+    v_b = c_nb @ (disp / t_span)
+    v_od = d_odo / t_span / (1 + cal[CAL_SCALE])
+    v_b_nom = np.array([0.0, nominal[0], 0.0])
+    h = np.zeros((3, x.size))
+    h[:, _DV:_DV + 3] = c_bm @ c_nb
+    h[:, _PHI:_PHI + 3] = -c_bm @ c_nb @ skew3(c_bn @ v_b_nom)
+    h[:, _AL:_AL + 3] = -c_bm @ skew3(v_b_nom)
+    h[1, ODO_SCALE] = -(c_bm @ v_b_nom)[1]
+    z = c_bm @ v_b - np.array([0.0, v_od, 0.0])
+    nominal[0] += (nominal[4] - nominal[0]) * min(1.0, t_span / tau_fwd)
+    nominal[4] = v_od
+    innov = z - h @ x
+    joseph_update(x, p, z, h, r_vel)
+    return innov
+
+
+@nb.njit(cache=True)
+def stand_update(x, p, nav, w_sum, t_span, nominal, r_zupt, r_zaru):
+    """Zero-velocity (004 eq. 2) and zero-rate updates of (x, P) while the shearer stands (any state count >= 15)."""
+    nominal[0] = nominal[4] = 0.0
+    n = x.size
+    h = np.zeros((3, n))
+    for i in range(3):
+        h[i, _DV + i] = 1.0
+    joseph_update(x, p, nav[VEL].copy(), h, np.eye(3) * r_zupt ** 2)
+    c_nb = quat_mat(nav[QUAT]).T
+    w_ie, _w_en = nav_rates(nav[LAT], nav[HGT], nav[VEL])
+    h = np.zeros((3, n))
+    h[:, _PHI:_PHI + 3] = c_nb @ skew3(w_ie)
+    for i in range(3):
+        h[i, _BG + i] = 1.0
+    joseph_update(x, p, w_sum / t_span - c_nb @ w_ie, h, np.eye(3) * r_zaru ** 2)
+
+
+@nb.njit(cache=True)
+def keep_covariance(x, p, p_fallback):
+    """Symmetrize P; if a variance is not positive and finite, restore p_fallback and drop the update x.
+    Returns True when P had to be repaired."""
+    p[:, :] = 0.5 * (p + p.T)
+    for i in range(x.size):
+        if not (p[i, i] > 0.0) or not np.isfinite(p[i, i]):
+            p[:, :] = p_fallback
+            x[:] = 0.0
+            return True
+    return False
+
+
+@nb.njit(cache=True)
 def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch, fix_llh, fix_r, fix_gate, q_psd,
                params,
                nav, cal, p, nominal, out_nav, out_cal, x_post, p_post, p_pred, phi_store, flags, nis_out,
@@ -221,71 +315,23 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
     k_fix = np.searchsorted(fix_epoch, j0 + 1)
     x = np.zeros(N_STATES)
     for j in range(j0 + 1, j1 + 1):
-        u0 = (j - 1) * steps
-        t_span = t_mech[j * steps] - t_mech[u0]
-        f_sum = np.zeros(3)
-        disp = np.zeros(3)
-        w_sum = np.zeros(3)
-        for u in range(u0, u0 + steps):
-            dt = t_mech[u + 1] - t_mech[u]
-            ph = phi_b[u] - cal[CAL_GYRO] * dt
-            dv_n, v_bar = _mech_step(nav, ph, dv_b[u] - cal[CAL_ACCEL] * dt, dt)
-            f_sum += dv_n
-            disp += v_bar * dt
-            w_sum += ph
-        # F is evaluated at the nominal specific force: the running mean over P_TAU_FORCE, not this step's, which
-        # carries the machine's vibration whose velocity is also in the innovations (errors in variables again:
-        # the vibration would "reveal" a heading error through f x phi that is not there).
-        if nominal[1] == 0.0 and nominal[2] == 0.0 and nominal[3] == 0.0:
-            nominal[1:4] = f_sum / t_span
-        else:
-            nominal[1:4] += (f_sum / t_span - nominal[1:4]) * min(1.0, t_span / params[P_TAU_FORCE])
-        phi, qd = discretize(system_matrix(nav, nominal[1:4].copy()), q_psd, t_span)
+        t_span, f_sum, disp, w_sum = mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, (j - 1) * steps, steps)
+        phi, qd = transition(nav, nominal, f_sum, t_span, q_psd, params[P_TAU_FORCE])
         p[:, :] = phi @ p @ phi.T + qd
         phi_store[j] = phi
         p_pred[j] = p
         x[:] = 0.0
         flag = 0
-        c_bn = quat_mat(nav[QUAT])
-        c_nb = c_bn.T
         if odo_mode[j] == 1:
-            c_mb = rotvec_mat(cal[CAL_MOUNT])
-            c_bm = c_mb.T
-            v_n = disp / t_span
-            v_b = c_nb @ v_n
-            v_od = (odo_dist[j] - odo_dist[j - 1]) / t_span / (1 + cal[CAL_SCALE])
-            # 001 eq. 20 evaluates H at the true velocity. Measured velocities there (the odometer's quantization,
-            # the IMU's vibration) would put the same noise into H and z, and that correlation biases the scale and
-            # mounting estimates at every update (errors in variables). H uses the nominal motion instead: along
-            # the odometer axis at the odometer speed averaged up to two epochs back (the quantization error of
-            # the last reading is also in this one's, with the opposite sign).
-            v_b_nom = np.array([0.0, nominal[0], 0.0])
-            h = np.zeros((3, N_STATES))
-            h[:, _DV:_DV + 3] = c_bm @ c_nb
-            h[:, _PHI:_PHI + 3] = -c_bm @ c_nb @ skew3(c_bn @ v_b_nom)
-            h[:, _AL:_AL + 3] = -c_bm @ skew3(v_b_nom)
-            h[1, ODO_SCALE] = -(c_bm @ v_b_nom)[1]
-            z = c_bm @ v_b - np.array([0.0, v_od, 0.0])
-            nominal[0] += (nominal[4] - nominal[0]) * min(1.0, t_span / params[P_TAU_FWD])
-            nominal[4] = v_od
-            vel_innov[j] = z - h @ x
-            joseph_update(x, p, z, h, r_vel)
+            vel_innov[j] = odometer_update(x, p, nav, cal, disp, t_span, odo_dist[j] - odo_dist[j - 1], nominal,
+                                           r_vel, params[P_TAU_FWD])
             flag |= FLAG_VELOCITY
         elif odo_mode[j] == 0:
-            nominal[0] = nominal[4] = 0.0
-            h = np.zeros((3, N_STATES))
-            for i in range(3):
-                h[i, _DV + i] = 1.0
-            joseph_update(x, p, nav[VEL].copy(), h, np.eye(3) * params[P_R_ZUPT] ** 2)
-            w_ie, _w_en = nav_rates(nav[LAT], nav[HGT], nav[VEL])
-            h = np.zeros((3, N_STATES))
-            h[:, _PHI:_PHI + 3] = c_nb @ skew3(w_ie)
-            for i in range(3):
-                h[i, _BG + i] = 1.0
-            joseph_update(x, p, w_sum / t_span - c_nb @ w_ie, h, np.eye(3) * params[P_R_ZARU] ** 2)
+            stand_update(x, p, nav, w_sum, t_span, nominal, params[P_R_ZUPT], params[P_R_ZARU])
             flag |= FLAG_ZUPT
         else:
             flag |= FLAG_SKIPPED
+        c_bn = quat_mat(nav[QUAT])
         while k_fix < fix_epoch.size and fix_epoch[k_fix] == j:
             h = np.zeros((3, N_STATES))
             h[:, _PHI:_PHI + 3] = -skew3(c_bn @ lever)
@@ -300,15 +346,7 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
             else:
                 flag |= FLAG_SKIPPED
             k_fix += 1
-        # Keep P symmetric and positive definite.
-        p[:, :] = 0.5 * (p + p.T)
-        ok = True
-        for i in range(N_STATES):
-            if not (p[i, i] > 0.0) or not np.isfinite(p[i, i]):
-                ok = False
-        if not ok:
-            p[:, :] = p_pred[j]
-            x[:] = 0.0
+        if keep_covariance(x, p, p_pred[j]):
             flag |= FLAG_COVARIANCE_REPAIRED
         apply_correction(nav, cal, x)
         x_post[j] = x

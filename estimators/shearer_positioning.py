@@ -9,7 +9,9 @@ Methods (each an estimates/NAME stream):
 * ``kf_cpoem``      plus CPOEM fixes (001 eqs. 6, 21-22) whose points come from the forward filter;
 * ``kf_cpoem_rts``  plus the online RTS smoother (001 eqs. 28-31, Fig. 4) run at each face end over the pass just
                     finished; the smoothed points feed the next cycle's fixes, the output is the smoothed pass;
-* ``rts_offline``   one RTS pass over the whole run of ``kf_cpoem_rts``'s forward filter.
+* ``rts_offline``   one RTS pass over the whole run of ``kf_cpoem_rts``'s forward filter;
+* ``ckf_mag``       003's centralized SINS/odometer/magnetometer filter (estimators.afkf), needs the mag stream;
+* ``afkf``          003's adaptive federated filter with the magnetometer disturbance test (estimators.afkf).
 
 Passes and face ends are found from the odometer alone: a straight cut is a run of travel in one direction
 longer than half the face (the distance between the two surveyed face-end points); the pass ends when the
@@ -44,7 +46,8 @@ from estimators.rotations import (
 from estimators.rts import rts_backward
 from estimators.strapdown import compensated_increments, mechanize
 
-METHODS = ("dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline")
+METHODS = ("dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag", "afkf")
+MAG_METHODS = ("ckf_mag", "afkf")
 DEG = np.pi / 180
 
 
@@ -62,6 +65,39 @@ class ImuNoise:
     accel_bias: float  # m/s^2
     gyro_bias_psd: float = 0.0  # rad^2/s^3, random-walk density of the in-run bias
     accel_bias_psd: float = 0.0  # m^2/s^5
+
+
+@dataclass(frozen=True)
+class MagSettings:
+    """The shearer magnetometer as the SINS/magnetometer filters (estimators.afkf) use it. Units SI."""
+
+    date: str = "2026-06-01"
+    """Date for the geomagnetic model (declination, dip and strength at the start position)."""
+    noise_t: float = 1e-7
+    """White noise per axis [T]."""
+    extra_sigma: float = 0.5 * DEG
+    """Yaw error [rad] the white noise does not cover: calibration residual, motor field, declination error. The
+    nominal yaw variance is noise_t^2 / (H^2 n) + extra_sigma^2 for n readings per filter epoch (002 eq. 27)."""
+    window: int = 50
+    """Innovations in the noise-estimation window (003 section 4.2) [filter epochs]."""
+    min_samples: int = 20
+    """Innovations needed before the window's estimate replaces the nominal variance."""
+    field_check: bool = True
+    """Leave out readings whose strength or dip disagrees with the geomagnetic model (the disturbance test)."""
+    norm_tol: float = 0.03
+    """Largest relative deviation of the field strength from the model's."""
+    dip_tol: float = 2.0 * DEG
+    """Largest deviation of the dip from the model's [rad]."""
+    gate: float = float("inf")
+    """Normalized innovation squared above which a yaw update is left out."""
+    saturation_t: float = 8e-5
+    """Range of the magnetometer [T]: a component at or beyond it is saturated (MTi-30: +-0.8 G)."""
+    hard_iron_t: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    """Hard-iron offset h [T] of an earlier calibration (estimators.magnetic.fit_ellipsoid), removed first."""
+    soft_iron_correction: tuple[tuple[float, ...], ...] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    """S^-1 of that calibration: B_b = S^-1 (b_b - h)."""
+    sharing: str = "trace"
+    """Information-sharing rule (estimators.federated): "trace" (003 section 4.3) or "inverse_trace"."""
 
 
 @dataclass(frozen=True)
@@ -108,6 +144,7 @@ class Config:
     vibration_vrw: float = 5e-4
     """Velocity random walk [m/s/sqrt(s)] added for the cutting machine's vibration: what sculling compensation at
     the IMU rate leaves of a 30 Hz pick band (about 1e-4 m/s^2 that comes and goes with the cutting)."""
+    mag: MagSettings = MagSettings()
 
     @classmethod
     def appendix_a(cls, **kw) -> Config:
@@ -136,6 +173,8 @@ class Log:
     ram_support: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     ram_extension: np.ndarray = field(default_factory=lambda: np.zeros(0))
     ram_valid: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    mag_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    mag_b: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (M, 3) [T]
 
 
 @dataclass
@@ -151,6 +190,7 @@ class Solution:
     cal: np.ndarray | None = None  # (K, 10) estimators.shearer_kf calibration vector
     sd_cal: np.ndarray | None = None  # (K, 10)
     notes: list[str] = field(default_factory=list)
+    fusion: dict[str, np.ndarray] | None = None  # ESTIMATE_FUSION columns of a federated filter
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -265,6 +305,17 @@ def _q_psd(cfg: Config) -> np.ndarray:
     q[kf.GYRO_BIAS] = cfg.imu.gyro_bias_psd
     q[kf.ACCEL_BIAS] = cfg.imu.accel_bias_psd
     return q * cfg.q_scale ** 2
+
+
+def kf_params(cfg: Config) -> np.ndarray:
+    """The parameter vector of the estimators.shearer_kf kernels."""
+    params = np.zeros(kf.N_PARAMS)
+    quantization = np.sqrt(cfg.metres_per_pulse ** 2 / 6) * cfg.filter_rate_hz  # of a speed over one epoch
+    params[[kf.P_R_LATERAL, kf.P_R_ALONG, kf.P_R_VERTICAL, kf.P_R_ZUPT, kf.P_R_ZARU, kf.P_TAU_FWD, kf.P_TAU_FORCE]] = [
+        cfg.r_lateral, np.hypot(quantization, cfg.r_odometer), cfg.r_vertical, cfg.r_zupt, cfg.r_zaru,
+        cfg.speed_tau_s, cfg.force_tau_s]
+    params[kf.P_LEVER:kf.P_LEVER + 3] = cfg.lever_arm_m
+    return params
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -453,13 +504,7 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     p = _p0(cfg, log)
     fwd.nav[0], fwd.sd[0] = nav, _sd(p)
     q_psd = _q_psd(cfg)
-    mpp = cfg.metres_per_pulse
-    params = np.zeros(kf.N_PARAMS)
-    dt_kf = 1.0 / cfg.filter_rate_hz
-    params[[kf.P_R_LATERAL, kf.P_R_ALONG, kf.P_R_VERTICAL, kf.P_R_ZUPT, kf.P_R_ZARU, kf.P_TAU_FWD, kf.P_TAU_FORCE]] = [
-        cfg.r_lateral, np.hypot(np.sqrt(mpp ** 2 / 6) / dt_kf, cfg.r_odometer), cfg.r_vertical, cfg.r_zupt,
-        cfg.r_zaru, cfg.speed_tau_s, cfg.force_tau_s]
-    params[kf.P_LEVER:kf.P_LEVER + 3] = cfg.lever_arm_m
+    params = kf_params(cfg)
     nominal = np.zeros(5)
     smooth_nav = fwd.nav.copy() if smooth else None
     smooth_sd = fwd.sd.copy() if smooth else None
@@ -598,37 +643,48 @@ def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS) -> dict[
             out["dr_compensated"] = dead_reckoning(log, cfg, prep, smoothed.cal[-1])
     if "dr" in methods:
         out["dr"] = dead_reckoning(log, cfg, prep)
+    if set(MAG_METHODS) & set(methods):
+        from estimators import afkf  # it builds on this module
+
+        for name in MAG_METHODS:
+            if name in methods:
+                out[name] = afkf.run(log, cfg, prep, federated=name == "afkf")
     return {m: out[m] for m in methods}
 
 
 
 
-def log_from_columns(imu, odometer, survey, pushram=None) -> Log:
+def log_from_columns(imu, odometer, survey, pushram=None, mag=None) -> Log:
     """A Log from stream columns (pyarrow tables or mappings of arrays, logformat column names)."""
     def col(table, name):
         c = table[name] if isinstance(table, dict) else table.column(name)
         return np.asarray(c if isinstance(c, np.ndarray) else c.to_numpy())
 
-    ram = {}
+    optional = {}
     if pushram is not None:
-        ram = {"ram_t": col(pushram, "t"), "ram_support": col(pushram, "support"),
-                   "ram_extension": col(pushram, "extension"), "ram_valid": col(pushram, "valid")}
+        optional.update(ram_t=col(pushram, "t"), ram_support=col(pushram, "support"),
+                        ram_extension=col(pushram, "extension"), ram_valid=col(pushram, "valid"))
+    if mag is not None:
+        optional.update(mag_t=col(mag, "t"), mag_b=np.column_stack([col(mag, f"b_{a}") for a in "xyz"]))
     return Log(imu_t=col(imu, "t"), dtheta=np.column_stack([col(imu, f"dtheta_{a}") for a in "xyz"]),
                dv=np.column_stack([col(imu, f"dv_{a}") for a in "xyz"]), odo_t=col(odometer, "t"),
                odo_distance=col(odometer, "distance"), odo_direction=col(odometer, "direction"),
                survey_t=col(survey, "t"), survey_llh=np.column_stack([col(survey, k) for k in ("lat", "lon", "h")]),
                survey_yaw=col(survey, "yaw"),
                survey_sd=np.column_stack([col(survey, k) for k in ("sd_horizontal", "sd_vertical", "sd_yaw")]),
-               **ram)
+               **optional)
 
 
 def load_log(run_dir: Path) -> Log:
-    """The streams of a run directory the positioning reads (push rams optional), checked on load."""
-    from estimators.logformat import IMU, ODOMETER, PUSHRAM, SURVEY, read_stream
+    """The streams of a run directory the positioning reads (push rams and magnetometer optional), checked on
+    load."""
+    from estimators.logformat import IMU, MAG, ODOMETER, PUSHRAM, SURVEY, read_stream
 
-    ram = read_stream(run_dir, PUSHRAM) if (Path(run_dir) / PUSHRAM.filename).is_file() else None
+    def optional(stream):
+        return read_stream(run_dir, stream) if (Path(run_dir) / stream.filename).is_file() else None
+
     return log_from_columns(read_stream(run_dir, IMU), read_stream(run_dir, ODOMETER), read_stream(run_dir, SURVEY),
-                            ram)
+                            optional(PUSHRAM), optional(MAG))
 
 
 def estimate_columns(sol: Solution) -> dict[str, np.ndarray]:

@@ -8,7 +8,14 @@ import pyarrow as pa
 import pytest
 from rerun.chunk import RrdReader
 
-from estimators.logformat import ESTIMATE_STATES, FLAG_POSITION, STREAMS, make_table
+from estimators.federated_kf import MAG_DISTURBED, MAG_USED
+from estimators.logformat import (
+    ESTIMATE_FUSION,
+    ESTIMATE_STATES,
+    FLAG_POSITION,
+    STREAMS,
+    make_table,
+)
 from twin.estimate_recording import write_estimate_recording
 from twin.recording import ESTIMATES_RRD, RUN_RRD, TIMELINE, write_recording
 
@@ -18,6 +25,7 @@ from .test_metrics import offset_estimate
 OFFSET = np.array([0.3, -0.2, 0.1])  # m east, north, up
 ROTVEC = np.array([1e-3, -2e-3, 5e-3])  # estimate = Exp([rotvec x]) truth: psi-angle error -rotvec
 SIGMA = 0.05
+D_POS = {"odometer": 0.05, "mag": -0.4}  # sub-filter position minus the global one [m]
 STATES_TRUTH = {"gyro_bias_z": np.radians(720.0) / 3600, "odo_scale": 0.003}
 
 
@@ -34,7 +42,13 @@ def run_dir(tmp_path_factory):
     estimate = offset_estimate(shearer, t, OFFSET, ROTVEC, sd=SIGMA, flags=flags)
     k = t.size
     states = make_table(ESTIMATE_STATES, {"t": t, **{c.name: np.full(k, 1e-5) for c in ESTIMATE_STATES.columns[1:]}})
-    write_estimate_recording(out / ESTIMATES_RRD, scn, shearer, {"kf": estimate}, {"kf": states}, STATES_TRUTH)
+    fusion = {"t": t, "beta_odometer": np.full(k, 0.3), "beta_mag": np.full(k, 0.7), "r_yaw": np.full(k, 1e-4),
+              "yaw_innovation": np.full(k, 1e-3), "mag_flags": np.full(k, MAG_USED, np.int32),
+              **{f"{sub}_d_pos_{a}": np.full(k, D_POS[sub]) for sub in D_POS for a in "enu"},
+              **{f"{sub}_d_yaw": np.zeros(k) for sub in D_POS}}
+    fusion["mag_flags"][501] = MAG_DISTURBED
+    write_estimate_recording(out / ESTIMATES_RRD, scn, shearer, {"kf": estimate}, {"kf": states}, STATES_TRUTH,
+                             fusion={"kf": make_table(ESTIMATE_FUSION, fusion)})
     return out
 
 
@@ -101,3 +115,17 @@ def test_view_opens_both_files(run_dir, monkeypatch):
     monkeypatch.setattr(recording.sys, "executable", str(run_dir / "no-bin" / "python"))
     recording.open_viewer(run_dir)
     assert launched == [["/usr/bin/rerun", str(run_dir / RUN_RRD), str(run_dir / ESTIMATES_RRD)]]
+
+
+def test_fusion_series_show_the_subfilters_and_the_disturbed_reading(run_dir):
+    chunks = RrdReader(run_dir / ESTIMATES_RRD).stream().to_chunks()
+    _, beta = _scalars(chunks, "/plots/fusion/kf/beta")
+    np.testing.assert_allclose(beta, np.broadcast_to([0.3, 0.7], beta.shape))
+    _, sd = _scalars(chunks, "/plots/fusion/kf/r_yaw")
+    np.testing.assert_allclose(sd, np.degrees(1e-2))
+    for i, axis in enumerate(("east", "north")):
+        _, err = _scalars(chunks, f"/plots/fusion/kf/subfilter_errors/{axis}")
+        np.testing.assert_allclose(err, np.broadcast_to(OFFSET[i] + np.array([0.0, D_POS["odometer"], D_POS["mag"]]),
+                                                        err.shape), atol=1e-6)
+    _, flags = _scalars(chunks, "/plots/fusion/kf/magnetometer")
+    assert flags[:, 0].all() and flags[:, 1].sum() == 1  # the single disturbed epoch survives the decimation

@@ -66,7 +66,8 @@ def test_standing_filter_finds_the_gyro_bias_and_leaves_the_heading_alone():
 def default_log():
     scn, result = simulated("default")
     streams = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), 0)
-    log = sp.log_from_columns(streams["imu"], streams["odometer"], streams["survey"], streams["pushram"])
+    log = sp.log_from_columns(streams["imu"], streams["odometer"], streams["survey"], streams["pushram"],
+                              streams["mag"])
     return scn, log
 
 

@@ -16,7 +16,14 @@ import numpy as np
 
 from estimators import metrics
 from estimators import shearer_positioning as sp
-from estimators.logformat import STREAMS, read_estimate, read_stream, write_estimate
+from estimators.logformat import (
+    ESTIMATE_FUSION,
+    ESTIMATE_STATES,
+    STREAMS,
+    read_estimate,
+    read_stream,
+    write_estimate,
+)
 from twin.imu_grades import grade
 from twin.layout import support_stations
 from twin.scenario import Scenario
@@ -39,7 +46,11 @@ def positioning_config(scn: Scenario) -> sp.Config:
           "metres_per_pulse": scn.sensors.odometer.metres_per_pulse,
           "support_u_m": tuple((support_stations(scn) + 0.5) * scn.face.pan_length_m - scn.shearer.length_m / 2),
           "n_samples": est.n_samples, "filter_rate_hz": est.filter_rate_hz, "cpoem_spacing_m": est.cpoem_spacing_m,
-          "ram_noise_sd": max(ram.noise_m, ram.resolution_m), "advance_sd": max(5 * ram.noise_m, 0.003)}
+          "ram_noise_sd": max(ram.noise_m, ram.resolution_m), "advance_sd": max(5 * ram.noise_m, 0.003),
+          "mag": sp.MagSettings(date=scn.sensors.mag.date, noise_t=max(scn.sensors.mag.noise_t, 1e-9),
+                                extra_sigma=math.radians(est.mag_extra_sigma_deg), field_check=est.mag_field_check,
+                                hard_iron_t=tuple(est.mag_hard_iron_t),
+                                soft_iron_correction=tuple(map(tuple, est.mag_soft_iron_correction)))}
     if est.tuning == "appendix_a":
         return sp.Config.appendix_a(**kw)
     imu = sp.ImuNoise(gyro_arw=max(g.gyro_arw, 1e-6), accel_vrw=max(g.accel_vrw, 1e-5),
@@ -76,7 +87,9 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
     for name, sol in sols.items():
         write_estimate(run_dir, name, sp.estimate_columns(sol))
         if sol.cal is not None:
-            write_estimate(run_dir, name, sp.state_columns(sol), states=True)
+            write_estimate(run_dir, name, sp.state_columns(sol), ESTIMATE_STATES)
+        if sol.fusion is not None:
+            write_estimate(run_dir, name, sol.fusion, ESTIMATE_FUSION)
         table = read_estimate(run_dir, name)
         t, err = metrics.position_errors(table, truth)
         entry = {"cycles": metrics.cycle_metrics(t, err, cycles), "notes": sol.notes}
@@ -88,8 +101,11 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
         out[name] = entry
     if recording:
         estimates = {name: read_estimate(run_dir, name) for name in sols}
-        states = {name: read_estimate(run_dir, name, states=True) for name, sol in sols.items() if sol.cal is not None}
-        write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, truth, estimates, states, states_truth)
+        states = {name: read_estimate(run_dir, name, ESTIMATE_STATES) for name, sol in sols.items() if sol.cal is not None}
+        fusion = {name: read_estimate(run_dir, name, ESTIMATE_FUSION) for name, sol in sols.items()
+                  if sol.fusion is not None}
+        write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, truth, estimates, states, states_truth,
+                                 fusion=fusion)
     return out
 
 

@@ -19,6 +19,17 @@ the truth point; attitude the psi-angle phi, C_b^n(true) = (I + [phi x]) C_b^n(e
 * `plots/states/METHOD/{gyro_bias,accel_bias,odo_mount,odo_scale}`   Scalars, the filter's sensor states
   [deg/h, mg, deg, 1], with the true values as flat series where given
 * `plots/sigma/METHOD/{gyro_bias,accel_bias,odo_mount,odo_scale}`    Scalars, +- their one-sigma
+
+and for a federated filter (ESTIMATE_FUSION, 003 section 4):
+
+* `plots/fusion/METHOD/beta`                          Scalars, information-sharing coefficients per sub-filter
+* `plots/fusion/METHOD/r_yaw`                         Scalars, the yaw noise sd the magnetometer sub-filter used
+                                                      (estimated from its innovations) [deg]
+* `plots/fusion/METHOD/yaw_innovation`                Scalars, yaw closing-error innovation [deg]
+* `plots/fusion/METHOD/magnetometer`                  Scalars 0/1: reading used, disturbed, gated in each plot
+                                                      interval (estimators.federated_kf MAG_*)
+* `plots/fusion/METHOD/subfilter_errors/{east,north}` Scalars, position error of the global estimate and of each
+                                                      sub-filter's own estimate before the fusion [m]
 """
 
 from __future__ import annotations
@@ -32,6 +43,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from estimators import earth
+from estimators.federated_kf import MAG_DISTURBED, MAG_GATED, MAG_USED
 from estimators.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT
 from estimators.metrics import attitude_errors, column, columns, position_errors
 from twin.imu_grades import DEG, DEG_PER_H, MG
@@ -57,6 +69,8 @@ STATE_GROUPS = {  # state column prefix: (axes, SI value per display unit, displ
     "odo_scale": ("", 1.0, "1"),
 }
 FLAG_SERIES = (("position fix", FLAG_POSITION), ("ZUPT", FLAG_ZUPT), ("skipped", FLAG_SKIPPED))
+MAG_SERIES = (("used", MAG_USED), ("disturbed", MAG_DISTURBED), ("gated", MAG_GATED))
+SUBFILTERS = ("odometer", "mag")
 _PALETTE = np.array([[40, 160, 240], [60, 200, 90], [200, 80, 220], [240, 200, 40], [120, 120, 255]], np.uint8)
 
 
@@ -106,13 +120,37 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method:
         _log_band(rec, f"plots/sigma/{method}/position/{axis}", t, sd_pos[:, i], f"{method} {axis} [m]")
         _log_band(rec, f"plots/sigma/{method}/attitude/{a}", t, sd_att[:, i], f"{method} phi_{a} [deg]")
 
-    # Flags are events: OR them over each plot interval so a single-sample fix is not decimated away.
+    _log_flags(rec, f"plots/flags/{method}", table, "flags", FLAG_SERIES, method, rate_hz)
+
+
+def _log_flags(rec: rr.RecordingStream, entity: str, table: pa.Table, name: str, series, method: str,
+               rate_hz: float) -> None:
+    """Flags are events: OR them over each plot interval so a single-sample fix is not decimated away."""
     t_all = column(table, "t")
     keep = decimate(t_all, rate_hz)
-    flags = np.bitwise_or.reduceat(np.asarray(table.column("flags").to_numpy(), np.int64), keep)
-    _series(rec, f"plots/flags/{method}", t_all[keep],
-            np.column_stack([(flags & bit) != 0 for _, bit in FLAG_SERIES]).astype(float),
-            [f"{method} {name}" for name, _ in FLAG_SERIES])
+    flags = np.bitwise_or.reduceat(np.asarray(table.column(name).to_numpy(), np.int64), keep)
+    _series(rec, entity, t_all[keep], np.column_stack([(flags & bit) != 0 for _, bit in series]).astype(float),
+            [f"{method} {label}" for label, _ in series])
+
+
+def _log_fusion(rec: rr.RecordingStream, truth_shearer, method: str, estimate: pa.Table, fusion: pa.Table,
+                rate_hz: float) -> None:
+    sub, t = _plot_rows(fusion, rate_hz)
+    root = f"plots/fusion/{method}"
+    _series(rec, f"{root}/r_yaw", t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None], [f"{method} sd yaw [deg]"])
+    _series(rec, f"{root}/yaw_innovation", t, np.degrees(column(sub, "yaw_innovation"))[:, None],
+            [f"{method} yaw innovation [deg]"])
+    _log_flags(rec, f"{root}/magnetometer", fusion, "mag_flags", MAG_SERIES, method, rate_hz)
+    beta = np.column_stack([column(sub, f"beta_{s}") for s in SUBFILTERS])
+    if not np.isfinite(beta).any():
+        return  # a centralized filter: no sub-filters
+    _series(rec, f"{root}/beta", t, beta, [f"{method} beta {s}" for s in SUBFILTERS])
+    est, _ = _plot_rows(estimate, rate_hz)
+    _, err = position_errors(est, truth_shearer)
+    for i, axis in enumerate(POSITION_AXES[:2]):
+        d = np.column_stack([np.zeros(t.size)] + [column(sub, f"{s}_d_pos_{'en'[i]}") for s in SUBFILTERS])
+        _series(rec, f"{root}/subfilter_errors/{axis}", t, err[:, i:i + 1] + d,
+                [f"{method} global {axis} [m]"] + [f"{method} {s} sub-filter {axis} [m]" for s in SUBFILTERS])
 
 
 def _log_states(rec: rr.RecordingStream, method: str, table: pa.Table, truth: dict[str, float] | None,
@@ -135,9 +173,10 @@ def _log_states(rec: rr.RecordingStream, method: str, table: pa.Table, truth: di
                 [f"{sign}1 sigma {n} [{unit}]" for sign in "+-" for n in names])
 
 
-def estimate_views(methods: list[str], state_methods: list[str]) -> tuple[rrb.View, ...]:
+def estimate_views(methods: list[str], state_methods: list[str],
+                   fusion_methods: list[str] = ()) -> tuple[rrb.View, ...]:
     """Time-series views of the Estimates tab: each error axis over all methods with their sigma bands, each
-    group of sensor states, the flags."""
+    group of sensor states, the flags, and the fusion of federated filters."""
     views = []
     for axis in POSITION_AXES:
         views.append(rrb.TimeSeriesView(
@@ -155,31 +194,40 @@ def estimate_views(methods: list[str], state_methods: list[str]) -> tuple[rrb.Vi
             contents=[f"plots/states/{m}/{group}" for m in state_methods] + [f"plots/sigma/{m}/{group}"
                                                                               for m in state_methods]))
     views.append(rrb.TimeSeriesView(name="Position fixes, ZUPTs, skipped", origin="plots/flags"))
+    for part, title in (("beta", "Information sharing"), ("r_yaw", "Magnetometer yaw noise sd [deg]"),
+                        ("yaw_innovation", "Yaw innovation [deg]"), ("magnetometer", "Magnetometer readings"),
+                        ("subfilter_errors", "Sub-filter position errors [m]")) if fusion_methods else ():
+        views.append(rrb.TimeSeriesView(name=title, origin="/",
+                                        contents=[f"plots/fusion/{m}/{part}/**" for m in fusion_methods]))
     return tuple(views)
 
 
 def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates: dict[str, pa.Table],
                              states: dict[str, pa.Table], states_truth: dict[str, float] | None = None,
-                             rate_hz: float = PLOT_RATE_HZ) -> None:
+                             rate_hz: float = PLOT_RATE_HZ, fusion: dict[str, pa.Table] | None = None) -> None:
     """Write the estimators' outputs as `path` (normally RUN_DIR/estimates.rrd) with the recording id of
     RUN_DIR/run.rrd.
 
     `truth_shearer`: the truth_shearer table (or its columns as arrays); `estimates`: method name -> ESTIMATE
     table; `states`: method name -> ESTIMATE_STATES table (filters with sensor states only); `states_truth`:
     true values of the sensor states by ESTIMATE_STATES column name in SI units (e.g. "gyro_bias_x" [rad/s],
-    "odo_scale"), drawn as flat series. Estimate times must lie within the truth span (LogError otherwise).
+    "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters).
+    Estimate times must lie within the truth span (LogError otherwise).
     """
+    fusion = fusion or {}
     if not rate_hz > 0:
         raise ValueError(f"write_estimate_recording: rate_hz must be positive, got {rate_hz}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=run_recording_id(path.parent) or uuid.uuid4())
-    rec.save(path, default_blueprint=blueprint(estimate_views(list(estimates), list(states))))
+    rec.save(path, default_blueprint=blueprint(estimate_views(list(estimates), list(states), list(fusion))))
     try:
         for k, (method, table) in enumerate(estimates.items()):
             _log_estimate(rec, scn, truth_shearer, method, table, rate_hz, _PALETTE[k % len(_PALETTE)])
         for method, table in states.items():
             _log_states(rec, method, table, states_truth, rate_hz)
+        for method, table in fusion.items():
+            _log_fusion(rec, truth_shearer, method, estimates[method], table, rate_hz)
         rec.flush()
     finally:
         rec.disconnect()

@@ -16,7 +16,7 @@ from typing import Annotated, Literal
 from twin import snake
 from twin.layout import floor_pitch_change
 from twin.imu_grades import GRADES
-from twin.sensor_config import Fault, Sensors
+from twin.sensor_config import Fault, Sensors, Vector3
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -136,7 +136,8 @@ class Rates(_Section):
 class ShearerPositioning(_Section):
     """The shearer positioning estimators of 001 that `longwall run` / `longwall estimate` run on the log."""
 
-    methods: list[Literal["dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline"]] = [
+    methods: list[Literal["dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag",
+                          "afkf"]] = [
         "dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline"]
     """estimators.shearer_positioning METHODS; an empty list runs none."""
     tuning: Literal["ours", "appendix_a"] = "ours"
@@ -146,6 +147,16 @@ class ShearerPositioning(_Section):
     """Coning/sculling sub-samples per mechanization update."""
     cpoem_spacing_m: Annotated[float, Field(ge=0.2, le=50, allow_inf_nan=False)] = 2.0
     """Delta of 001 section 2.2: the distance between CPOEM points (001 uses 2, 6 and 10 m)."""
+    mag_extra_sigma_deg: Annotated[float, Field(ge=0, le=30, allow_inf_nan=False)] = 0.5
+    """Magnetic yaw error the magnetometer's white noise does not cover (calibration residual, motor field) [deg]."""
+    mag_field_check: bool = True
+    """afkf: leave out magnetometer readings whose strength or dip disagrees with the geomagnetic model."""
+    mag_hard_iron_t: Vector3 = [0.0, 0.0, 0.0]
+    """Hard-iron offset [T] of the magnetometer's calibration (estimators.magnetic.fit_ellipsoid), removed from
+    the readings before use."""
+    mag_soft_iron_correction: Annotated[list[Vector3], Field(min_length=3, max_length=3)] = [
+        [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    """The calibration's S^-1 (rows): calibrated field = S^-1 (reading - hard iron)."""
 
 
 class Estimators(_Section):
