@@ -113,11 +113,12 @@ def attitude_errors(estimate, truth_shearer) -> tuple[np.ndarray, np.ndarray]:
 
 # ----------------------------------------------------------------------------------------------- statistics
 
-STAT_KEYS = ("samples", "rmse_e", "rmse_n", "rmse_u", "max_horizontal", "max_3d", "sep")
+STAT_KEYS = ("samples", "rmse_e", "rmse_n", "rmse_u", "max_e", "max_n", "max_horizontal", "max_3d", "sep")
 
 
 def error_stats(err_enu: np.ndarray) -> dict[str, float]:
-    """RMSE per axis, the largest horizontal and 3-D error, and the SEP of position errors (K, 3) [m].
+    """RMSE per axis, the largest |east|, |north|, horizontal and 3-D error, and the SEP of position errors
+    (K, 3) [m].
 
     SEP (spherical error probable) is the radius of the sphere about the truth that holds half of the errors:
     here the empirical median of the 3-D error norm |e_k| over the samples (001 section 4, Table 3), not the
@@ -129,7 +130,8 @@ def error_stats(err_enu: np.ndarray) -> dict[str, float]:
     rmse = np.sqrt(np.mean(err ** 2, axis=0))
     norm = np.linalg.norm(err, axis=1)
     return {"samples": int(err.shape[0]), "rmse_e": float(rmse[0]), "rmse_n": float(rmse[1]),
-            "rmse_u": float(rmse[2]), "max_horizontal": float(np.hypot(err[:, 0], err[:, 1]).max()),
+            "rmse_u": float(rmse[2]), "max_e": float(np.abs(err[:, 0]).max()),
+            "max_n": float(np.abs(err[:, 1]).max()), "max_horizontal": float(np.hypot(err[:, 0], err[:, 1]).max()),
             "max_3d": float(norm.max()), "sep": float(np.median(norm))}
 
 

@@ -125,7 +125,8 @@ def test_cycle_metrics_windows():
     assert second["samples"] == 40 and second["max_3d"] == pytest.approx(1.0)
     assert second["sep"] == pytest.approx(1.0)  # 32 of 40 samples are 1 m up
     assert second["straight_cut"]["rmse_n"] == pytest.approx(0.4) and second["straight_cut"]["max_3d"] == 0.4
-    assert second["max_horizontal"] == pytest.approx(0.4)
+    assert second["max_horizontal"] == pytest.approx(0.4) and second["max_n"] == pytest.approx(0.4)
+    assert first["max_e"] == pytest.approx(0.3) and first["max_n"] == 0.0
     assert total["samples"] == t.size and total["straight_cut"]["samples"] == 9 + 8
     assert total["rmse_u"] == pytest.approx(np.sqrt(32 / 60))
 

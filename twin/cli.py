@@ -92,7 +92,7 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
         bar.close()
     if not quiet:
         print(format_summary(summary))
-        print(format_estimators(estimated))
+        print(format_estimators(estimated, scn.name))
         print(f"\nrun directory: {out}")
     return out
 
@@ -107,7 +107,7 @@ def estimate(run_dir: Path, quiet: bool = False) -> dict:
     estimated = run_estimators(Path(run_dir), scn)
     write_metrics(Path(run_dir), estimated)
     if not quiet:
-        print(format_estimators(estimated))
+        print(format_estimators(estimated, scn.name))
     return estimated
 
 

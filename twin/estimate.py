@@ -109,15 +109,30 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
     return out
 
 
-def format_estimators(estimators: dict) -> str:
-    """Per-method SEP per cutting cycle [m] as a table."""
+PAPER_FIGURES = {
+    "seed001": ("sep", "001 Table 3, KF + CPOEM + RTS: 0.50 0.32 0.13 0.17"),
+    "seed003": ("max", "003 Table 2: SINS/OD 0.901 E 1.249 N, SINS/OD/MAG 0.220 E 0.325 N"),
+    "seed003_interference": ("max", "003 section 5.2: CKF 3.827 E 1.942 N, FKF 1.545 E 1.942 N"),
+}
+"""The paper figures a scenario reproduces, printed beside the table they belong to."""
+
+
+def format_estimators(estimators: dict, scenario: str = "") -> str:
+    """Per-method SEP per cutting cycle and maximum |east|, |north| error over the run [m] as tables, with the
+    paper's figures for the scenarios that reproduce one (PAPER_FIGURES)."""
     if not estimators:
         return ""
+    table, paper = PAPER_FIGURES.get(scenario, ("", ""))
     n = max(len(e["cycles"]) - 1 for e in estimators.values())
-    lines = ["", "shearer position, SEP per cutting cycle [m] (001 Table 3: 0.50 0.32 0.13 0.17)",
+    lines = ["", "shearer position, SEP per cutting cycle [m]" + (f" ({paper})" if table == "sep" else ""),
              f"{'method':16s}" + "".join(f"{'A' + str(k + 1):>8s}" for k in range(n)) + f"{'all':>8s}"]
     for name, e in estimators.items():
         lines.append(f"{name:16s}" + "".join(f"{c['sep']:8.3f}" for c in e["cycles"]))
+    lines += ["", "shearer position, maximum error over the run [m]" + (f" ({paper})" if table == "max" else ""),
+              f"{'method':16s}{'east':>8s}{'north':>8s}{'horiz.':>8s}"]
+    for name, e in estimators.items():
+        run = e["cycles"][-1]
+        lines.append(f"{name:16s}{run['max_e']:8.3f}{run['max_n']:8.3f}{run['max_horizontal']:8.3f}")
     return "\n".join(lines)
 
 
