@@ -15,7 +15,8 @@ import time
 
 import numpy as np
 
-from estimators import afkf, metrics
+from estimators import federated_positioning as fp
+from estimators import metrics
 from estimators import shearer_positioning as sp
 from twin.cli import default_scenario
 from twin.estimate import positioning_config
@@ -54,7 +55,7 @@ def run_trials(name: str, trials: int) -> tuple[dict[str, np.ndarray], dict[str,
             if m == "kf":
                 sol = sp.run_kf(log, cfg, prep, cpoem=False, smooth=False)[0]
             else:
-                sol = afkf.run(log, cfg, prep, federated=m == "afkf")
+                sol = fp.run_mag(log, cfg, prep, federated=m == "afkf")
             if timed:
                 seconds[m] += time.perf_counter() - t0
             if not (np.isfinite(sol.llh).all() and np.isfinite(sol.sd).all()):

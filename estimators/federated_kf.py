@@ -31,17 +31,29 @@ import numba as nb
 import numpy as np
 
 from estimators.adaptive import window_push, window_r
+from estimators.fault_detection import (
+    FSPRT_LAMBDA,
+    chi2_dual_state,
+    chi2_residual,
+    fsprt_update,
+    hysteresis,
+)
 from estimators.federated import fuse_kernel, sharing_kernel
 from estimators.logformat import (
     FLAG_COVARIANCE_REPAIRED,
+    FLAG_ISOLATED,
+    FLAG_POSITION,
     FLAG_SKIPPED,
     FLAG_VELOCITY,
     FLAG_ZUPT,
 )
 from estimators.magnetic import yaw_closing_error_nb
 from estimators.shearer_kf import (
+    CAL_SCALE,
     DP,
     N_STATES,
+    ODO_SCALE,
+    P_LEVER,
     P_R_ALONG,
     P_R_LATERAL,
     P_R_VERTICAL,
@@ -52,6 +64,7 @@ from estimators.shearer_kf import (
     PHI,
     QUAT,
     apply_correction,
+    fix_measurement,
     joseph_update,
     keep_covariance,
     mechanize_epoch,
@@ -61,7 +74,7 @@ from estimators.shearer_kf import (
 )
 from estimators.strapdown import quat_mat
 
-SUB_ODOMETER, SUB_MAG = 0, 1
+SUB_ODOMETER, SUB_AIDING = 0, 1
 N_SUB = 2
 
 FEDERATED, CENTRALIZED = 0, 1
@@ -70,6 +83,15 @@ FEDERATED, CENTRALIZED = 0, 1
 (M_DECLINATION, M_H_PHI, M_INTENSITY, M_INCLINATION, M_NORM_TOL, M_DIP_TOL, M_R_YAW, M_R_MIN, M_MIN_SAMPLES,
  M_GATE, M_CHECK, M_ADAPT, M_INVERSE_SHARING) = (0, 1, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14)
 N_MAG_PARAMS = 15  # M_H_PHI takes 1..3
+
+# Indices of the detector parameter vector, and of the detector statistics per fix.
+D_FADING, D_T_ON, D_T_OFF, D_CHI2, D_ISOLATE_BY, D_CAP, D_ARM = range(7)
+N_DET_PARAMS = 7
+DET_RESIDUAL, DET_DUAL, DET_FSPRT = range(3)
+N_BACK = 16
+"""Rail fixes the filter can go back over when the fading SPRT raises a fault."""
+"""Detectors (004 section IV): residual chi-square, dual-state chi-square, fading SPRT; D_ISOLATE_BY names the
+one whose fault flag keeps the rail model's fixes out (-1: none)."""
 
 # Bits of the per-epoch magnetometer flag.
 MAG_READ = 1  # a reading was available over the epoch
@@ -118,7 +140,7 @@ def _share(m, beta):
 
 
 @nb.njit(cache=True)
-def fuse_epoch(x_od, p_od, x_mag, p_mag, inverse_sharing):
+def fuse_epoch(x_od, p_od, x_aiding, p_aiding, inverse_sharing):
     """Fusion (004 eqs. 10-11) and sharing coefficients (003 section 4.3) of the two sub-filters.
 
     Returns (x_g, P_g, beta (2,), valid (2,), ok); the sub-filters are reset in place (x_i = 0, P_i = P_g / beta_i;
@@ -126,45 +148,122 @@ def fuse_epoch(x_od, p_od, x_mag, p_mag, inverse_sharing):
     xs = np.empty((N_SUB, N_STATES))
     ps = np.empty((N_SUB, N_STATES, N_STATES))
     xs[SUB_ODOMETER], ps[SUB_ODOMETER] = x_od, p_od
-    xs[SUB_MAG], ps[SUB_MAG] = x_mag, p_mag
+    xs[SUB_AIDING], ps[SUB_AIDING] = x_aiding, p_aiding
     x_g, p_g, valid, ok = fuse_kernel(xs, ps)
     beta = sharing_kernel(ps, valid, inverse_sharing)
     if ok:
         p_od[:, :] = _share(p_g, beta[SUB_ODOMETER])
-        p_mag[:, :] = _share(p_g, beta[SUB_MAG])
+        p_aiding[:, :] = _share(p_g, beta[SUB_AIDING])
         x_od[:] = 0.0
-        x_mag[:] = 0.0
+        x_aiding[:] = 0.0
     return x_g, p_g, beta, valid, ok
 
 
 @nb.njit(cache=True)
-def run_afkf(mode, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b, q_psd, params, mag_params, r_window,
-             nav, cal, p0, out_nav, out_cal, out_sd, flags, mag_flags, beta_out, r_yaw_out, yaw_innov, sub_delta):
-    """Run the federated (mode FEDERATED) or centralized (CENTRALIZED) filter over epochs 1 .. K-1.
+def initial_covariances(p0, federated):
+    """(P_sub (2, 19, 19), beta (2,)): the initial information split between the sub-filters (Carlson) or, in
+    the centralized mode, P0 in slot SUB_ODOMETER (the one filter)."""
+    beta = np.full(N_SUB, 1.0 / N_SUB)
+    p_sub = np.empty((N_SUB, N_STATES, N_STATES))
+    for i in range(N_SUB):
+        p_sub[i] = _share(p0, beta[i]) if federated else p0
+    return p_sub, beta
 
-    mag_b (K, 3): the calibrated mean magnetometer reading over each epoch (NaN where none). params are
-    estimators.shearer_kf's, mag_params this module's M_* vector; r_window the length of the noise window.
-    nav, cal start the run (updated in place), p0 (19, 19) is the initial covariance. Stores per epoch the
-    navigation and calibration, the one-sigma of the 19 states, filter and magnetometer flags, beta (2,) (NaN in
-    the centralized mode), the yaw R used, the yaw innovation and, per sub-filter, x_i - x_g of position and
-    attitude (6,) before the reset (the sub-filter's own estimate relative to the global one)."""
+
+@nb.njit(cache=True)
+def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, trusted, x_other, p_other, det_params, fsprt,
+                isolated, seen, stats):
+    """Position fix of the rail kinematics model (004 eq. 9) with the three detectors on its innovation (004
+    eqs. 15-24): residual chi-square, dual-state chi-square against the other sub-filter, fading SPRT (with its
+    hysteresis in isolated[0]). stats[:] = the three statistics. Applied unless the isolating detector holds a
+    fault; returns True when applied. A `trusted` fix (a surveyed face end) is applied without the detectors.
+
+    scale_h (3,): for a point whose face coordinate is a true distance (the face survey), the along-face
+    direction in n times the odometer travel u at the fix. Such a fix lies u k_true along the face from where the
+    odometer (scale k) puts the shearer, so z += scale_h k_est and H on the scale state (truth - estimate, as in
+    the odometer update) is -scale_h: the face survey calibrates the odometer."""
+    z, h = fix_measurement(nav, lever, fix_llh, x.size)
+    z += scale_h * cal[CAL_SCALE]
+    h[:, ODO_SCALE] = -scale_h
+    if trusted:
+        joseph_update(x, p, z, h, fix_r)
+        stats[:] = np.nan
+        return True
+    v = z - h @ x
+    s = h @ p @ h.T + fix_r
+    stats[DET_RESIDUAL] = chi2_residual(v, s)
+    # The detectors are armed once the aiding sub-filter has taken its first fixes (before, the fading SPRT only
+    # shows what it would say, from a copy of its state).
+    seen[0] += 1
+    armed = seen[0] > det_params[D_ARM]
+    state = fsprt if armed else fsprt.copy()
+    lam = min(fsprt_update(state, v, s, det_params[D_FADING]), det_params[D_CAP])
+    state[FSPRT_LAMBDA] = lam  # capped: a large fault must not delay the readmission by its size
+    stats[DET_FSPRT] = lam
+    if armed:
+        isolated[0] = hysteresis(isolated[0], lam, det_params[D_T_ON], det_params[D_T_OFF])
+    # The dual-state test compares the estimate with this fix (a trial update) against the one without it.
+    x_try, p_try = x.copy(), p.copy()
+    joseph_update(x_try, p_try, z, h, fix_r)
+    stats[DET_DUAL] = chi2_dual_state(x_try[DP], p_try[DP, DP].copy(), x_other[DP], p_other[DP, DP].copy())
+    by = int(det_params[D_ISOLATE_BY])
+    reject = armed and ((by == DET_FSPRT and isolated[0]) or (by == DET_RESIDUAL and stats[DET_RESIDUAL] > det_params[D_CHI2])
+                        or (by == DET_DUAL and stats[DET_DUAL] > det_params[D_CHI2]))
+    if reject:
+        return False
+    x[:] = x_try
+    p[:, :] = p_try
+    return True
+
+
+@nb.njit(cache=True)
+def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b, fix_epoch, fix_llh, fix_r,
+             fix_scale_h, fix_trusted, q_psd, params, mag_params, det_params, nav, cal, p_sub, beta, nominal, r_buf, counters, fsprt, isolated,
+             out_nav, out_cal, out_sd, flags, mag_flags, beta_out, r_yaw_out, yaw_innov, sub_delta, fix_stats,
+             fix_applied):
+    """Run the federated (mode FEDERATED) or centralized (CENTRALIZED) filter over epochs j0+1 .. j1.
+
+    Inputs per epoch j: odometer distance and mode (estimators.shearer_kf.run_filter), mag_b (3,) the calibrated
+    mean magnetometer reading over the epoch (NaN where none). Position fixes of the rail kinematics model
+    (fix_epoch sorted, fix_llh (F, 3), fix_r (F, 3, 3), fix_scale_h (F, 3), fix_trusted (F,): see _fix_update)
+    go to sub-filter 2 (in the centralized mode to the one
+    filter) through the detectors of det_params (D_*). params are estimators.shearer_kf's, mag_params the M_*
+    vector. The state carried across calls, updated in place: nav, cal, p_sub (2, 19, 19) (initial_covariances),
+    beta (2,), nominal (N_NOMINAL,) (zeros at the start), the yaw-noise window r_buf (W, 1, 1) with counters[0] its
+    count, counters[1] the rail fixes tested so far, the FSPRT state fsprt and its fault flag isolated[0].
+
+    Stores per epoch: navigation and calibration, one-sigma of the 19 states, filter and magnetometer flags, beta
+    (NaN in the centralized mode), the yaw R used, the yaw innovation, per sub-filter x_i - x_g of position and
+    attitude (6,) before the reset; per fix the detector statistics (3,) and whether it was applied."""
     r_vel = np.diag(np.array([params[P_R_LATERAL], params[P_R_ALONG], params[P_R_VERTICAL]]) ** 2)
+    lever = params[P_LEVER:P_LEVER + 3].copy()
     federated = mode == FEDERATED
     adapt = federated and mag_params[M_ADAPT] > 0
     check = federated and mag_params[M_CHECK] > 0
     r_nominal = np.array([[mag_params[M_R_YAW]]])
     r_min = np.array([mag_params[M_R_MIN]])
-    r_buf = np.zeros((r_window, 1, 1))
-    r_count = 0
-    beta = np.full(N_SUB, 1.0 / N_SUB)
-    nominal = np.zeros(5)
+    p_od, p_aid = p_sub[SUB_ODOMETER], p_sub[SUB_AIDING]
     x_od = np.zeros(N_STATES)
-    x_mag = np.zeros(N_STATES)
-    p_od = _share(p0, beta[SUB_ODOMETER]) if federated else p0.copy()  # the initial information split (Carlson)
-    p_mag = _share(p0, beta[SUB_MAG])
-    p_mag_pred = p_mag.copy()
-    out_sd[0] = np.sqrt(np.diag(p0))
-    for j in range(1, out_nav.shape[0]):
+    x_aid = np.zeros(N_STATES)
+    k_fix = np.searchsorted(fix_epoch, j0 + 1)
+    # Snapshots of the state at the start of the last N_BACK epochs with a rail fix: when the fading SPRT raises a
+    # fault, the fixes of the rise that led to it were already applied and have bent the estimate (a soft fault is
+    # partly absorbed); the filter goes back to before them and goes on without them.
+    snap_j = np.full(N_BACK, -1, np.int64)
+    snap_k = np.full(N_BACK, -1, np.int64)
+    snap_nav, snap_cal = np.zeros((N_BACK, nav.size)), np.zeros((N_BACK, cal.size))
+    snap_p = np.zeros((N_BACK, N_SUB, N_STATES, N_STATES))
+    snap_beta, snap_nominal = np.zeros((N_BACK, N_SUB)), np.zeros((N_BACK, nominal.size))
+    snap_count = 0
+    rejected_until = -1
+    j = j0 + 1
+    while j <= j1:
+        if k_fix < fix_epoch.size and fix_epoch[k_fix] == j and not fix_trusted[k_fix] and k_fix > rejected_until:
+            slot = snap_count % N_BACK
+            snap_j[slot], snap_k[slot] = j, k_fix
+            snap_nav[slot], snap_cal[slot], snap_p[slot] = nav, cal, p_sub
+            snap_beta[slot], snap_nominal[slot] = beta, nominal
+            snap_count += 1
         t_span, f_sum, disp, w_sum = mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, (j - 1) * steps, steps)
         phi, qd = transition(nav, nominal, f_sum, t_span, q_psd, params[P_TAU_FORCE])
         p_od_pred = phi @ p_od @ phi.T + (_share(qd, beta[SUB_ODOMETER]) if federated else qd)
@@ -179,32 +278,61 @@ def run_afkf(mode, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b, q_psd,
             flag |= FLAG_ZUPT
         else:
             flag |= FLAG_SKIPPED
+        # Sub-filter 2 (magnetometer and rail model); in the centralized mode its measurements go to the one filter.
+        x2, p2 = (x_aid, p_aid) if federated else (x_od, p_od)
+        p_aid_pred = p_aid
         if federated:
-            p_mag_pred = phi @ p_mag @ phi.T + _share(qd, beta[SUB_MAG])
-            p_mag[:, :] = p_mag_pred
-        r_yaw = window_r(r_buf, r_count, r_nominal, r_min, int(mag_params[M_MIN_SAMPLES]))[0, 0] if adapt \
+            p_aid_pred = phi @ p_aid @ phi.T + _share(qd, beta[SUB_AIDING])
+            p_aid[:, :] = p_aid_pred
+        r_yaw = window_r(r_buf, counters[0], r_nominal, r_min, int(mag_params[M_MIN_SAMPLES]))[0, 0] if adapt \
             else mag_params[M_R_YAW]
         r_yaw_out[j] = r_yaw
         mflag = 0
         if np.all(np.isfinite(mag_b[j])):
-            if federated:
-                mflag, yaw_innov[j], _r, r_count = mag_update(x_mag, p_mag, nav, mag_b[j], mag_params, r_yaw, r_buf,
-                                                               r_count, check)
+            mflag, yaw_innov[j], _r, counters[0] = mag_update(x2, p2, nav, mag_b[j], mag_params, r_yaw, r_buf,
+                                                             counters[0], check)
+        back = -1
+        while k_fix < fix_epoch.size and fix_epoch[k_fix] == j:
+            if k_fix <= rejected_until:  # rolled back: already tested, left out
+                fix_applied[k_fix] = 0
+                flag |= FLAG_SKIPPED
+                k_fix += 1
+                continue
+            was = isolated[0]
+            if _fix_update(x2, p2, nav, cal, lever, fix_llh[k_fix], fix_r[k_fix], fix_scale_h[k_fix],
+                           fix_trusted[k_fix], x_od, p_od, det_params, fsprt, isolated, counters[1:],
+                           fix_stats[k_fix]):
+                fix_applied[k_fix] = 1
+                flag |= FLAG_POSITION
             else:
-                mflag, yaw_innov[j], _r, r_count = mag_update(x_od, p_od, nav, mag_b[j], mag_params, r_yaw, r_buf,
-                                                               r_count, False)
+                fix_applied[k_fix] = 0
+                flag |= FLAG_SKIPPED
+            if isolated[0] and not was and int(det_params[D_ISOLATE_BY]) == DET_FSPRT:
+                back = _rise_start(snap_k, snap_count, fix_stats, k_fix, 0.5 * det_params[D_T_OFF])
+                rejected_until = k_fix
+            k_fix += 1
+        if back >= 0:
+            j, k_fix = snap_j[back], snap_k[back]
+            nav[:], cal[:], p_sub[:] = snap_nav[back], snap_cal[back], snap_p[back]
+            beta[:], nominal[:] = snap_beta[back], snap_nominal[back]
+            x_od[:] = 0.0
+            x_aid[:] = 0.0
+            snap_count = 0
+            continue
+        if isolated[0]:
+            flag |= FLAG_ISOLATED
         if federated:
-            if keep_covariance(x_od, p_od, p_od_pred) | keep_covariance(x_mag, p_mag, p_mag_pred):
+            if keep_covariance(x_od, p_od, p_od_pred) | keep_covariance(x_aid, p_aid, p_aid_pred):
                 flag |= FLAG_COVARIANCE_REPAIRED
-            delta = np.zeros((N_SUB, 6))
             x_pre_od = x_od.copy()
-            x_pre_mag = x_mag.copy()
-            x_g, p_g, beta_new, valid, ok = fuse_epoch(x_od, p_od, x_mag, p_mag, mag_params[M_INVERSE_SHARING] > 0)
+            x_pre_aid = x_aid.copy()
+            x_g, p_g, beta_new, valid, ok = fuse_epoch(x_od, p_od, x_aid, p_aid, mag_params[M_INVERSE_SHARING] > 0)
+            delta = np.zeros((N_SUB, 6))
             if not ok:  # nothing usable: drop this epoch's updates and restart both from the prediction
                 p_od[:, :] = p_od_pred
-                p_mag[:, :] = p_mag_pred
+                p_aid[:, :] = p_aid_pred
                 x_od[:] = 0.0
-                x_mag[:] = 0.0
+                x_aid[:] = 0.0
                 flag |= FLAG_COVARIANCE_REPAIRED
                 p_g = p_od_pred
             else:
@@ -212,10 +340,9 @@ def run_afkf(mode, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b, q_psd,
                 if not valid.all():
                     mflag |= SUB_INVALID
                 for k in range(3):
-                    delta[SUB_ODOMETER, k] = x_pre_od[DP.start + k] - x_g[DP.start + k]
-                    delta[SUB_ODOMETER, 3 + k] = x_pre_od[PHI.start + k] - x_g[PHI.start + k]
-                    delta[SUB_MAG, k] = x_pre_mag[DP.start + k] - x_g[DP.start + k]
-                    delta[SUB_MAG, 3 + k] = x_pre_mag[PHI.start + k] - x_g[PHI.start + k]
+                    for i, x_pre in ((SUB_ODOMETER, x_pre_od), (SUB_AIDING, x_pre_aid)):
+                        delta[i, k] = x_pre[DP.start + k] - x_g[DP.start + k]
+                        delta[i, 3 + k] = x_pre[PHI.start + k] - x_g[PHI.start + k]
                 apply_correction(nav, cal, x_g)
             sub_delta[j] = delta
             beta_out[j] = beta
@@ -231,3 +358,23 @@ def run_afkf(mode, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b, q_psd,
         out_cal[j] = cal
         flags[j] = flag
         mag_flags[j] = mflag
+        j += 1
+
+
+@nb.njit(cache=True)
+def _rise_start(snap_k, snap_count, fix_stats, k_now, level):
+    """Ring slot of the earliest stored fix from which the fading SPRT stayed above `level` (half the clearing
+    threshold) up to fix k_now: the onset of the fault as the detector saw it; -1 when there is nothing to go
+    back over."""
+    best, best_k = -1, k_now
+    for i in range(min(snap_count, N_BACK)):
+        k = snap_k[i]
+        if k < best_k:
+            above = True
+            for m in range(k, k_now):
+                if not fix_stats[m, DET_FSPRT] > level:
+                    above = False
+                    break
+            if above:
+                best, best_k = i, k
+    return best

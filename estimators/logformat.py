@@ -212,6 +212,23 @@ SURVEY = Stream(
     ),
 )
 
+FACE_SURVEY = Stream(
+    "face_survey",
+    "The face line surveyed when the face is installed, before the first cut: where the shearer body reference "
+    "point runs on the conveyor, one point per chute (the pan line surveyed and carried to the shearer's point "
+    "with the machine geometry; 004's rail kinematics model of the first cut).",
+    (
+        T,
+        Column("u", "m", "f8", "distance along the face from the start pose, the direction of the first cut"),
+        Column("lat", "rad", "f8", "geodetic latitude (WGS-84)"),
+        Column("lon", "rad", "f8", "geodetic longitude"),
+        Column("h", "m", "f8", "ellipsoidal height"),
+        Column("sd_horizontal", "m", "f8", "one-sigma horizontal error of the point"),
+        Column("sd_vertical", "m", "f8", "one-sigma vertical error of the point"),
+    ),
+    time_order="nondecreasing",
+)
+
 # Bits of the estimates' `flags` column.
 FLAG_VELOCITY = 1  # odometer / motion-constraint velocity update applied
 FLAG_POSITION = 2  # position fix (CPOEM point or survey) applied
@@ -220,6 +237,7 @@ FLAG_SKIPPED = 8  # a measurement was due but skipped (dropout, missing push-ram
 FLAG_COVARIANCE_REPAIRED = 16  # the covariance was re-symmetrized / clipped to stay positive definite
 FLAG_SMOOTHED = 32  # the row is an RTS-smoothed estimate
 FLAG_MAG = 64  # magnetometer yaw update applied
+FLAG_ISOLATED = 128  # the rail kinematics model is isolated (its fault detector holds a fault)
 
 ESTIMATE = Stream(
     "estimate",
@@ -259,28 +277,46 @@ ESTIMATE_STATES = Stream(
 
 ESTIMATE_FUSION = Stream(
     "estimate_fusion",
-    "A federated filter's fusion (estimates/NAME_fusion.parquet, 003 section 4): information-sharing coefficients, "
-    "the magnetometer sub-filter's estimated yaw noise and innovation, and each sub-filter's own estimate "
-    "relative to the global one (NaN where the filter has no sub-filters).",
+    "A federated filter's fusion (estimates/NAME_fusion.parquet, 003 section 4, 004 section III): "
+    "information-sharing coefficients, the magnetometer's estimated yaw noise and innovation, and each "
+    "sub-filter's own estimate relative to the global one (NaN where the filter has no sub-filters). The aiding "
+    "sub-filter is SINS/magnetometer (003) or SINS/rail kinematics model (004).",
     (
         T,
         Column("beta_odometer", "1", "f8", "information-sharing coefficient of the SINS/odometer sub-filter",
                nan_ok=True),
-        Column("beta_mag", "1", "f8", "information-sharing coefficient of the SINS/magnetometer sub-filter",
+        Column("beta_aiding", "1", "f8", "information-sharing coefficient of the aiding sub-filter",
                nan_ok=True),
         Column("r_yaw", "rad^2", "f8", "yaw measurement noise variance used (estimated from the innovations)"),
         Column("yaw_innovation", "rad", "f8", "yaw closing-error innovation (NaN without a reading)", nan_ok=True),
         Column("mag_flags", "1", "i4", "bitmask of estimators.federated_kf MAG_* (read, disturbed, gated, used)"),
         *(Column(f"{sub}_d_pos_{a}", "m", "f8", f"{sub} sub-filter position minus the global one, {a}",
-                 nan_ok=True) for sub in ("odometer", "mag") for a in "enu"),
+                 nan_ok=True) for sub in ("odometer", "aiding") for a in "enu"),
         *(Column(f"{sub}_d_yaw", "rad", "f8", f"{sub} sub-filter yaw minus the global one", nan_ok=True)
-          for sub in ("odometer", "mag")),
+          for sub in ("odometer", "aiding")),
+    ),
+)
+
+ESTIMATE_DETECTORS = Stream(
+    "estimate_detectors",
+    "The rail kinematics model's position fixes and the fault detectors on their innovations "
+    "(estimates/NAME_detectors.parquet, 004 section IV), one row per fix.",
+    (
+        T,
+        Column("lat", "rad", "f8", "predicted shearer body point on the rail: latitude"),
+        Column("lon", "rad", "f8", "longitude"),
+        Column("h", "m", "f8", "ellipsoidal height"),
+        Column("residual", "1", "f8", "residual chi-square statistic of the fix's innovation"),
+        Column("dual_state", "1", "f8", "dual-state chi-square statistic (with against without the fix)"),
+        Column("fsprt", "1", "f8", "fading sequential probability ratio statistic (004 eq. 23)"),
+        Column("applied", "1", "i4", "1 when the fix was applied, 0 when the isolating detector held a fault"),
+        Column("isolated", "1", "i4", "1 while the rail kinematics model is isolated"),
     ),
 )
 
 TRUTH_STREAMS = (TRUTH_SHEARER, TRUTH_PANS, TRUTH_SUPPORTS, TRUTH_CYCLES)
-SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, MAG, SUPPORT_IMU, FAULTS, SURVEY)
-ESTIMATE_STREAMS = (ESTIMATE, ESTIMATE_STATES, ESTIMATE_FUSION)
+SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, MAG, SUPPORT_IMU, FAULTS, SURVEY, FACE_SURVEY)
+ESTIMATE_STREAMS = (ESTIMATE, ESTIMATE_STATES, ESTIMATE_FUSION, ESTIMATE_DETECTORS)
 STREAMS = {s.name: s for s in TRUTH_STREAMS + SENSOR_STREAMS}
 
 
@@ -347,7 +383,8 @@ def read_stream(run_dir: Path, stream: Stream) -> pa.Table:
 ESTIMATES_DIR = "estimates"
 
 
-_ESTIMATE_SUFFIX = {"estimate": "", "estimate_states": "_states", "estimate_fusion": "_fusion"}
+_ESTIMATE_SUFFIX = {"estimate": "", "estimate_states": "_states", "estimate_fusion": "_fusion",
+                    "estimate_detectors": "_detectors"}
 
 
 def estimate_path(run_dir: Path, method: str, stream: Stream = ESTIMATE) -> Path:

@@ -85,6 +85,10 @@ CAL_MOUNT = slice(6, 9)
 CAL_SCALE = 9
 N_CAL = 10
 
+N_NOMINAL = 5
+"""Length of the kernels' running "nominal" vector: the odometer speed and specific force the models are
+linearized at (odometer_update, transition) and the last odometer speed."""
+
 # Indices of the kernel's parameter vector.
 P_R_LATERAL, P_R_ALONG, P_R_VERTICAL, P_R_ZUPT, P_R_ZARU, P_TAU_FWD, P_TAU_FORCE, P_LEVER = range(8)
 N_PARAMS = 11  # the lever arm takes 7..9, one spare
@@ -186,19 +190,20 @@ def _mech_step(nav, phi_b, dv_b, dt):
 
 
 @nb.njit(cache=True)
-def _body_offset_n(nav, lever):
-    return quat_mat(nav[QUAT]) @ lever
-
-
-@nb.njit(cache=True)
-def _fix_innovation(nav, lever, fix_llh):
-    """Body-point position of the SINS minus the fix, ENU metres."""
-    lat, h = nav[LAT], nav[HGT]
+def fix_measurement(nav, lever, fix_llh, n):
+    """(z, H (3, n)) of a position fix (001 eqs. 21-22) of the body point: z = body-point position of the SINS
+    minus the fix, ENU metres; H = [0, -[(C_b^n l) x], I, 0 ...]."""
+    lat, hgt = nav[LAT], nav[HGT]
     r_m, r_n = radii_nb(lat)
-    off = _body_offset_n(nav, lever)
-    return np.array([(nav[LON] - fix_llh[1]) * (r_n + h) * np.cos(lat) - off[0],
-                     (nav[LAT] - fix_llh[0]) * (r_m + h) - off[1],
-                     nav[HGT] - fix_llh[2] - off[2]])
+    off = quat_mat(nav[QUAT]) @ lever
+    z = np.array([(nav[LON] - fix_llh[1]) * (r_n + hgt) * np.cos(lat) - off[0],
+                  (nav[LAT] - fix_llh[0]) * (r_m + hgt) - off[1],
+                  nav[HGT] - fix_llh[2] - off[2]])
+    h = np.zeros((3, n))
+    h[:, _PHI:_PHI + 3] = -skew3(off)
+    for i in range(3):
+        h[i, _DP + i] = 1.0
+    return z, h
 
 
 @nb.njit(cache=True)
@@ -303,7 +308,7 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
     """Filter epochs j0+1 .. j1 (epoch j ends mechanization step j * steps); state (nav, cal, p) in place.
 
     odo_mode[j]: 1 moving with a valid odometer over (j-1, j], 0 standing, -1 odometer missing (skipped).
-    nominal (5,): the running means of the odometer speed and of the specific force in n that H and F are
+    nominal (N_NOMINAL,): the running means of the odometer speed and of the specific force in n that H and F are
     evaluated at, and the last odometer speed (carried across calls).
     Fixes (fix_epoch sorted, fix_llh (F, 3) lat/lon/h, fix_r (F, 3, 3) ENU covariance, fix_gate (F,) the largest
     normalized innovation squared accepted) apply at their epoch.
@@ -331,13 +336,8 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
             flag |= FLAG_ZUPT
         else:
             flag |= FLAG_SKIPPED
-        c_bn = quat_mat(nav[QUAT])
         while k_fix < fix_epoch.size and fix_epoch[k_fix] == j:
-            h = np.zeros((3, N_STATES))
-            h[:, _PHI:_PHI + 3] = -skew3(c_bn @ lever)
-            for i in range(3):
-                h[i, _DP + i] = 1.0
-            z = _fix_innovation(nav, lever, fix_llh[k_fix])
+            z, h = fix_measurement(nav, lever, fix_llh[k_fix], N_STATES)
             gamma = nis(x, p, z, h, fix_r[k_fix])
             nis_out[k_fix] = gamma
             if gamma <= fix_gate[k_fix]:

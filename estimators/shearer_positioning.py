@@ -10,8 +10,10 @@ Methods (each an estimates/NAME stream):
 * ``kf_cpoem_rts``  plus the online RTS smoother (001 eqs. 28-31, Fig. 4) run at each face end over the pass just
                     finished; the smoothed points feed the next cycle's fixes, the output is the smoothed pass;
 * ``rts_offline``   one RTS pass over the whole run of ``kf_cpoem_rts``'s forward filter;
-* ``ckf_mag``       003's centralized SINS/odometer/magnetometer filter (estimators.afkf), needs the mag stream;
-* ``afkf``          003's adaptive federated filter with the magnetometer disturbance test (estimators.afkf).
+* ``ckf_mag``       003's centralized SINS/odometer/magnetometer filter, needs the mag stream;
+* ``afkf``          003's adaptive federated filter with the magnetometer disturbance test;
+* ``fkf_rail``      004's federated SINS/odometer + SINS/rail-kinematics-model filter with fault detection and
+                    isolation of the rail model (these three: estimators.federated_positioning).
 
 Passes and face ends are found from the odometer alone: a straight cut is a run of travel in one direction
 longer than half the face (the distance between the two surveyed face-end points); the pass ends when the
@@ -33,6 +35,7 @@ import numpy as np
 from estimators import earth
 from estimators import shearer_kf as kf
 from estimators.cpoem import Points, RamLog, crossings, predict_fixes, record
+from estimators.fault_detection import DetectorConfig
 from estimators.fine_alignment import fine_align
 from estimators.logformat import FLAG_SMOOTHED
 from estimators.rotations import (
@@ -46,8 +49,7 @@ from estimators.rotations import (
 from estimators.rts import rts_backward
 from estimators.strapdown import compensated_increments, mechanize
 
-METHODS = ("dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag", "afkf")
-MAG_METHODS = ("ckf_mag", "afkf")
+METHODS = ("dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag", "afkf", "fkf_rail")
 DEG = np.pi / 180
 
 
@@ -145,6 +147,20 @@ class Config:
     """Velocity random walk [m/s/sqrt(s)] added for the cutting machine's vibration: what sculling compensation at
     the IMU rate leaves of a 30 Hz pick band (about 1e-4 m/s^2 that comes and goes with the cutting)."""
     mag: MagSettings = MagSettings()
+    chute_length_m: float = 0.0
+    """Point spacing of the rail kinematics model (004: one point per chute); 0 takes cpoem_spacing_m."""
+    end_zone_m: float = 0.0
+    """Stretch at each face end where the snake sump and the end push move the pans between two passes (the
+    shearer's length plus the push lag, the snake and two pans): the rail kinematics model gives no fixes there
+    (its strokes are not yet read reliably there: see the issue 7 note)."""
+    rail_advance_sd: float = 0.0
+    """Advance from the ram strokes [m] as the rail kinematics model uses it; 0 takes advance_sd."""
+    detector: DetectorConfig = field(default_factory=lambda: DetectorConfig(fading=0.6, t_on=12.0, t_off=5.0))
+    """Fault detectors on the rail kinematics model's fixes (004 section IV). The fixes come one per chute (one
+    every 10-20 s at cutting speed), not at 10 Hz: a fading factor of 0.6 per fix keeps about a minute of memory,
+    and t_on 12 gave no false alarm over the fault-free trials of benchmarks/bench_rail.py."""
+    isolate_by: str | None = "fsprt"
+    """The detector whose fault flag isolates the rail kinematics model (residual, dual_state, fsprt; None)."""
 
     @classmethod
     def appendix_a(cls, **kw) -> Config:
@@ -175,6 +191,9 @@ class Log:
     ram_valid: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     mag_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     mag_b: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # (M, 3) [T]
+    face_u: np.ndarray = field(default_factory=lambda: np.zeros(0))  # FACE_SURVEY: distance from the start pose
+    face_llh: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    face_sd: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # horizontal, vertical [m]
 
 
 @dataclass
@@ -191,6 +210,7 @@ class Solution:
     sd_cal: np.ndarray | None = None  # (K, 10)
     notes: list[str] = field(default_factory=list)
     fusion: dict[str, np.ndarray] | None = None  # ESTIMATE_FUSION columns of a federated filter
+    detectors: dict[str, np.ndarray] | None = None  # ESTIMATE_DETECTORS columns of the rail-model filter
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -447,11 +467,11 @@ class _Fixes:
         return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0))
 
 
-def _fixes_for(prep: _Prepared, cfg: Config, log: Log, a: int, b: int, points: Points | None,
-               notes: list[str]) -> _Fixes:
-    """Position fixes of epochs (a, b]: surveyed face ends (trusted: never gated), then CPOEM points crossed on a
-    straight cut (gated at cfg.fix_gate)."""
-    sel = np.flatnonzero((prep.survey_epochs > a) & (prep.survey_epochs <= b))
+def fixes_for(prep: _Prepared, cfg: Config, log: Log, a: int, b: int, points: Points | None,
+              notes: list[str], face_ends: bool = True) -> _Fixes:
+    """Position fixes of epochs (a, b]: surveyed face ends (trusted: never gated; with `face_ends`), then CPOEM
+    points crossed on a straight cut (gated at cfg.fix_gate)."""
+    sel = np.flatnonzero((prep.survey_epochs > a) & (prep.survey_epochs <= b) & face_ends)
     j = list(prep.survey_epochs[sel])
     llh = [log.survey_llh[1 + k] for k in sel]
     r = [np.diag([log.survey_sd[1 + k, 0] ** 2] * 2 + [log.survey_sd[1 + k, 1] ** 2]) for k in sel]
@@ -478,8 +498,24 @@ def _fixes_for(prep: _Prepared, cfg: Config, log: Log, a: int, b: int, points: P
     return _Fixes(np.array(j, np.int64)[order], np.array(llh)[order], np.array(r)[order], np.array(gate)[order])
 
 
-def _segment_points(prep: _Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, p: np.ndarray) -> Points:
-    """CPOEM points of the straight cut inside epochs [a, b] from navigation rows nav (epochs a..b)."""
+def face_survey_points(log: Log, prep: _Prepared) -> Points:
+    """The installed face line (FACE_SURVEY) as CPOEM points of the first cut, with the survey's covariance. Its
+    face coordinate is a true distance, the filter's the odometer's: the two part by the odometer's scale error,
+    which the rail-model filter puts in the fix's measurement model (estimators.federated_kf._fix_update)."""
+    if log.face_u.size == 0 or not prep.cuts:
+        return Points.empty()
+    first, last = prep.cuts[0]
+    sign = 1.0 if prep.odo[last] >= prep.odo[first - 1] else -1.0  # the odometer counts the first cut this way
+    c_bn = np.broadcast_to(quat_to_mat(prep.nav0[kf.QUAT]), (log.face_u.size, 3, 3))
+    sd_h, sd_v = log.face_sd[:, 0], log.face_sd[:, 1]
+    cov = np.zeros((log.face_u.size, 3, 3))
+    cov[:, [0, 1, 2], [0, 1, 2]] = np.column_stack([sd_h ** 2, sd_h ** 2, sd_v ** 2])
+    return Points(sign * log.face_u, np.full(log.face_u.size, prep.t_kf[0]), log.face_llh.copy(), cov, c_bn.copy())
+
+
+def segment_points(prep: _Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, cov_enu: np.ndarray) -> Points:
+    """CPOEM points of the straight cut inside epochs [a, b] from navigation rows nav and position covariances
+    cov_enu (3, 3) (epochs a..b)."""
     u = prep.odo - prep.odo[0]
     lever = np.asarray(cfg.lever_arm_m, float)
     for first, last in prep.cuts:
@@ -488,7 +524,7 @@ def _segment_points(prep: _Prepared, cfg: Config, a: int, b: int, nav: np.ndarra
             cov = np.zeros((prep.t_kf.size, 3, 3))
             c_bn = np.zeros((prep.t_kf.size, 3, 3))
             llh[a:b + 1] = _body_llh(nav, lever)
-            cov[a:b + 1] = p[:, kf.DP, kf.DP]
+            cov[a:b + 1] = cov_enu
             c_bn[a:b + 1] = quat_to_mat(nav[:, kf.QUAT])
             return record(u, prep.t_kf, llh, cov, c_bn, cfg.cpoem_spacing_m, first - 1, last)
     return Points.empty()
@@ -505,14 +541,14 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     fwd.nav[0], fwd.sd[0] = nav, _sd(p)
     q_psd = _q_psd(cfg)
     params = kf_params(cfg)
-    nominal = np.zeros(5)
+    nominal = np.zeros(kf.N_NOMINAL)
     smooth_nav = fwd.nav.copy() if smooth else None
     smooth_sd = fwd.sd.copy() if smooth else None
     points: Points | None = Points.empty() if cpoem else None
     notes = list(prep.notes)
     n_fixes = n_gated = 0
     for a, b in prep.segments:
-        fixes = _fixes_for(prep, cfg, log, a, b, points, notes) if cpoem else _Fixes.empty()
+        fixes = fixes_for(prep, cfg, log, a, b, points, notes) if cpoem else _Fixes.empty()
         m = b - a + 1
         x_post = np.zeros((m, kf.N_STATES))
         p_post = np.zeros((m, kf.N_STATES, kf.N_STATES))
@@ -543,9 +579,9 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
             _apply_rows(s_nav, s_cal, x_s - x_post)
             smooth_nav[a + 1:b + 1], smooth_sd[a + 1:b + 1] = s_nav[1:], _sd(p_s[1:])
             if cpoem:
-                points = _segment_points(prep, cfg, a, b, s_nav, p_s)
+                points = segment_points(prep, cfg, a, b, s_nav, p_s[:, kf.DP, kf.DP])
         elif cpoem:
-            points = _segment_points(prep, cfg, a, b, seg_nav, p_post)
+            points = segment_points(prep, cfg, a, b, seg_nav, p_post[:, kf.DP, kf.DP])
     if n_gated:
         notes.append(f"{n_gated} of {n_fixes} position fixes rejected by the innovation gate")
     missing = np.flatnonzero(prep.mode[1:] < 0) + 1
@@ -643,18 +679,21 @@ def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS) -> dict[
             out["dr_compensated"] = dead_reckoning(log, cfg, prep, smoothed.cal[-1])
     if "dr" in methods:
         out["dr"] = dead_reckoning(log, cfg, prep)
-    if set(MAG_METHODS) & set(methods):
-        from estimators import afkf  # it builds on this module
+    if {"ckf_mag", "afkf", "fkf_rail"} & set(methods):
+        from estimators import federated_positioning as fp  # it builds on this module
 
-        for name in MAG_METHODS:
-            if name in methods:
-                out[name] = afkf.run(log, cfg, prep, federated=name == "afkf")
+        if "ckf_mag" in methods:
+            out["ckf_mag"] = fp.run_mag(log, cfg, prep, federated=False)
+        if "afkf" in methods:
+            out["afkf"] = fp.run_mag(log, cfg, prep, federated=True)
+        if "fkf_rail" in methods:
+            out["fkf_rail"] = fp.run_rail(log, cfg, prep, cfg.isolate_by)
     return {m: out[m] for m in methods}
 
 
 
 
-def log_from_columns(imu, odometer, survey, pushram=None, mag=None) -> Log:
+def log_from_columns(imu, odometer, survey, pushram=None, mag=None, face_survey=None) -> Log:
     """A Log from stream columns (pyarrow tables or mappings of arrays, logformat column names)."""
     def col(table, name):
         c = table[name] if isinstance(table, dict) else table.column(name)
@@ -666,6 +705,10 @@ def log_from_columns(imu, odometer, survey, pushram=None, mag=None) -> Log:
                         ram_extension=col(pushram, "extension"), ram_valid=col(pushram, "valid"))
     if mag is not None:
         optional.update(mag_t=col(mag, "t"), mag_b=np.column_stack([col(mag, f"b_{a}") for a in "xyz"]))
+    if face_survey is not None:
+        optional.update(face_u=col(face_survey, "u"),
+                        face_llh=np.column_stack([col(face_survey, k) for k in ("lat", "lon", "h")]),
+                        face_sd=np.column_stack([col(face_survey, k) for k in ("sd_horizontal", "sd_vertical")]))
     return Log(imu_t=col(imu, "t"), dtheta=np.column_stack([col(imu, f"dtheta_{a}") for a in "xyz"]),
                dv=np.column_stack([col(imu, f"dv_{a}") for a in "xyz"]), odo_t=col(odometer, "t"),
                odo_distance=col(odometer, "distance"), odo_direction=col(odometer, "direction"),
@@ -676,15 +719,23 @@ def log_from_columns(imu, odometer, survey, pushram=None, mag=None) -> Log:
 
 
 def load_log(run_dir: Path) -> Log:
-    """The streams of a run directory the positioning reads (push rams and magnetometer optional), checked on
-    load."""
-    from estimators.logformat import IMU, MAG, ODOMETER, PUSHRAM, SURVEY, read_stream
+    """The streams of a run directory the positioning reads (push rams, magnetometer and face survey optional),
+    checked on load."""
+    from estimators.logformat import (
+        FACE_SURVEY,
+        IMU,
+        MAG,
+        ODOMETER,
+        PUSHRAM,
+        SURVEY,
+        read_stream,
+    )
 
     def optional(stream):
         return read_stream(run_dir, stream) if (Path(run_dir) / stream.filename).is_file() else None
 
     return log_from_columns(read_stream(run_dir, IMU), read_stream(run_dir, ODOMETER), read_stream(run_dir, SURVEY),
-                            optional(PUSHRAM), optional(MAG))
+                            optional(PUSHRAM), optional(MAG), optional(FACE_SURVEY))
 
 
 def estimate_columns(sol: Solution) -> dict[str, np.ndarray]:

@@ -10,6 +10,7 @@ from rerun.chunk import RrdReader
 
 from estimators.federated_kf import MAG_DISTURBED, MAG_USED
 from estimators.logformat import (
+    ESTIMATE_DETECTORS,
     ESTIMATE_FUSION,
     ESTIMATE_STATES,
     FLAG_POSITION,
@@ -25,7 +26,7 @@ from .test_metrics import offset_estimate
 OFFSET = np.array([0.3, -0.2, 0.1])  # m east, north, up
 ROTVEC = np.array([1e-3, -2e-3, 5e-3])  # estimate = Exp([rotvec x]) truth: psi-angle error -rotvec
 SIGMA = 0.05
-D_POS = {"odometer": 0.05, "mag": -0.4}  # sub-filter position minus the global one [m]
+D_POS = {"odometer": 0.05, "aiding": -0.4}  # sub-filter position minus the global one [m]
 STATES_TRUTH = {"gyro_bias_z": np.radians(720.0) / 3600, "odo_scale": 0.003}
 
 
@@ -42,7 +43,7 @@ def run_dir(tmp_path_factory):
     estimate = offset_estimate(shearer, t, OFFSET, ROTVEC, sd=SIGMA, flags=flags)
     k = t.size
     states = make_table(ESTIMATE_STATES, {"t": t, **{c.name: np.full(k, 1e-5) for c in ESTIMATE_STATES.columns[1:]}})
-    fusion = {"t": t, "beta_odometer": np.full(k, 0.3), "beta_mag": np.full(k, 0.7), "r_yaw": np.full(k, 1e-4),
+    fusion = {"t": t, "beta_odometer": np.full(k, 0.3), "beta_aiding": np.full(k, 0.7), "r_yaw": np.full(k, 1e-4),
               "yaw_innovation": np.full(k, 1e-3), "mag_flags": np.full(k, MAG_USED, np.int32),
               **{f"{sub}_d_pos_{a}": np.full(k, D_POS[sub]) for sub in D_POS for a in "enu"},
               **{f"{sub}_d_yaw": np.zeros(k) for sub in D_POS}}
@@ -125,7 +126,30 @@ def test_fusion_series_show_the_subfilters_and_the_disturbed_reading(run_dir):
     np.testing.assert_allclose(sd, np.degrees(1e-2))
     for i, axis in enumerate(("east", "north")):
         _, err = _scalars(chunks, f"/plots/fusion/kf/subfilter_errors/{axis}")
-        np.testing.assert_allclose(err, np.broadcast_to(OFFSET[i] + np.array([0.0, D_POS["odometer"], D_POS["mag"]]),
+        np.testing.assert_allclose(err, np.broadcast_to(OFFSET[i] + np.array([0.0, D_POS["odometer"], D_POS["aiding"]]),
                                                         err.shape), atol=1e-6)
     _, flags = _scalars(chunks, "/plots/fusion/kf/magnetometer")
     assert flags[:, 0].all() and flags[:, 1].sum() == 1  # the single disturbed epoch survives the decimation
+
+
+def test_detector_series_carry_their_thresholds(tmp_path):
+    scn, result = simulated("default")
+    shearer = make_table(STREAMS["truth_shearer"], result.tables["truth_shearer"])
+    t = result.tables["truth_shearer"]["t"][1000:60000:2000]
+    k = t.size
+    est = offset_estimate(shearer, t, OFFSET, ROTVEC, sd=SIGMA)
+    truth_at_t = {c: np.interp(t, result.tables["truth_shearer"]["t"], result.tables["truth_shearer"][c])
+                  for c in ("lat", "lon", "h")}
+    det = make_table(ESTIMATE_DETECTORS, {"t": t, **truth_at_t, "residual": np.linspace(0, 20, k),
+                                          "dual_state": np.zeros(k), "fsprt": np.full(k, 3.0),
+                                          "applied": np.ones(k, np.int32), "isolated": np.zeros(k, np.int32)})
+    path = tmp_path / ESTIMATES_RRD
+    write_estimate_recording(path, scn, shearer, {"fkf_rail": est}, {}, detectors={
+        "fkf_rail": (det, {"residual": 16.3, "dual_state": 16.3, "t_on": 12.0, "t_off": 5.0})})
+    chunks = RrdReader(path).stream().to_chunks()
+    _, fsprt = _scalars(chunks, "/plots/detectors/fkf_rail/fsprt")
+    np.testing.assert_allclose(fsprt, np.broadcast_to([3.0, 12.0, 5.0], fsprt.shape))
+    _, res = _scalars(chunks, "/plots/detectors/fkf_rail/residual")
+    np.testing.assert_allclose(res[:, 0], np.linspace(0, 20, k))
+    np.testing.assert_allclose(res[:, 1], 16.3)
+    assert any(c.entity_path == "/world/estimates/fkf_rail/rail" and c.is_static for c in chunks)

@@ -6,7 +6,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from estimators import afkf, metrics
+from estimators import federated_positioning as fp
+from estimators import metrics
 from estimators import federated_kf as fk
 from estimators import shearer_kf as kf
 from estimators import shearer_positioning as sp
@@ -32,26 +33,26 @@ def test_one_fusion_equals_the_centralized_update(beta_od):
     kf.joseph_update(x_c, p_c, z_od, h_od, r_od)
     kf.joseph_update(x_c, p_c, z_mag, h_mag, r_mag)
     x_od, p_od = np.zeros(kf.N_STATES), p / beta_od
-    x_mag, p_mag = np.zeros(kf.N_STATES), p / (1 - beta_od)
+    x_aiding, p_aiding = np.zeros(kf.N_STATES), p / (1 - beta_od)
     kf.joseph_update(x_od, p_od, z_od, h_od, r_od)
-    kf.joseph_update(x_mag, p_mag, z_mag, h_mag, r_mag)
-    tr_od, tr_mag = np.trace(p_od), np.trace(p_mag)
-    x_g, p_g, beta, valid, ok = fk.fuse_epoch(x_od, p_od, x_mag, p_mag, False)
+    kf.joseph_update(x_aiding, p_aiding, z_mag, h_mag, r_mag)
+    tr_od, tr_mag = np.trace(p_od), np.trace(p_aiding)
+    x_g, p_g, beta, valid, ok = fk.fuse_epoch(x_od, p_od, x_aiding, p_aiding, False)
     assert ok and valid.all()
     assert np.allclose(x_g, x_c, atol=1e-12) and np.allclose(p_g, p_c, atol=1e-10 * np.abs(p_c).max())
     assert beta == pytest.approx([tr_od / (tr_od + tr_mag), tr_mag / (tr_od + tr_mag)])  # 003 section 4.3
-    assert np.allclose(p_od, p_g / beta[0]) and np.allclose(p_mag, p_g / beta[1]) and not x_od.any()
+    assert np.allclose(p_od, p_g / beta[0]) and np.allclose(p_aiding, p_g / beta[1]) and not x_od.any()
 
 
 def test_a_blown_up_subfilter_is_left_out_and_restarted():
     p = np.diag(np.linspace(1.0, 2.0, kf.N_STATES))
     x_od, p_od = np.full(kf.N_STATES, 0.1), p.copy()
-    x_mag, p_mag = np.zeros(kf.N_STATES), p.copy()
-    p_mag[5, 5] = np.nan
-    x_g, p_g, beta, valid, ok = fk.fuse_epoch(x_od, p_od, x_mag, p_mag, False)
+    x_aiding, p_aiding = np.zeros(kf.N_STATES), p.copy()
+    p_aiding[5, 5] = np.nan
+    x_g, p_g, beta, valid, ok = fk.fuse_epoch(x_od, p_od, x_aiding, p_aiding, False)
     assert ok and list(valid) == [True, False] and list(beta) == [1.0, 0.0]
     assert np.allclose(x_g, 0.1) and np.allclose(p_g, p)
-    assert np.allclose(p_mag, p) and np.allclose(p_od, p)
+    assert np.allclose(p_aiding, p) and np.allclose(p_od, p)
 
 
 @pytest.fixture(scope="module", params=["seed003", "seed003_interference"])
@@ -75,7 +76,7 @@ def test_without_readings_both_filters_are_the_odometer_filter(face):
     blind = dataclasses.replace(log, mag_b=np.full_like(log.mag_b, np.nan))
     ref = sp.run_kf(blind, cfg, prep, cpoem=False, smooth=False)[0]
     for federated in (False, True):
-        sol = afkf.run(blind, cfg, prep, federated)
+        sol = fp.run_mag(blind, cfg, prep, federated)
         assert np.allclose(sol.llh, ref.llh, rtol=0, atol=1e-12) and np.allclose(sol.sd, ref.sd, rtol=1e-6)
         assert not (sol.flags & FLAG_MAG).any() and "not finite" in " ".join(sol.notes)
 
@@ -83,8 +84,8 @@ def test_without_readings_both_filters_are_the_odometer_filter(face):
 def test_the_magnetometer_bounds_the_heading_and_the_federated_filter_survives_interference(face):
     scn, truth, log, cfg, prep = face
     odometer_only = _max_horizontal(sp.run_kf(log, cfg, prep, cpoem=False, smooth=False)[0], truth)
-    ckf = afkf.run(log, cfg, prep, federated=False)
-    fed = afkf.run(log, cfg, prep, federated=True)
+    ckf = fp.run_mag(log, cfg, prep, federated=False)
+    fed = fp.run_mag(log, cfg, prep, federated=True)
     e_ckf, e_fed = _max_horizontal(ckf, truth), _max_horizontal(fed, truth)
     disturbed = (fed.fusion["mag_flags"] & fk.MAG_DISTURBED) > 0
     if scn.faults:
@@ -95,7 +96,7 @@ def test_the_magnetometer_bounds_the_heading_and_the_federated_filter_survives_i
         assert not disturbed.any()
         assert e_fed == pytest.approx(e_ckf, rel=1e-6)  # nothing disturbed: the fusion is the centralized filter
         assert e_fed < 0.4 * odometer_only
-    beta = fed.fusion["beta_mag"][1:]
+    beta = fed.fusion["beta_aiding"][1:]
     assert np.all((beta > 0) & (beta < 1)) and np.isfinite(fed.sd).all()
 
 
@@ -106,11 +107,11 @@ def test_bad_magnetometer_readings_are_left_out_and_noted(face):
     mag_b = log.mag_b.copy()
     mag_b[100:200] = np.nan
     mag_b[300:400, 0] = cfg.mag.saturation_t
-    sol = afkf.run(dataclasses.replace(log, mag_b=mag_b), cfg, prep, federated=True)
+    sol = fp.run_mag(dataclasses.replace(log, mag_b=mag_b), cfg, prep, federated=True)
     assert np.isfinite(sol.llh).all()
     assert any("200 readings saturated or not finite" in n for n in sol.notes)
     with pytest.raises(sp.PositioningError, match="mag: no magnetometer readings"):
-        afkf.run(dataclasses.replace(log, mag_t=np.zeros(0), mag_b=np.zeros((0, 3))), cfg, prep, federated=True)
+        fp.run_mag(dataclasses.replace(log, mag_t=np.zeros(0), mag_b=np.zeros((0, 3))), cfg, prep, federated=True)
 
 
 def test_a_calibration_undoes_the_iron_it_was_fitted_for(face):
@@ -124,8 +125,8 @@ def test_a_calibration_undoes_the_iron_it_was_fitted_for(face):
     distorted = dataclasses.replace(log, mag_b=log.mag_b @ soft.T + hard)
     calibrated = dataclasses.replace(cfg, mag=dataclasses.replace(
         cfg.mag, hard_iron_t=tuple(hard), soft_iron_correction=tuple(map(tuple, np.linalg.inv(soft)))))
-    ref = afkf.run(log, cfg, prep, federated=True)
-    sol = afkf.run(distorted, calibrated, prep, federated=True)
-    raw = afkf.run(distorted, cfg, prep, federated=True)
+    ref = fp.run_mag(log, cfg, prep, federated=True)
+    sol = fp.run_mag(distorted, calibrated, prep, federated=True)
+    raw = fp.run_mag(distorted, cfg, prep, federated=True)
     assert np.allclose(sol.llh, ref.llh, rtol=0, atol=1e-12)
     assert np.abs(raw.llh - ref.llh).max() > 1e-8  # ~6 cm: the uncalibrated iron matters

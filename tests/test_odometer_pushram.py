@@ -244,7 +244,7 @@ def test_rail_deviation_follows_the_shearer():
     start = math.floor(15.0 / length)  # the shearer's pan at t_start
     stations = support_stations(scn)
     for k in (100, 150, 299):
-        here = math.floor((5.0 + 0.1 * k) / length)
+        here = math.floor((5.0 + 0.1 * k) / length) + 1  # the pan the shearer enters is deviated too
         hit = (stations >= start) & (stations <= here)
         assert np.allclose(d[k, hit], rail_deviation_m(stations[hit] - start + 1, value, length), atol=1e-12)
         assert not d[k, ~hit].any()

@@ -8,12 +8,12 @@ import pytest
 
 from twin.scenario import ScenarioError, load_scenario, parse_scenario, scenario_to_toml
 
-from .conftest import SCENARIO_DIR, SCENARIOS
+from .conftest import SCENARIO_DIR, SCENARIOS, SEED004_VARIANTS
 
 import tomllib
 
 
-@pytest.mark.parametrize("name", SCENARIOS)
+@pytest.mark.parametrize("name", SCENARIOS + list(SEED004_VARIANTS))
 def test_shipped_scenarios_load_and_round_trip(name):
     scn = load_scenario(SCENARIO_DIR / f"{name}.toml")
     again = parse_scenario(tomllib.loads(scenario_to_toml(scn)))
@@ -28,6 +28,24 @@ def test_paper_scenarios_match_their_experiments():
     assert (s4.face.pan_count, s4.face.pan_length_m, s4.face.web_depth_m, s4.cycles) == (200, 1.8, 1.0, 5)
     from twin.haulage import Timeline
     assert 6.2 < Timeline(s4).duration / 3600 < 6.6
+
+
+def test_seed004_variants_change_only_what_they_say():
+    """seed004_fault adds 004's rail deviation (2825-3131 s, 1 deg per two chutes); seed004_20cycles runs 20
+    cycles on a longer panel; both run INS/odometer and the rail-model filter. Nothing else differs."""
+    base4 = load_scenario(SCENARIO_DIR / "seed004.toml").model_dump()
+    for name in SEED004_VARIANTS:
+        scn = load_scenario(SCENARIO_DIR / f"{name}.toml")
+        data = scn.model_dump()
+        assert data["estimators"]["shearer"]["methods"] == ["kf", "fkf_rail"]
+        changed = {k for k in data if data[k] != base4[k]}
+        if name == "seed004_fault":
+            assert changed == {"name", "faults", "estimators"}
+            (fault,) = scn.faults
+            assert (fault.kind, fault.t_start_s, fault.t_end_s, fault.value) == ("rail_deviation", 2825.0, 3131.0, 1.0)
+        else:
+            assert changed == {"name", "cycles", "face", "estimators"} and scn.cycles == 20
+            assert {k for k in data["face"] if data["face"][k] != base4["face"][k]} == {"panel_length_m"}
 
 
 def base() -> dict:

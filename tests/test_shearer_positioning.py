@@ -50,7 +50,7 @@ def test_standing_filter_finds_the_gyro_bias_and_leaves_the_heading_alone():
     flags = np.zeros(n_kf + 1, np.int32)
     cal = z(kf.N_CAL)
     kf.run_filter(0, n_kf, steps, t_mech, phi_b, dv_b, z(n_kf + 1), np.zeros(n_kf + 1, np.int8),
-                  np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), z(0), np.full(kf.N_STATES, 1e-12), params, nav, cal, p, z(5),
+                  np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), z(0), np.full(kf.N_STATES, 1e-12), params, nav, cal, p, z(kf.N_NOMINAL),
                   out_nav, out_cal, *store, flags, z(0), z((n_kf + 1, 3)))
     assert np.all(flags[1:] & FLAG_ZUPT)
     assert np.abs(cal[kf.CAL_GYRO] - bias).max() < 10 * DEG_H

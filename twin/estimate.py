@@ -16,7 +16,9 @@ import numpy as np
 
 from estimators import metrics
 from estimators import shearer_positioning as sp
+from estimators.fault_detection import chi2_threshold
 from estimators.logformat import (
+    ESTIMATE_DETECTORS,
     ESTIMATE_FUSION,
     ESTIMATE_STATES,
     STREAMS,
@@ -47,6 +49,10 @@ def positioning_config(scn: Scenario) -> sp.Config:
           "support_u_m": tuple((support_stations(scn) + 0.5) * scn.face.pan_length_m - scn.shearer.length_m / 2),
           "n_samples": est.n_samples, "filter_rate_hz": est.filter_rate_hz, "cpoem_spacing_m": est.cpoem_spacing_m,
           "ram_noise_sd": max(ram.noise_m, ram.resolution_m), "advance_sd": max(5 * ram.noise_m, 0.003),
+          "rail_advance_sd": max(1.5 * ram.noise_m, 0.003),
+          "chute_length_m": scn.face.pan_length_m,
+          "end_zone_m": scn.shearer.length_m + (scn.pattern.push_lag_pans + scn.pattern.snake_length_pans + 2)
+          * scn.face.pan_length_m,
           "mag": sp.MagSettings(date=scn.sensors.mag.date, noise_t=max(scn.sensors.mag.noise_t, 1e-9),
                                 extra_sigma=math.radians(est.mag_extra_sigma_deg), field_check=est.mag_field_check,
                                 hard_iron_t=tuple(est.mag_hard_iron_t),
@@ -90,6 +96,8 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
             write_estimate(run_dir, name, sp.state_columns(sol), ESTIMATE_STATES)
         if sol.fusion is not None:
             write_estimate(run_dir, name, sol.fusion, ESTIMATE_FUSION)
+        if sol.detectors is not None:
+            write_estimate(run_dir, name, sol.detectors, ESTIMATE_DETECTORS)
         table = read_estimate(run_dir, name)
         t, err = metrics.position_errors(table, truth)
         entry = {"cycles": metrics.cycle_metrics(t, err, cycles), "notes": sol.notes}
@@ -104,8 +112,14 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
         states = {name: read_estimate(run_dir, name, ESTIMATE_STATES) for name, sol in sols.items() if sol.cal is not None}
         fusion = {name: read_estimate(run_dir, name, ESTIMATE_FUSION) for name, sol in sols.items()
                   if sol.fusion is not None}
+        cfg = positioning_config(scn)
+        thresholds = {"residual": chi2_threshold(3, cfg.detector.p_false_alarm), "t_on": cfg.detector.t_on,
+                      "t_off": cfg.detector.t_off}
+        thresholds["dual_state"] = thresholds["residual"]
+        detectors = {name: (read_estimate(run_dir, name, ESTIMATE_DETECTORS), thresholds)
+                     for name, sol in sols.items() if sol.detectors is not None}
         write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, truth, estimates, states, states_truth,
-                                 fusion=fusion)
+                                 fusion=fusion, detectors=detectors)
     return out
 
 

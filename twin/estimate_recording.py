@@ -30,6 +30,14 @@ and for a federated filter (ESTIMATE_FUSION, 003 section 4):
                                                       interval (estimators.federated_kf MAG_*)
 * `plots/fusion/METHOD/subfilter_errors/{east,north}` Scalars, position error of the global estimate and of each
                                                       sub-filter's own estimate before the fusion [m]
+
+and for the rail kinematics model's filter (ESTIMATE_DETECTORS, 004 section IV):
+
+* `plots/detectors/METHOD/{residual,dual_state,fsprt}`  Scalars, each detector's statistic per fix with its
+                                                      thresholds
+* `plots/detectors/METHOD/isolated`                   Scalars 0/1, the rail model isolated
+* `world/estimates/METHOD/rail`                       static Points3D, the rail model's predicted points (the
+                                                      shearer's path it predicts), beside the true path of run.rrd
 """
 
 from __future__ import annotations
@@ -70,7 +78,7 @@ STATE_GROUPS = {  # state column prefix: (axes, SI value per display unit, displ
 }
 FLAG_SERIES = (("position fix", FLAG_POSITION), ("ZUPT", FLAG_ZUPT), ("skipped", FLAG_SKIPPED))
 MAG_SERIES = (("used", MAG_USED), ("disturbed", MAG_DISTURBED), ("gated", MAG_GATED))
-SUBFILTERS = ("odometer", "mag")
+SUBFILTERS = ("odometer", "aiding")
 _PALETTE = np.array([[40, 160, 240], [60, 200, 90], [200, 80, 220], [240, 200, 40], [120, 120, 255]], np.uint8)
 
 
@@ -173,8 +181,27 @@ def _log_states(rec: rr.RecordingStream, method: str, table: pa.Table, truth: di
                 [f"{sign}1 sigma {n} [{unit}]" for sign in "+-" for n in names])
 
 
-def estimate_views(methods: list[str], state_methods: list[str],
-                   fusion_methods: list[str] = ()) -> tuple[rrb.View, ...]:
+def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, table: pa.Table,
+                   thresholds: dict[str, float]) -> None:
+    if table.num_rows == 0:
+        return
+    t = column(table, "t")
+    root = f"plots/detectors/{method}"
+    for name in ("residual", "dual_state"):
+        _series(rec, f"{root}/{name}", t, np.column_stack([column(table, name), np.full(t.size, thresholds[name])]),
+                [f"{method} {name}", f"{name} threshold"])
+    _series(rec, f"{root}/fsprt", t, np.column_stack([column(table, "fsprt"), np.full(t.size, thresholds["t_on"]),
+                                                      np.full(t.size, thresholds["t_off"])]),
+            [f"{method} fsprt", "fsprt T1 (fault)", "fsprt T0 (clear)"])
+    _series(rec, f"{root}/isolated", t, column(table, "isolated")[:, None].astype(float), [f"{method} isolated"])
+    site = scn.site
+    p_t = earth.lla_to_enu(column(table, "lat"), column(table, "lon"), column(table, "h"), np.radians(site.lat_deg),
+                           np.radians(site.lon_deg), site.height_m).astype(np.float32)
+    rec.log(f"world/estimates/{method}/rail", rr.Points3D(p_t, radii=0.08, colors=[240, 120, 40]), static=True)
+
+
+def estimate_views(methods: list[str], state_methods: list[str], fusion_methods: list[str] = (),
+                   detector_methods: list[str] = ()) -> tuple[rrb.View, ...]:
     """Time-series views of the Estimates tab: each error axis over all methods with their sigma bands, each
     group of sensor states, the flags, and the fusion of federated filters."""
     views = []
@@ -199,28 +226,37 @@ def estimate_views(methods: list[str], state_methods: list[str],
                         ("subfilter_errors", "Sub-filter position errors [m]")) if fusion_methods else ():
         views.append(rrb.TimeSeriesView(name=title, origin="/",
                                         contents=[f"plots/fusion/{m}/{part}/**" for m in fusion_methods]))
+    for part, title in (("residual", "Residual chi-square"), ("dual_state", "Dual-state chi-square"),
+                        ("fsprt", "Fading SPRT"), ("isolated", "Rail model isolated")) if detector_methods else ():
+        views.append(rrb.TimeSeriesView(name=title, origin="/",
+                                        contents=[f"plots/detectors/{m}/{part}/**" for m in detector_methods]))
     return tuple(views)
 
 
 def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates: dict[str, pa.Table],
                              states: dict[str, pa.Table], states_truth: dict[str, float] | None = None,
-                             rate_hz: float = PLOT_RATE_HZ, fusion: dict[str, pa.Table] | None = None) -> None:
+                             rate_hz: float = PLOT_RATE_HZ, fusion: dict[str, pa.Table] | None = None,
+                             detectors: dict[str, tuple[pa.Table, dict[str, float]]] | None = None) -> None:
     """Write the estimators' outputs as `path` (normally RUN_DIR/estimates.rrd) with the recording id of
     RUN_DIR/run.rrd.
 
     `truth_shearer`: the truth_shearer table (or its columns as arrays); `estimates`: method name -> ESTIMATE
     table; `states`: method name -> ESTIMATE_STATES table (filters with sensor states only); `states_truth`:
     true values of the sensor states by ESTIMATE_STATES column name in SI units (e.g. "gyro_bias_x" [rad/s],
-    "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters).
+    "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters);
+    `detectors`: method name -> (ESTIMATE_DETECTORS table, thresholds by statistic: residual, dual_state, t_on,
+    t_off).
     Estimate times must lie within the truth span (LogError otherwise).
     """
     fusion = fusion or {}
+    detectors = detectors or {}
     if not rate_hz > 0:
         raise ValueError(f"write_estimate_recording: rate_hz must be positive, got {rate_hz}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=run_recording_id(path.parent) or uuid.uuid4())
-    rec.save(path, default_blueprint=blueprint(estimate_views(list(estimates), list(states), list(fusion))))
+    rec.save(path, default_blueprint=blueprint(estimate_views(list(estimates), list(states), list(fusion),
+                                                                        list(detectors))))
     try:
         for k, (method, table) in enumerate(estimates.items()):
             _log_estimate(rec, scn, truth_shearer, method, table, rate_hz, _PALETTE[k % len(_PALETTE)])
@@ -228,6 +264,8 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
             _log_states(rec, method, table, states_truth, rate_hz)
         for method, table in fusion.items():
             _log_fusion(rec, truth_shearer, method, estimates[method], table, rate_hz)
+        for method, (table, thresholds) in detectors.items():
+            _log_detectors(rec, scn, method, table, thresholds)
         rec.flush()
     finally:
         rec.disconnect()

@@ -103,7 +103,8 @@ class Timeline:
             done = 0.0
             for stop in sorted((st for st in h.stops if st.cycle == k), key=lambda st: st.at_m):
                 legs = _slice_legs(cut_legs, done, stop.at_m)
-                t, s = self._run(t, s, d, legs, accel, k)
+                if legs:  # a stop at the start of the cut (at_m 0) extends the stand before it
+                    t, s = self._run(t, s, d, legs, accel, k)
                 t = self._stop(t, s, stop.duration_s, k)
                 done = stop.at_m
             t, s = self._run(t, s, d, _slice_legs(cut_legs, done, travel), accel, k)

@@ -43,8 +43,8 @@ and when:
 * with the shearer truth (keyword `shearer`, the truth_shearer columns t and s): the start chute is the pan
   under the shearer's centre at t_start (pan = floor(s / pan_length_m)); at a sample time t in the window the
   deviated stretch is every pan the shearer's centre has covered since t_start (min..max of s over
-  [t_start, t]); a support whose pan (twin.layout.support_stations) lies in it reads + e(|pan - start| + 1)
-  until t_end. So the error builds up along the face as the shearer cuts through the window, as in 004.
+  [t_start, t]) and the next pan in its direction of travel (the rail model predicts the path ahead); a support
+  whose pan (twin.layout.support_stations) lies in it reads + e(|pan - start| + 1) until t_end. So the error builds up along the face as the shearer cuts through the window, as in 004.
 * without it: the whole rail is deviated from the start of the window: the start chute is the pan of
   support `target` (support 0, the headgate, when the fault has no target) and every support from it towards
   the tailgate reads + e(pan - start + 1) inside the window.
@@ -128,7 +128,11 @@ def _rail_deviation(x: np.ndarray, t_grid: np.ndarray, fault: Fault, scn: Scenar
         return np.clip(np.floor(s / length), 0, n_pans - 1).astype(np.int64)
 
     start = pan(s0)
-    covered = (pan(lo[k])[:, None] <= stations[None, :]) & (stations[None, :] <= pan(hi[k])[:, None])
+    # The chute the shearer is entering belongs to the stretch too: the rail model predicts the path ahead.
+    ahead = 1 if s_win[-1] >= s0 else -1
+    first = np.clip(pan(lo[k]) - (ahead < 0), 0, n_pans - 1)
+    last = np.clip(pan(hi[k]) + (ahead > 0), 0, n_pans - 1)
+    covered = (first[:, None] <= stations[None, :]) & (stations[None, :] <= last[:, None])
     err = rail_deviation_m(np.abs(stations - start) + 1, fault.value, length)
     x[rows] += np.where(covered, err[None, :], 0.0)
 

@@ -137,7 +137,7 @@ class ShearerPositioning(_Section):
     """The shearer positioning estimators of 001 that `longwall run` / `longwall estimate` run on the log."""
 
     methods: list[Literal["dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag",
-                          "afkf"]] = [
+                          "afkf", "fkf_rail"]] = [
         "dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline"]
     """estimators.shearer_positioning METHODS; an empty list runs none."""
     tuning: Literal["ours", "appendix_a"] = "ours"

@@ -122,6 +122,8 @@ class Survey(_Section):
     face_ends: Literal["first_cut", "every_cut"] = "every_cut"
     """first_cut: only the ends of the first straight cut are fixed (001's experiment); every_cut: both ends of
     every straight cut, as the gate-road survey marks them ahead of each advance."""
+    face_line: bool = True
+    """Survey the installed face line before the first cut (the FACE_SURVEY stream: one point per chute)."""
 
 
 class Sensors(_Section):

@@ -21,11 +21,11 @@ from twin.odometer import odometer_stream
 from twin.pushram import pushram_stream
 from twin.scenario import Scenario
 from twin.support_units import support_imu_stream
-from twin.survey import survey_stream
+from twin.survey import face_survey_stream, survey_stream
 
 # Stream keys of the per-trial generators (fixed, so streams do not shift each other).
 _IMU, _ODOMETER, _PUSHRAM, _MAG, _SUPPORT_IMU = range(5)
-_SURVEY = 5
+_SURVEY, _FACE_SURVEY = 5, 6
 _VIBRATION = 1000  # the vibration phases belong to the machine's motion: drawn once per run, not per trial
 
 
@@ -80,6 +80,8 @@ def sensor_streams(scn: Scenario, truth: dict[str, dict[str, np.ndarray]], ideal
         "mag": mag_stream(scn, shearer, trial_rng(scn, trial, _MAG), faults),
         "faults": faults_table(scn),
         "survey": survey_stream(scn, shearer, truth.get("truth_cycles"), trial_rng(scn, trial, _SURVEY)),
+        "face_survey": face_survey_stream(scn, shearer, truth.get("truth_cycles"),
+                                          trial_rng(scn, trial, _FACE_SURVEY)),
     }
     if scn.sensors.support_imu.supports:
         streams["support_imu"] = support_imu_stream(scn, supports, shearer, trial_rng(scn, trial, _SUPPORT_IMU),

@@ -1,0 +1,170 @@
+"""004 on the twin: INS/odometer against the federated INS/odometer + INS/rail-kinematics-model filter per cycle
+beside 004 Table 2, the rail-model fault of 004 section V.A (seed004_fault) with the three detectors side by side
+(detection delay, clearing delay, misses, false alarms per hour, error during the fault), fault-free Monte Carlo
+false alarms of the fading SPRT, and with --long the 20-cycle variant.
+
+Physics once: seed004 is simulated once; seed004_fault differs only in the fault, which acts on the push-ram
+sensors, so its trials draw their sensors from the same truth. Each trial redraws every sensor error.
+Run: python benchmarks/bench_rail.py [TRIALS] [--long]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+
+import numpy as np
+
+from estimators import federated_positioning as fp
+from estimators import metrics
+from estimators import shearer_positioning as sp
+from estimators.fault_detection import chi2_threshold
+from estimators.logformat import FLAG_ISOLATED
+from twin.cli import default_scenario
+from twin.estimate import positioning_config
+from twin.scenario import load_scenario
+from twin.sensors import imu_truth, sensor_streams
+from twin.simulate import simulate
+
+TABLE2 = {  # 004 Table 2, RMSE per cycle [m]: INS/ODO east, north; assisted by model east, north
+    "kf": ([0.886, 0.964, 0.939, 0.981, 1.041], [0.853, 1.002, 0.851, 0.923, 0.970]),
+    "fkf_rail": ([0.420, 0.446, 0.592, 0.663, 0.816], [0.180, 0.239, 0.208, 0.226, 0.214]),
+}
+CLEAR_MARGIN_S = 60.0
+"""Isolation that ends within this time after the fault counts as the fault's, not as a false alarm."""
+
+
+def _log(scn, tables, ideal, trial: int) -> sp.Log:
+    s = sensor_streams(scn, tables, ideal, trial)
+    return sp.log_from_columns(s["imu"], s["odometer"], s["survey"], s["pushram"], face_survey=s["face_survey"])
+
+
+def _cycle_rmse(sol: sp.Solution, tables) -> np.ndarray:
+    """(cycles, 2) RMSE east, north."""
+    _, err = metrics.position_errors(sp.estimate_columns(sol), tables["truth_shearer"])
+    rows = metrics.cycle_metrics(sol.t, err, tables["truth_cycles"])[:-1]
+    return np.array([[r["rmse_e"], r["rmse_n"]] for r in rows])
+
+
+def _windows(t: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
+    """(start, end) of the runs of True in flag at times t."""
+    edges = np.diff(np.concatenate([[0], flag.astype(np.int8), [0]]))
+    return [(float(t[a]), float(t[b - 1])) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
+
+
+def detector_figures(sol: sp.Solution, name: str, threshold: float, t0: float, t1: float, hours: float,
+                     sol_threshold_on: float) -> dict[str, float]:
+    """Delay to the first flag after t0, delay of the clearing after t1, fault fixes not flagged, false alarms
+    per hour (flags starting outside [t0, t1 + CLEAR_MARGIN_S])."""
+    d = sol.detectors
+    if name == "fsprt":
+        runs = _windows(sol.t, (sol.flags & FLAG_ISOLATED) > 0)
+    else:
+        flagged = d[name] > threshold
+        runs = [(t, t) for t in d["t"][flagged]]
+    first = [a for a, _ in runs if t0 <= a <= t1 + CLEAR_MARGIN_S]
+    if name == "fsprt":  # the flag goes back to the onset (the filter rolls back): the alarm is the crossing
+        t_on = sol_threshold_on
+        crossed = d["t"][(d["t"] >= t0) & (d["fsprt"] > t_on)]
+        first = [float(crossed[0])] if crossed.size else []
+    inside = [(a, b) for a, b in runs if a <= t1 + CLEAR_MARGIN_S and b >= t0]
+    cleared = max((b for _, b in inside), default=np.nan)
+    in_fault = (d["t"] >= t0) & (d["t"] <= t1)
+    if name == "fsprt":
+        missed = int(np.sum(in_fault & (d["isolated"] == 0) & (d["t"] >= (first[0] if first else t1))))
+    else:
+        missed = int(np.sum(in_fault & ~(d[name] > threshold)))
+    false = sum(1 for a, _ in runs if not (t0 <= a <= t1 + CLEAR_MARGIN_S))
+    return {"delay": (first[0] - t0) if first else np.nan, "clear": cleared - t1 if name == "fsprt" else np.nan,
+            "missed": missed, "fixes": int(in_fault.sum()), "false_per_h": false / hours}
+
+
+def main(trials: int = 20, long: bool = False) -> None:
+    t_start = time.perf_counter()
+    scn = load_scenario(default_scenario().parent / "seed004.toml")
+    scn_fault = load_scenario(default_scenario().parent / "seed004_fault.toml")
+    result = simulate(scn)
+    tables = result.tables
+    ideal = imu_truth(scn, tables["truth_shearer"])
+    cfg = positioning_config(scn)
+    t_sim = time.perf_counter() - t_start
+    hours = float(tables["truth_shearer"]["t"][-1]) / 3600
+
+    log = _log(scn, tables, ideal, 0)
+    prep = sp.prepare(log, cfg)
+    t0 = time.perf_counter()
+    kf_sol = sp.run_kf(log, cfg, prep, cpoem=False, smooth=False)[0]
+    t_kf = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    rail = fp.run_rail(log, cfg, prep)
+    t_rail = time.perf_counter() - t0
+    rmse = {"kf": _cycle_rmse(kf_sol, tables), "fkf_rail": _cycle_rmse(rail, tables)}
+    print(f"seed004 (simulated in {t_sim:.0f} s), trial 0: RMSE per cycle [m], ours beside 004 Table 2")
+    print(f"{'cycle':>5s}  {'INS/ODO E':>18s} {'INS/ODO N':>18s}   {'with model E':>18s} {'with model N':>18s}")
+    for k in range(rmse["kf"].shape[0]):
+        cells = [f"{rmse[m][k, i]:8.3f} ({TABLE2[m][i][k]:5.3f})" if k < 5 else f"{rmse[m][k, i]:8.3f}"
+                 for m in ("kf", "fkf_rail") for i in (0, 1)]
+        print(f"{k + 1:5d}  {cells[0]:>18s} {cells[1]:>18s}   {cells[2]:>18s} {cells[3]:>18s}")
+    n_imu = log.imu_t.size
+    print(f"throughput: INS/odometer {n_imu / t_kf:,.0f}, federated rail filter {n_imu / t_rail:,.0f} IMU samples/s")
+
+    fault = scn_fault.faults[0]
+    f_log = _log(scn_fault, tables, ideal, 0)
+    f_prep = sp.prepare(f_log, cfg)
+    thr = chi2_threshold(3, cfg.detector.p_false_alarm)
+    print(f"\nseed004_fault, trial 0: rail deviation {fault.value:g} deg per two chutes, {fault.t_start_s:g}-"
+          f"{fault.t_end_s:g} s; detectors (threshold: chi-square {thr:.1f}, FSPRT {cfg.detector.t_on:g} / "
+          f"{cfg.detector.t_off:g}, fading {cfg.detector.fading:g})")
+    clean_err = _window_error(rail, tables, fault)
+    print(f"{'isolating detector':20s} {'delay [s]':>9s} {'clear [s]':>9s} {'missed':>8s} {'false/h':>8s} "
+          f"{'max horiz. error in fault [m]':>30s}  (fault-free {clean_err:.3f}; target <= +0.05)")
+    for name in fp.DETECTORS:
+        sol = fp.run_rail(f_log, cfg, f_prep, isolate_by=name)
+        fig = detector_figures(sol, name, thr, fault.t_start_s, fault.t_end_s, hours, cfg.detector.t_on)
+        print(f"{name:20s} {fig['delay']:9.1f} {fig['clear']:9.1f} {fig['missed']:4d}/{fig['fixes']:<3d} "
+              f"{fig['false_per_h']:8.2f} {_window_error(sol, tables, fault):30.3f}")
+    none = fp.run_rail(f_log, cfg, f_prep, isolate_by=None)
+    print(f"{'none (no isolation)':20s} {'':9s} {'':9s} {'':8s} {'':8s} {_window_error(none, tables, fault):30.3f}")
+    print("targets: FSPRT delay <= 60 s, clear <= 60 s after the fault ends")
+
+    alarms, worst = [], []
+    for trial in range(1, trials + 1):
+        tlog = _log(scn, tables, ideal, trial)
+        sol = fp.run_rail(tlog, cfg, sp.prepare(tlog, cfg))
+        alarms.append(len(_windows(sol.t, (sol.flags & FLAG_ISOLATED) > 0)))
+        worst.append(_cycle_rmse(sol, tables).max(axis=0))
+    worst = np.array(worst)
+    print(f"\nfault-free Monte Carlo, {trials} trials of seed004 ({trials * hours:.0f} h): FSPRT false alarms "
+          f"{sum(alarms)} (target 0; per trial {alarms}); worst cycle RMSE E {worst[:, 0].mean():.3f} +- "
+          f"{worst[:, 0].std():.3f}, N {worst[:, 1].mean():.3f} +- {worst[:, 1].std():.3f} m")
+    if long:
+        _long_run()
+    print(f"\ntotal {time.perf_counter() - t_start:.0f} s")
+
+
+def _window_error(sol: sp.Solution, tables, fault) -> float:
+    """Largest horizontal error while the fault acts and a minute after."""
+    _, err = metrics.position_errors(sp.estimate_columns(sol), tables["truth_shearer"])
+    w = (sol.t >= fault.t_start_s) & (sol.t <= fault.t_end_s + CLEAR_MARGIN_S)
+    return float(np.hypot(err[w, 0], err[w, 1]).max())
+
+
+def _long_run() -> None:
+    scn = load_scenario(default_scenario().parent / "seed004_20cycles.toml")
+    result = simulate(scn)
+    ideal = imu_truth(scn, result.tables["truth_shearer"])
+    cfg = dataclasses.replace(positioning_config(scn))
+    log = _log(scn, result.tables, ideal, 0)
+    prep = sp.prepare(log, cfg)
+    rmse = {m: _cycle_rmse(s, result.tables) for m, s in
+            (("kf", sp.run_kf(log, cfg, prep, cpoem=False, smooth=False)[0]), ("fkf_rail", fp.run_rail(log, cfg, prep)))}
+    print("\nseed004_20cycles: RMSE per cycle E / N [m]")
+    for m, r in rmse.items():
+        print(f"{m:9s} E " + " ".join(f"{v:.2f}" for v in r[:, 0]))
+        print(f"{'':9s} N " + " ".join(f"{v:.2f}" for v in r[:, 1]))
+
+
+if __name__ == "__main__":
+    args = [a for a in sys.argv[1:] if not a.startswith("--")]
+    main(int(args[0]) if args else 20, "--long" in sys.argv)

@@ -1,0 +1,84 @@
+"""004's federated INS/odometer + INS/rail-kinematics-model filter (estimators.federated_positioning.run_rail) on the
+default face: the face survey's fixes, the odometer calibration they give, and the isolation of a rail-model fault
+reported by the push-ram sensors."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from estimators import federated_positioning as fp
+from estimators import metrics
+from estimators import shearer_positioning as sp
+from estimators.logformat import FLAG_ISOLATED, FLAG_POSITION
+from twin.estimate import positioning_config, true_states
+from twin.scenario import parse_scenario
+from twin.sensors import imu_truth, sensor_streams
+
+from .conftest import simulated
+
+
+def _log(scn, result, trial=0) -> sp.Log:
+    s = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), trial)
+    return sp.log_from_columns(s["imu"], s["odometer"], s["survey"], s["pushram"], face_survey=s["face_survey"])
+
+
+@pytest.fixture(scope="module")
+def face():
+    scn, result = simulated("default")
+    log = _log(scn, result)
+    cfg = positioning_config(scn)
+    return scn, result, log, cfg, sp.prepare(log, cfg)
+
+
+def test_the_face_survey_fixes_the_first_cut_and_calibrates_the_odometer(face):
+    scn, result, log, cfg, prep = face
+    rail = fp.run_rail(log, cfg, prep)
+    odo = sp.run_kf(log, cfg, prep, cpoem=False, smooth=False)[0]
+    assert np.isfinite(rail.llh).all() and np.isfinite(rail.sd).all()
+    d = rail.detectors
+    cut_end = result.tables["truth_cycles"]["t_cut_end"][0]
+    assert d["applied"].all() and np.sum(d["t"] <= cut_end) >= 0.8 * log.face_u.size
+    assert not (rail.flags & FLAG_ISOLATED).any() and (rail.flags & FLAG_POSITION).any()
+    truth = true_states(scn)["odo_scale"]
+    # The face survey's points lie at true distances: the odometer scale (0.3 %) becomes observable.
+    assert abs(rail.cal[-1, 9] - truth) < 0.25 * abs(truth) < abs(odo.cal[-1, 9] - truth)
+    errs = []
+    for sol in (odo, rail):  # over the first cut, on the surveyed face line
+        t, err = metrics.position_errors(sp.estimate_columns(sol), result.tables["truth_shearer"])
+        errs.append(np.hypot(err[:, 0], err[:, 1])[t <= cut_end].max())
+    assert errs[1] < 0.5 * errs[0], errs
+
+
+def test_a_rail_deviation_is_isolated_and_the_filter_readmits_the_model(face):
+    scn, result, _, cfg, _ = face
+    cut_end = float(result.tables["truth_cycles"]["t_cut_end"][0])
+    t0, t1 = 0.35 * cut_end, 0.6 * cut_end
+    faulted = parse_scenario({**scn.model_dump(), "faults": [
+        {"kind": "rail_deviation", "t_start_s": t0, "t_end_s": t1, "value": 2.0}]}, "default-rail-fault")
+    f_log = _log(faulted, result)
+    sol = fp.run_rail(f_log, cfg, sp.prepare(f_log, cfg))
+    isolated = (sol.flags & FLAG_ISOLATED) > 0
+    assert isolated[(sol.t > t0) & (sol.t < t1 + 60.0)].any()
+    assert not isolated[sol.t < t0].any() and not isolated[sol.t > t1 + 120.0].any()
+    d = sol.detectors
+    during = (d["t"] > t0) & (d["t"] < t1)
+    assert np.nanmax(d["residual"][during]) > 3 * np.nanmax(d["residual"][d["t"] < t0])
+    assert (d["applied"][during] == 0).any()
+    # Isolated, the filter rides on the odometer: the deviation does not bend the estimate.
+    blind = fp.run_rail(f_log, dataclasses.replace(cfg), sp.prepare(f_log, cfg), isolate_by=None)
+    errs = []
+    for s in (sol, blind):
+        _, err = metrics.position_errors(sp.estimate_columns(s), result.tables["truth_shearer"])
+        errs.append(np.hypot(err[:, 0], err[:, 1]).max())
+    assert errs[0] < errs[1]
+
+
+def test_unknown_detector_and_missing_rams_are_one_line(face):
+    _scn, _result, log, cfg, prep = face
+    with pytest.raises(sp.PositioningError, match="detector 'cusum'"):
+        fp.run_rail(log, cfg, prep, isolate_by="cusum")
+    bare = dataclasses.replace(log, ram_t=np.zeros(0), ram_support=np.zeros(0, int), ram_extension=np.zeros(0),
+                               ram_valid=np.zeros(0, int))
+    with pytest.raises(sp.PositioningError, match="pushram"):
+        fp.run_rail(bare, cfg, sp.prepare(bare, cfg))
