@@ -54,7 +54,7 @@ def _windows(t: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
 
 
 def detector_figures(sol: sp.Solution, name: str, threshold: float, t0: float, t1: float, hours: float,
-                     sol_threshold_on: float) -> dict[str, float]:
+                     t_on: float) -> dict[str, float]:
     """Delay to the first flag after t0, delay of the clearing after t1, fault fixes not flagged, false alarms
     per hour (flags starting outside [t0, t1 + CLEAR_MARGIN_S])."""
     d = sol.detectors
@@ -65,7 +65,6 @@ def detector_figures(sol: sp.Solution, name: str, threshold: float, t0: float, t
         runs = [(t, t) for t in d["t"][flagged]]
     first = [a for a, _ in runs if t0 <= a <= t1 + CLEAR_MARGIN_S]
     if name == "fsprt":  # the flag goes back to the onset (the filter rolls back): the alarm is the crossing
-        t_on = sol_threshold_on
         crossed = d["t"][(d["t"] >= t0) & (d["fsprt"] > t_on)]
         first = [float(crossed[0])] if crossed.size else []
     inside = [(a, b) for a, b in runs if a <= t1 + CLEAR_MARGIN_S and b >= t0]

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from estimators import ram_checks as rc
+from twin.estimate import ram_layout
 from twin.layout import support_stations
 from twin.scenario import load_scenario, parse_scenario
 from twin.sensors import imu_truth, sensor_streams
@@ -35,15 +36,6 @@ SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "seed004.toml"
 TARGET = 100
 KIND = {"ram_stuck": "stuck", "ram_offset": "offset", "ram_drift": "drift", "ram_scale": "scale",
         "ram_dropout": "dropout", "ram_noise_burst": "noise_burst", "rail_deviation": "rail_deviation"}
-
-
-def layout_of(scn) -> rc.RamLayout:
-    """What a user knows of the scenario's face and its ram sensors."""
-    k = scn.supports.pans_per_support
-    return rc.RamLayout(n_supports=support_stations(scn).size, spacing_m=k * scn.face.pan_length_m,
-                        stroke_m=scn.face.web_depth_m, noise_m=scn.sensors.pushram.noise_m,
-                        resolution_m=scn.sensors.pushram.resolution_m, pan_length_m=scn.face.pan_length_m,
-                        bend_limit_deg=scn.face.bend_limit_horizontal_deg)
 
 
 def first_push(supports: dict[str, np.ndarray], target: int, web: float) -> tuple[float, float]:
@@ -87,7 +79,7 @@ def main() -> None:
     duration = float(result.tables["truth_shearer"]["t"][-1])
     print(f"{scn.name}: {scn.cycles} cycles, {duration / 3600:.2f} h, {support_stations(scn).size} supports, "
           f"ram noise {scn.sensors.pushram.noise_m} m; physics {time.perf_counter() - t0:.0f} s")
-    layout = layout_of(scn)
+    layout = ram_layout(scn)
     interior = rc._neighbour_filter(layout.n_supports)
     tau_n = layout.bend_m * interior[3][TARGET] + rc.NEIGHBOUR_SIGMAS * layout.sigma_m * interior[2][TARGET] \
         * 1.2533 / np.sqrt(rc.NEIGHBOUR_WINDOW)
@@ -103,7 +95,7 @@ def main() -> None:
         faulty = parse_scenario({**scn.model_dump(), "faults": [fault]}, scn.name)
         ram = sensor_streams(faulty, result.tables, ideal, 0)["pushram"]
         start = time.perf_counter()
-        found = rc.check_log(ram, layout_of(faulty))
+        found = rc.check_log(ram, ram_layout(faulty))
         check_seconds.append(time.perf_counter() - start)
         t0, t1, kind = fault["t_start_s"], fault["t_end_s"], KIND[fault["kind"]]
         if kind == "rail_deviation":

@@ -114,13 +114,13 @@ def field_disturbed(mag_b, c_bn, intensity, inclination, norm_tol, dip_tol):
 def mag_update(x, p, nav, mag_b, mag_params, r_yaw, r_buf, r_count, use_check):
     """Yaw closing-error update (003 section 3.2) of (x, P) with variance r_yaw.
 
-    Returns (flag bits, innovation, R used, new window count). With use_check, a disturbed reading is left out
+    Returns (flag bits, innovation, new window count). With use_check, a disturbed reading is left out
     and not put in the noise window; every other innovation goes into the window (also a gated one, so that R can
     grow to admit a real change)."""
     c_bn = quat_mat(nav[QUAT])
     if use_check and field_disturbed(mag_b, c_bn, mag_params[M_INTENSITY], mag_params[M_INCLINATION],
                                      mag_params[M_NORM_TOL], mag_params[M_DIP_TOL]):
-        return MAG_READ | MAG_DISTURBED, np.nan, r_yaw, r_count
+        return MAG_READ | MAG_DISTURBED, np.nan, r_count
     h = np.zeros((1, x.size))
     h[0, PHI.start:PHI.start + 3] = mag_params[M_H_PHI:M_H_PHI + 3]
     z = np.array([yaw_closing_error_nb(mag_b, c_bn, mag_params[M_DECLINATION])])
@@ -128,9 +128,9 @@ def mag_update(x, p, nav, mag_b, mag_params, r_yaw, r_buf, r_count, use_check):
     hph = h @ p @ h.T
     r_count = window_push(r_buf, r_count, np.array([v]), hph)
     if v * v > mag_params[M_GATE] * (hph[0, 0] + r_yaw):
-        return MAG_READ | MAG_GATED, v, r_yaw, r_count
+        return MAG_READ | MAG_GATED, v, r_count
     joseph_update(x, p, z, h, np.array([[r_yaw]]))
-    return MAG_READ | MAG_USED, v, r_yaw, r_count
+    return MAG_READ | MAG_USED, v, r_count
 
 
 @nb.njit(cache=True)
@@ -289,7 +289,7 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
         r_yaw_out[j] = r_yaw
         mflag = 0
         if np.all(np.isfinite(mag_b[j])):
-            mflag, yaw_innov[j], _r, counters[0] = mag_update(x2, p2, nav, mag_b[j], mag_params, r_yaw, r_buf,
+            mflag, yaw_innov[j], counters[0] = mag_update(x2, p2, nav, mag_b[j], mag_params, r_yaw, r_buf,
                                                              counters[0], check)
         back = -1
         while k_fix < fix_epoch.size and fix_epoch[k_fix] == j:

@@ -95,7 +95,7 @@ def detector_params(det: DetectorConfig, isolate_by: str | None) -> np.ndarray:
 class _Run:
     """Storage of one federated run over all epochs."""
 
-    def __init__(self, prep, n_fixes_hint: int = 0):
+    def __init__(self, prep):
         n = prep.t_kf.size
         self.nav, self.cal = np.zeros((n, kf.N_NAV)), np.zeros((n, kf.N_CAL))
         self.nav[0], self.cal[0] = prep.nav0, prep.cal0

@@ -30,22 +30,13 @@ import pytest
 
 from estimators import ram_checks as rc
 from estimators.logformat import PUSHRAM, make_table
-from twin.layout import support_stations
+from twin.estimate import ram_layout
 from twin.scenario import parse_scenario
 from twin.sensors import imu_truth, sensor_streams
 
 from .conftest import simulated
 
 SUPPORT = 20
-
-
-def layout_of(scn) -> rc.RamLayout:
-    """What a user knows of the scenario's face and its ram sensors."""
-    k = scn.supports.pans_per_support
-    return rc.RamLayout(n_supports=support_stations(scn).size, spacing_m=k * scn.face.pan_length_m,
-                        stroke_m=scn.face.web_depth_m, noise_m=scn.sensors.pushram.noise_m,
-                        resolution_m=scn.sensors.pushram.resolution_m, pan_length_m=scn.face.pan_length_m,
-                        bend_limit_deg=scn.face.bend_limit_horizontal_deg)
 
 
 @cache
@@ -68,7 +59,7 @@ def pushram(name: str = "default", faults=(), trial: int = 0, sensor: dict | Non
 
 def findings(name: str = "default", faults=(), trial: int = 0, sensor: dict | None = None):
     scn, ram = pushram(name, faults, trial, sensor)
-    return scn, rc.check_log(ram, layout_of(scn))
+    return scn, rc.check_log(ram, ram_layout(scn))
 
 
 def fault(kind, t0, t1, value=0.0, target=SUPPORT):
@@ -117,7 +108,7 @@ def test_stuck_ram_is_flat_through_its_push():
     """Frozen at rest before its push, through the push and the advance: the flat run names it after 30
     readings (noise = resolution: a reading stays in its quantum with p = 0.38)."""
     scn, found = findings(faults=[fault("ram_stuck", 250.0, 700.0)])
-    run = rc._flat_run(layout_of(scn))
+    run = rc._flat_run(ram_layout(scn))
     assert run == 30
     f = only(found, "stuck")
     assert (f.t_start, f.t_end) == (250.0, 699.0)
@@ -128,7 +119,7 @@ def test_stuck_fine_sensor_stops_following_its_neighbours():
     """A sensor without noise reads constant at rest anyway: the neighbour check names it once the neighbours
     push and it does not follow."""
     scn, found = findings(faults=[fault("ram_stuck", 250.0, 700.0)], sensor={"noise_m": 0.0})
-    assert rc._flat_run(layout_of(scn)) is None
+    assert rc._flat_run(ram_layout(scn)) is None
     f = only(found, "stuck")
     assert 250.0 <= f.t_detect <= 360.0
     assert f.t_start <= 250.0 and f.t_end >= 699.0  # the whole frozen stretch
@@ -161,7 +152,7 @@ def test_scale_over_a_push_and_advance():
 def test_commanded_stroke_check_alone_sees_a_scale_error():
     """Check (a) on its own: the stroke of the push and the retraction of the advance are 10 % long."""
     scn, ram = pushram(faults=[fault("ram_scale", 250.0, 700.0, 0.1)])
-    layout = layout_of(scn)
+    layout = ram_layout(scn)
     tg, x = rc._grid(ram["t"], ram["support"], ram["extension"], ram["valid"], layout.n_supports)
     usable = ~rc._self_checks(tg, x, layout)[1]
     idxs, candidates, _ = rc._advances(x, usable, layout)
@@ -180,7 +171,7 @@ def test_rail_deviation_names_the_run_of_supports():
     _, clean = pushram()
     changed = np.unique(ram["support"][np.abs(ram["extension"] - clean["extension"]) > 1e-9])
     assert changed.size >= 10 and np.all(np.diff(changed) == 1)
-    found = rc.check_log(ram, layout_of(scn))
+    found = rc.check_log(ram, ram_layout(scn))
     assert len(found) == 1 and found[0].kind == "rail_deviation", rc.format_findings(found)
     f = found[0]
     assert changed[0] <= f.support and f.last_support <= changed[-1]
@@ -228,7 +219,7 @@ def test_a_pyarrow_table_works_too():
     scn, ram = pushram(faults=[fault("ram_dropout", 300.0, 400.0)])
     table = make_table(PUSHRAM, ram)
     assert isinstance(table, pa.Table)
-    assert [f.kind for f in rc.check_log(table, layout_of(scn))] == ["dropout"]
+    assert [f.kind for f in rc.check_log(table, ram_layout(scn))] == ["dropout"]
 
 
 def test_bad_input_is_one_clear_line():

@@ -26,6 +26,7 @@ from estimators.logformat import (
     read_stream,
     write_estimate,
 )
+from estimators.ram_checks import RamLayout
 from twin.imu_grades import grade
 from twin.layout import support_stations
 from twin.scenario import Scenario
@@ -65,6 +66,15 @@ def positioning_config(scn: Scenario) -> sp.Config:
                       gyro_bias_psd=_psd(g.gyro_bias_instability, g.gyro_bias_tau),
                       accel_bias_psd=_psd(g.accel_bias_instability, g.accel_bias_tau))
     return sp.Config(imu=imu, **kw)
+
+
+def ram_layout(scn: Scenario) -> RamLayout:
+    """What a user knows of the scenario's face and its push-ram sensors (estimators.ram_checks)."""
+    k = scn.supports.pans_per_support
+    return RamLayout(n_supports=support_stations(scn).size, spacing_m=k * scn.face.pan_length_m,
+                     stroke_m=scn.face.web_depth_m, noise_m=scn.sensors.pushram.noise_m,
+                     resolution_m=scn.sensors.pushram.resolution_m, pan_length_m=scn.face.pan_length_m,
+                     bend_limit_deg=scn.face.bend_limit_horizontal_deg)
 
 
 def true_states(scn: Scenario) -> dict[str, float]:
