@@ -306,17 +306,39 @@ ESTIMATE_DETECTORS = Stream(
         Column("lat", "rad", "f8", "predicted shearer body point on the rail: latitude"),
         Column("lon", "rad", "f8", "longitude"),
         Column("h", "m", "f8", "ellipsoidal height"),
-        Column("residual", "1", "f8", "residual chi-square statistic of the fix's innovation"),
-        Column("dual_state", "1", "f8", "dual-state chi-square statistic (with against without the fix)"),
-        Column("fsprt", "1", "f8", "fading sequential probability ratio statistic (004 eq. 23)"),
+        Column("residual", "1", "f8", "residual chi-square statistic of the fix's innovation (NaN: a surveyed face "
+               "end, applied without the detectors)", nan_ok=True),
+        Column("dual_state", "1", "f8", "dual-state chi-square statistic (with against without the fix)", nan_ok=True),
+        Column("fsprt", "1", "f8", "fading sequential probability ratio statistic (004 eq. 23)", nan_ok=True),
         Column("applied", "1", "i4", "1 when the fix was applied, 0 when the isolating detector held a fault"),
         Column("isolated", "1", "i4", "1 while the rail kinematics model is isolated"),
     ),
 )
 
+ESTIMATE_SUPPORT_ATTITUDE = Stream(
+    "estimate_support_attitude",
+    "One method's canopy attitude for every instrumented support (estimates/METHOD_support_attitude.parquet, "
+    "002_5cc0b59ad045ffaa.txt): one row per support per output sample, ordered like SUPPORT_IMU. Canopy frame c "
+    "as in SUPPORT_IMU, n local-level ENU; Euler angles as DESIGN (C_c^n = Rz(yaw) Rx(pitch) Ry(roll)). Gyro bias "
+    "and one-sigma are NaN for methods without them (002's KF and UKF).",
+    (
+        T,
+        Column("support", "1", "i4", "support index"),
+        *_quat("q_nc", "canopy attitude, rotates c vectors into n"),
+        Column("pitch", "rad", "f8", "about the canopy x axis (towards the coal wall): the face's inclination"),
+        Column("roll", "rad", "f8", "about the canopy y axis (along the face): the fore-aft tilt"),
+        Column("yaw", "rad", "f8", "counter-clockwise from north"),
+        *(Column(f"gyro_bias_{a}", "rad/s", "f8", f"estimated gyro bias in c, {a}", nan_ok=True) for a in "xyz"),
+        *(Column(f"sd_att_{a}", "rad", "f8", f"one-sigma attitude error about c's {a} axis", nan_ok=True)
+          for a in "xyz"),
+        Column("flags", "1", "i4", "bitmask of estimators.support_attitude_ours FLAG_* (0 for 002's filters)"),
+    ),
+    time_order="nondecreasing",
+)
+
 TRUTH_STREAMS = (TRUTH_SHEARER, TRUTH_PANS, TRUTH_SUPPORTS, TRUTH_CYCLES)
 SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, MAG, SUPPORT_IMU, FAULTS, SURVEY, FACE_SURVEY)
-ESTIMATE_STREAMS = (ESTIMATE, ESTIMATE_STATES, ESTIMATE_FUSION, ESTIMATE_DETECTORS)
+ESTIMATE_STREAMS = (ESTIMATE, ESTIMATE_STATES, ESTIMATE_FUSION, ESTIMATE_DETECTORS, ESTIMATE_SUPPORT_ATTITUDE)
 STREAMS = {s.name: s for s in TRUTH_STREAMS + SENSOR_STREAMS}
 
 
@@ -384,7 +406,7 @@ ESTIMATES_DIR = "estimates"
 
 
 _ESTIMATE_SUFFIX = {"estimate": "", "estimate_states": "_states", "estimate_fusion": "_fusion",
-                    "estimate_detectors": "_detectors"}
+                    "estimate_detectors": "_detectors", "estimate_support_attitude": "_support_attitude"}
 
 
 def estimate_path(run_dir: Path, method: str, stream: Stream = ESTIMATE) -> Path:
@@ -395,9 +417,9 @@ def estimate_path(run_dir: Path, method: str, stream: Stream = ESTIMATE) -> Path
 def write_estimate(run_dir: Path, method: str, data: dict[str, np.ndarray], stream: Stream = ESTIMATE) -> Path:
     path = estimate_path(run_dir, method, stream)
     path.parent.mkdir(parents=True, exist_ok=True)
-    return write_stream(path.parent, Stream(path.stem, stream.doc, stream.columns), make_table(stream, data))
+    return write_stream(path.parent, Stream(path.stem, stream.doc, stream.columns, stream.time_order), make_table(stream, data))
 
 
 def read_estimate(run_dir: Path, method: str, stream: Stream = ESTIMATE) -> pa.Table:
     path = estimate_path(run_dir, method, stream)
-    return read_stream(path.parent, Stream(path.stem, stream.doc, stream.columns))
+    return read_stream(path.parent, Stream(path.stem, stream.doc, stream.columns, stream.time_order))

@@ -15,10 +15,14 @@ Contents
   numba kernel over a batch of independent filters (supports, or Q candidates of the tuning);
 * the linear quaternion KF baseline (same state and process; the accelerometer/magnetometer quaternion as
   a linear measurement);
-* the gradient-descent tuning of Q's rate variances (eq. 35, steps 1.1-1.4) with the objective per iteration.
+* the gradient-descent tuning of Q's rate variances (eq. 35, steps 1.1-1.4) with the objective per iteration;
+* `support_batch`: a face's SUPPORT_IMU stream as (supports, samples, 3) arrays, units it cannot use left out
+  with their reason, so that each filter runs once over all supports.
 
 The scalar formulas are written once with numpy functions (numba's register_jitable) so that they serve both
-numpy arrays (the API) and numba scalars (the kernels).
+numpy arrays (the API) and numba scalars (the kernels). The kernels allocate each filter's state and scratch
+once (nothing in the sample loop), run the filters of a batch in parallel (prange) and use fast-math flags short
+of assuming finite values (FASTMATH); a filter's result does not depend on the batch it runs in.
 
 Rate-noise variances sigma_w^2 of Q (eq. 23) are in (rad/s)^2: Q_k = dt^2 / 4 Xi(q) diag(sigma_w^2) Xi(q)^T,
 the covariance of the quaternion step driven by white rate deviations held over one sample.
@@ -26,6 +30,7 @@ the covariance of the quaternion step driven by white rate deviations held over 
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
 import numba as nb
@@ -48,10 +53,19 @@ def accel_pitch_roll(fx, fy, fz):
 
 
 @register_jitable
-def level_field(mx, my, mz, pitch, roll):
+def accel_tilt_sincos(fx, fy, fz):
+    """(sin, cos) of the accelerometer pitch and of its roll (eqs. 7-8), without trigonometric calls:
+    sin(pitch) = f_y / |f|, cos(pitch) = sqrt(f_x^2 + f_z^2) / |f|, sin(roll) = -f_x / sqrt(f_x^2 + f_z^2),
+    cos(roll) = f_z / sqrt(f_x^2 + f_z^2)."""
+    rs = np.sqrt(fx * fx + fz * fz)
+    n = np.sqrt(rs * rs + fy * fy)
+    return fy / n, rs / n, -fx / rs, fz / rs
+
+
+@register_jitable
+def level_field(mx, my, mz, sp, cp, sr, cr):
     """Horizontal components (h_x, h_y) of the field m_b rotated to the level frame Rx(pitch) Ry(roll) m_b
-    (002 eq. 4 in the project's convention)."""
-    sp, cp, sr, cr = np.sin(pitch), np.cos(pitch), np.sin(roll), np.cos(roll)
+    (002 eq. 4 in the project's convention), from the sines and cosines of pitch and roll."""
     return cr * mx + sr * mz, sp * sr * mx + cp * my - sp * cr * mz
 
 
@@ -61,7 +75,7 @@ def mag_yaw(mx, my, mz, pitch, roll, declination):
     and roll (002 eqs. 3-6). The level field is B_h [sin(D + yaw), cos(D + yaw)]: the magnetic yaw is
     atan2(h_x, h_y) (eq. 5) and the true yaw subtracts the declination D (east positive; 002 eq. 6 adds it to
     its clockwise yaw)."""
-    hx, hy = level_field(mx, my, mz, pitch, roll)
+    hx, hy = level_field(mx, my, mz, np.sin(pitch), np.cos(pitch), np.sin(roll), np.cos(roll))
     return wrap(np.arctan2(hx, hy) - declination)
 
 
@@ -85,10 +99,10 @@ def accel_covariance(fx, fy, fz, var_x, var_y, var_z):
 
 
 @register_jitable
-def mag_yaw_variance(mx, my, mz, pitch, roll, var_x, var_y, var_z):
-    """Variance of the magnetic yaw for white magnetometer noise at fixed pitch and roll (002 eqs. 26-27)."""
-    sp, cp, sr, cr = np.sin(pitch), np.cos(pitch), np.sin(roll), np.cos(roll)
-    hx, hy = level_field(mx, my, mz, pitch, roll)
+def mag_yaw_variance(mx, my, mz, sp, cp, sr, cr, var_x, var_y, var_z):
+    """Variance of the magnetic yaw for white magnetometer noise at fixed pitch and roll, given by their sines
+    and cosines (002 eqs. 26-27)."""
+    hx, hy = level_field(mx, my, mz, sp, cp, sr, cr)
     h2 = hx * hx + hy * hy
     j0 = (hy * cr - hx * sp * sr) / h2
     j1 = -hx * cp / h2
@@ -120,35 +134,41 @@ def euler_quat(pitch, roll, yaw):
 
 
 @register_jitable
-def propagation_matrix(ax, ay, az):
-    """A = cos(|a|/2) I + sin(|a|/2) / |a| Omega(a) for the angle increment a [rad] (002 eqs. 12, 19):
-    q_k = A q_{k-1} is q_{k-1} (x) exp(a / 2). Returns the 4x4 matrix (numba and numpy scalars)."""
-    ang = np.sqrt(ax * ax + ay * ay + az * az)
-    c = np.cos(0.5 * ang)
-    s = 0.5 - ang * ang / 48.0 if ang < 1e-4 else np.sin(0.5 * ang) / ang
-    a = np.empty((4, 4))
-    a[0, 0], a[0, 1], a[0, 2], a[0, 3] = c, -s * ax, -s * ay, -s * az
-    a[1, 0], a[1, 1], a[1, 2], a[1, 3] = s * ax, c, s * az, -s * ay
-    a[2, 0], a[2, 1], a[2, 2], a[2, 3] = s * ay, -s * az, c, s * ax
-    a[3, 0], a[3, 1], a[3, 2], a[3, 3] = s * az, s * ay, -s * ax, c
-    return a
+def exp_half(ax, ay, az):
+    """(c, s) with exp(a / 2) = [c, s a_x, s a_y, s a_z] for the rotation vector a [rad] (002 eq. 12:
+    c = cos(|a|/2), s = sin(|a|/2) / |a|; Taylor series to 4th order below 0.01 rad, exact to 1e-17)."""
+    a2 = ax * ax + ay * ay + az * az
+    if a2 < 1e-4:
+        return 1.0 - a2 / 8.0 + a2 * a2 / 384.0, 0.5 - a2 / 48.0 + a2 * a2 / 3840.0
+    ang = np.sqrt(a2)
+    return np.cos(0.5 * ang), np.sin(0.5 * ang) / ang
 
 
 @register_jitable
-def process_noise(q, var_w, dt):
-    """Q = dt^2 / 4 Xi(q) diag(var_w) Xi(q)^T (002 eqs. 22-23), var_w the rate-deviation variances."""
-    xi = np.empty((4, 3))
-    xi[0, 0], xi[0, 1], xi[0, 2] = -q[1], -q[2], -q[3]
-    xi[1, 0], xi[1, 1], xi[1, 2] = q[0], -q[3], q[2]
-    xi[2, 0], xi[2, 1], xi[2, 2] = q[3], q[0], -q[1]
-    xi[3, 0], xi[3, 1], xi[3, 2] = -q[2], q[1], q[0]
-    out = np.empty((4, 4))
+def propagation_matrix(ax, ay, az, out):
+    """A = cos(|a|/2) I + sin(|a|/2) / |a| Omega(a) for the angle increment a [rad] into out (4, 4) (002 eqs. 12,
+    19): q_k = A q_{k-1} is q_{k-1} (x) exp(a / 2)."""
+    c, s = exp_half(ax, ay, az)
+    out[0, 0], out[0, 1], out[0, 2], out[0, 3] = c, -s * ax, -s * ay, -s * az
+    out[1, 0], out[1, 1], out[1, 2], out[1, 3] = s * ax, c, s * az, -s * ay
+    out[2, 0], out[2, 1], out[2, 2], out[2, 3] = s * ay, -s * az, c, s * ax
+    out[3, 0], out[3, 1], out[3, 2], out[3, 3] = s * az, s * ay, -s * ax, c
+    return out
+
+
+@register_jitable
+def process_noise(q, var_w, dt, out):
+    """Q = dt^2 / 4 Xi(q) diag(var_w) Xi(q)^T into out (4, 4) (002 eqs. 22-23), var_w the rate-deviation
+    variances [(rad/s)^2]; Xi(q) the 4x3 matrix of q (x) [0, w] = Xi(q) w."""
+    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
+    h = 0.25 * dt * dt
+    v0, v1, v2 = h * var_w[0], h * var_w[1], h * var_w[2]
+    xi = ((-q1, -q2, -q3), (q0, -q3, q2), (q3, q0, -q1), (-q2, q1, q0))
     for i in range(4):
-        for j in range(4):
-            acc = 0.0
-            for m in range(3):
-                acc += xi[i, m] * var_w[m] * xi[j, m]
-            out[i, j] = 0.25 * dt * dt * acc
+        for j in range(i, 4):
+            v = xi[i][0] * v0 * xi[j][0] + xi[i][1] * v1 * xi[j][1] + xi[i][2] * v2 * xi[j][2]
+            out[i, j] = v
+            out[j, i] = v
     return out
 
 
@@ -156,11 +176,10 @@ def propagate(q0, gyro, dt):
     """Attitude q_nb (K+1, 4) from q0 and gyro rates (K, 3) [rad/s] held over each step dt (002 eqs. 10-12)."""
     q = np.empty((gyro.shape[0] + 1, 4))
     q[0] = q0
+    a = np.empty((4, 4))
     for k in range(gyro.shape[0]):
-        q[k + 1] = propagation_matrix(*(gyro[k] * dt)) @ q[k]
+        q[k + 1] = propagation_matrix(*(gyro[k] * dt), a) @ q[k]
     return q
-
-
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -228,12 +247,17 @@ def _inputs(gyro, accel, mag):
 
 
 # --------------------------------------------------------------------------------------------------------------
-# Kernels
+# Kernels: one numba call runs a batch of independent filters (prange over the filters); each filter's state and
+# scratch are allocated once, nothing inside the sample loop allocates.
+
+FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+"""LLVM fast-math flags of the kernels: reassociation and contraction, no finite-math assumption (nnan, ninf)."""
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
 def _chol4(a, out):
-    """Lower Cholesky factor of a symmetric 4x4 matrix into out; non-positive pivots are floored."""
+    """Lower Cholesky factor of a symmetric 4x4 matrix (its lower triangle is read) into out, which may be a;
+    non-positive pivots are floored."""
     for j in range(4):
         s = a[j, j]
         for m in range(j):
@@ -249,19 +273,21 @@ def _chol4(a, out):
             out[i, j] = 0.0
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
 def _measurement(acc, mg, declination, var_a, var_m, z, r):
     """z = (pitch, roll, yaw) from the accelerometer and magnetometer and its covariance R (eqs. 5-8, 24-28)."""
-    p, rl = accel_pitch_roll(acc[0], acc[1], acc[2])
-    z[0], z[1] = p, rl
-    z[2] = mag_yaw(mg[0], mg[1], mg[2], p, rl, declination)
+    z[0], z[1] = accel_pitch_roll(acc[0], acc[1], acc[2])
+    sp, cp, sr, cr = accel_tilt_sincos(acc[0], acc[1], acc[2])
+    hx, hy = level_field(mg[0], mg[1], mg[2], sp, cp, sr, cr)
+    z[2] = wrap(np.arctan2(hx, hy) - declination)  # mag_yaw, eqs. 5-6
     vp, cpr, vr = accel_covariance(acc[0], acc[1], acc[2], var_a[0], var_a[1], var_a[2])
-    r[:, :] = 0.0
-    r[0, 0], r[0, 1], r[1, 0], r[1, 1] = vp, cpr, cpr, vr
-    r[2, 2] = mag_yaw_variance(mg[0], mg[1], mg[2], p, rl, var_m[0], var_m[1], var_m[2])
+    r[0, 0], r[0, 1], r[0, 2] = vp, cpr, 0.0
+    r[1, 0], r[1, 1], r[1, 2] = cpr, vr, 0.0
+    r[2, 0], r[2, 1] = 0.0, 0.0
+    r[2, 2] = mag_yaw_variance(mg[0], mg[1], mg[2], sp, cp, sr, cr, var_m[0], var_m[1], var_m[2])
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
 def body_rate(w, q, w_ie_n, out):
     """Gyro rate minus the Earth rate resolved in b (C_n^b w_ie^n with C from q)."""
     q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
@@ -272,67 +298,78 @@ def body_rate(w, q, w_ie_n, out):
     out[2] = w[2] - (2 * (q1 * q3 + q0 * q2) * ex + 2 * (q2 * q3 - q0 * q1) * ey + (1 - 2 * (q1 * q1 + q2 * q2)) * ez)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
 def _normalize_continuous(x, prev):
+    """x normalised, its sign chosen on prev's side (q and -q are the same attitude)."""
     n = np.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2] + x[3] * x[3])
-    sgn = 1.0 if x[0] * prev[0] + x[1] * prev[1] + x[2] * prev[2] + x[3] * prev[3] >= 0 else -1.0
+    if x[0] * prev[0] + x[1] * prev[1] + x[2] * prev[2] + x[3] * prev[3] < 0:
+        n = -n
     for i in range(4):
-        x[i] = sgn * x[i] / n
+        x[i] = x[i] / n
 
 
-@nb.njit(cache=True, inline="always")
-def _sigma_points(x, p, c, lo, sig):
-    """2n + 1 sigma points (eq. 16) of (x, P): x and x -/+ the columns of chol(c P), c = n + lambda."""
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _predict(x, p, a, pm, xm, ap):
+    """x- = A x, P- = A P A^T + pm (pm holds Q on entry): the unscented transform of the linear process model
+    (eqs. 18-19, 29-30) is exact, so no sigma points are needed for it."""
     for i in range(4):
+        xm[i] = a[i, 0] * x[0] + a[i, 1] * x[1] + a[i, 2] * x[2] + a[i, 3] * x[3]
         for j in range(4):
-            lo[i, j] = c * p[i, j]
-    _chol4(lo.copy(), lo)
-    for j in range(4):
-        sig[0, j] = x[j]
-        for i in range(4):
-            sig[1 + i, j] = x[j] + lo[j, i]
-            sig[5 + i, j] = x[j] - lo[j, i]
+            ap[i, j] = a[i, 0] * p[0, j] + a[i, 1] * p[1, j] + a[i, 2] * p[2, j] + a[i, 3] * p[3, j]
+    for i in range(4):
+        for j in range(i, 4):
+            v = pm[i, j] + ap[i, 0] * a[j, 0] + ap[i, 1] * a[j, 1] + ap[i, 2] * a[j, 2] + ap[i, 3] * a[j, 3]
+            pm[i, j] = v
+            pm[j, i] = v
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
+def _inv3(a, out):
+    """Inverse of a 3x3 matrix (cofactors) into out."""
+    out[0, 0] = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+    out[0, 1] = a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]
+    out[0, 2] = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
+    out[1, 0] = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+    out[1, 1] = a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]
+    out[1, 2] = a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]
+    out[2, 0] = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    out[2, 1] = a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]
+    out[2, 2] = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+    det = a[0, 0] * out[0, 0] + a[0, 1] * out[1, 0] + a[0, 2] * out[2, 0]
+    for i in range(3):
+        for j in range(3):
+            out[i, j] /= det
+
+
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _ukf_kernel(gyro, accel, mag, dt, var_w, var_a, var_m, declination, w_ie_n, wm, wc, c, q0, p0, out_q):
     """002 section 3.5 steps 2.1-2.6 for each filter f over its samples; var_w (F, 3) per filter."""
     nf, nk = gyro.shape[0], gyro.shape[1]
     for f in nb.prange(nf):
         x = q0[f].copy()
         p = p0.copy()
-        lo = np.empty((4, 4))
-        sig = np.empty((9, 4))
-        prop = np.empty((9, 4))
-        zs = np.empty((9, 3))
-        z = np.empty(3)
-        r = np.empty((3, 3))
-        w = np.empty(3)
+        a, ap, pm, lo = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4))
+        sig, zs = np.empty((9, 4)), np.empty((9, 3))
+        z, zm, y, w = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+        r, pzz, inv = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
         xm = np.empty(4)
-        zm = np.empty(3)
-        pm = np.empty((4, 4))
-        pzz = np.empty((3, 3))
-        pxz = np.empty((4, 3))
-        gain = np.empty((4, 3))
-        y = np.empty(3)
+        pxz, gain = np.empty((4, 3)), np.empty((4, 3))
         for k in range(nk):
-            # Step 2.1-2.2 (eqs. 18-19, 23, 29-30): sigma points of x_{k-1}, through A_{k-1}, plus Q.
+            # Steps 2.1-2.2 (eqs. 18-19, 23, 29-30), Q at the previous estimate.
             body_rate(gyro[f, k], x, w_ie_n, w)
-            a = propagation_matrix(w[0] * dt, w[1] * dt, w[2] * dt)
-            pm[:, :] = process_noise(x, var_w[f], dt)
-            _sigma_points(x, p, c, lo, sig)
-            xm[:] = 0.0
-            for i in range(9):
-                for j in range(4):
-                    prop[i, j] = a[j, 0] * sig[i, 0] + a[j, 1] * sig[i, 1] + a[j, 2] * sig[i, 2] + a[j, 3] * sig[i, 3]
-                    xm[j] += wm[i] * prop[i, j]
-            for i in range(9):
-                for j in range(4):
-                    dj = wc[i] * (prop[i, j] - xm[j])
-                    for m in range(4):
-                        pm[j, m] += dj * (prop[i, m] - xm[m])
-            # Step 2.3 (eq. 31): new sigma points of the prediction.
-            _sigma_points(xm, pm, c, lo, sig)
+            propagation_matrix(w[0] * dt, w[1] * dt, w[2] * dt, a)
+            process_noise(x, var_w[f], dt, pm)
+            _predict(x, p, a, pm, xm, ap)
+            # Step 2.3 (eqs. 16, 31): sigma points of the prediction, x- and x- -/+ the columns of chol(c P-).
+            for i in range(4):
+                for j in range(i + 1):
+                    lo[i, j] = c * pm[i, j]
+            _chol4(lo, lo)
+            for j in range(4):
+                sig[0, j] = xm[j]
+                for i in range(4):
+                    sig[1 + i, j] = xm[j] + lo[j, i]
+                    sig[5 + i, j] = xm[j] - lo[j, i]
             # Step 2.4 (eqs. 20-21, 32): output sigma points, yaw unwrapped around the central one.
             zm[:] = 0.0
             for i in range(9):
@@ -352,7 +389,7 @@ def _ukf_kernel(gyro, accel, mag, dt, var_w, var_a, var_m, declination, w_ie_n, 
                     for m in range(4):
                         pxz[m, j] += dz * (sig[i, m] - xm[m])
             # Steps 2.5-2.6 (eqs. 33-34).
-            inv = _inv3(pzz)
+            _inv3(pzz, inv)
             for j in range(3):
                 y[j] = z[j] - zm[j]
             y[2] = wrap(y[2])
@@ -370,62 +407,80 @@ def _ukf_kernel(gyro, accel, mag, dt, var_w, var_a, var_m, declination, w_ie_n, 
             out_q[f, k] = x
 
 
-@nb.njit(cache=True, inline="always")
-def _inv3(a):
-    """Inverse of a 3x3 matrix (cofactors)."""
-    out = np.empty((3, 3))
-    out[0, 0] = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
-    out[0, 1] = a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]
-    out[0, 2] = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
-    out[1, 0] = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
-    out[1, 1] = a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]
-    out[1, 2] = a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]
-    out[2, 0] = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
-    out[2, 1] = a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]
-    out[2, 2] = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-    det = a[0, 0] * out[0, 0] + a[0, 1] * out[1, 0] + a[0, 2] * out[2, 0]
-    return out / det
+@register_jitable
+def euler_quat_jacobian(q, yaw, out):
+    """d q / d(pitch, roll, yaw) (4, 3) into out of q = euler_quat(pitch, roll, yaw) = qz qx qy: the columns are
+    (0, cos(yaw), sin(yaw), 0) (x) q / 2, q (x) (0, 0, 1, 0) / 2 and (0, 0, 0, 1) (x) q / 2."""
+    q0, q1, q2, q3 = q[0], q[1], q[2], q[3]
+    cy, sy = 0.5 * np.cos(yaw), 0.5 * np.sin(yaw)
+    out[0, 0], out[1, 0], out[2, 0], out[3, 0] = -cy * q1 - sy * q2, cy * q0 + sy * q3, sy * q0 - cy * q3, \
+        cy * q2 - sy * q1
+    out[0, 1], out[1, 1], out[2, 1], out[3, 1] = -0.5 * q2, -0.5 * q3, 0.5 * q0, 0.5 * q1
+    out[0, 2], out[1, 2], out[2, 2], out[3, 2] = -0.5 * q3, -0.5 * q2, 0.5 * q1, 0.5 * q0
+    return out
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _kf_kernel(gyro, accel, mag, dt, var_w, var_a, var_m, declination, w_ie_n, q0, p0, out_q):
     """Linear quaternion KF: x_k = A x_{k-1} + w (eqs. 18-19, Q of eq. 23), z = q(pitch, roll, yaw) from the
-    accelerometer and magnetometer (eqs. 5-8) with H = I and R = J R_angles J^T (J the Jacobian of the Euler to
-    quaternion map at z, R_angles of eqs. 24-28)."""
+    accelerometer and magnetometer (eqs. 5-8) with H = I and R = J R_angles J^T (J = euler_quat_jacobian at z,
+    R_angles of eqs. 24-28)."""
     nf, nk = gyro.shape[0], gyro.shape[1]
-    eye = np.eye(4)
     for f in nb.prange(nf):
         x = q0[f].copy()
         p = p0.copy()
-        z = np.empty(3)
+        a, ap, pm, s, gain = np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4)), np.empty((4, 4))
+        z, w = np.empty(3), np.empty(3)
         r = np.empty((3, 3))
-        w = np.empty(3)
-        jac = np.empty((4, 3))
-        zq = np.empty(4)
+        jac, jr = np.empty((4, 3)), np.empty((4, 3))
+        zq, xm = np.empty(4), np.empty(4)
         for k in range(nk):
             body_rate(gyro[f, k], x, w_ie_n, w)
-            a = propagation_matrix(w[0] * dt, w[1] * dt, w[2] * dt)
-            xm = a @ x
-            pm = a @ p @ a.T + process_noise(x, var_w[f], dt)
+            propagation_matrix(w[0] * dt, w[1] * dt, w[2] * dt, a)
+            process_noise(x, var_w[f], dt, pm)
+            _predict(x, p, a, pm, xm, ap)
             _measurement(accel[f, k], mag[f, k], declination, var_a, var_m, z, r)
             zq[0], zq[1], zq[2], zq[3] = euler_quat(z[0], z[1], z[2])
-            h = 1e-6
-            for m in range(3):
-                zp = z.copy()
-                zp[m] += h
-                a0, a1, a2, a3 = euler_quat(zp[0], zp[1], zp[2])
-                jac[0, m], jac[1, m] = (a0 - zq[0]) / h, (a1 - zq[1]) / h
-                jac[2, m], jac[3, m] = (a2 - zq[2]) / h, (a3 - zq[3]) / h
+            euler_quat_jacobian(zq, z[2], jac)
             if zq[0] * xm[0] + zq[1] * xm[1] + zq[2] * xm[2] + zq[3] * xm[3] < 0:
-                zq = -zq
-                jac = -jac
-            rq = jac @ r @ jac.T + 1e-12 * eye
-            gain = pm @ np.linalg.inv(pm + rq)
-            xn = xm + gain @ (zq - xm)
-            p = (eye - gain) @ pm
-            p = 0.5 * (p + p.T)
-            _normalize_continuous(xn, x)
-            x = xn
+                for i in range(4):
+                    zq[i] = -zq[i]
+                    for j in range(3):
+                        jac[i, j] = -jac[i, j]
+            # S = P- + J R J^T (+ 1e-12 I: J R J^T has rank 3); K = P- S^-1 by Cholesky (S and P- symmetric).
+            for i in range(4):
+                for j in range(3):
+                    jr[i, j] = jac[i, 0] * r[0, j] + jac[i, 1] * r[1, j] + jac[i, 2] * r[2, j]
+            for i in range(4):
+                for j in range(i + 1):
+                    s[i, j] = pm[i, j] + jr[i, 0] * jac[j, 0] + jr[i, 1] * jac[j, 1] + jr[i, 2] * jac[j, 2]
+                s[i, i] += 1e-12
+            _chol4(s, s)
+            for col in range(4):  # row col of K = (S^-1 P-[:, col])^T: forward then back substitution
+                for i in range(4):
+                    v = pm[i, col]
+                    for m in range(i):
+                        v -= s[i, m] * gain[col, m]
+                    gain[col, i] = v / s[i, i]
+                for i in range(3, -1, -1):
+                    v = gain[col, i]
+                    for m in range(i + 1, 4):
+                        v -= s[m, i] * gain[col, m]
+                    gain[col, i] = v / s[i, i]
+            for i in range(4):
+                x[i] = xm[i] + (gain[i, 0] * (zq[0] - xm[0]) + gain[i, 1] * (zq[1] - xm[1])
+                                + gain[i, 2] * (zq[2] - xm[2]) + gain[i, 3] * (zq[3] - xm[3]))
+            # P = (I - K) P-, symmetrised
+            for i in range(4):
+                for j in range(4):
+                    ap[i, j] = pm[i, j] - (gain[i, 0] * pm[0, j] + gain[i, 1] * pm[1, j] + gain[i, 2] * pm[2, j]
+                                           + gain[i, 3] * pm[3, j])
+            for i in range(4):
+                for j in range(i, 4):
+                    v = 0.5 * (ap[i, j] + ap[j, i])
+                    p[i, j] = v
+                    p[j, i] = v
+            _normalize_continuous(x, xm)
             out_q[f, k] = x
 
 
@@ -474,6 +529,65 @@ def kf(gyro, accel, mag, dt: float, model: UnitModel, var_w, q0=None, p0_sigma: 
                np.asarray(model.var_mag, float), model.declination, np.asarray(model.earth_rate_n, float),
                q0, p0, out)
     return out
+
+
+@dataclass(frozen=True)
+class SupportBatch:
+    """The SUPPORT_IMU stream of a face as arrays over supports and samples: one batched call per filter."""
+
+    t: np.ndarray  # (K,) [s] the sample times every support kept shares
+    supports: np.ndarray  # (N,) support index of each row of the arrays
+    gyro: np.ndarray  # (N, K, 3) [rad/s] in the canopy frame c
+    accel: np.ndarray  # (N, K, 3) [m/s^2] in c
+    mag: np.ndarray  # (N, K, 3) [T] in c
+    skipped: dict[int, str]  # support left out -> why (one line)
+    dt: float  # [s] the sample interval
+
+
+def support_batch(columns: Mapping[str, np.ndarray], expected: Iterable[int] = ()) -> SupportBatch:
+    """SUPPORT_IMU columns (t, support, gyro_x .. mag_z: estimators.logformat) as (N, K, 3) arrays.
+
+    Never passes on a non-finite value: a support is left out, with its reason in `skipped`, when it is in
+    `expected` but has no rows, when one of its readings is NaN or infinite, or when its sample times are not the
+    common ones (the times at least half of the other supports have). ValueError (one line) when no support is
+    left or the common times are not uniformly spaced (the filters take one interval dt).
+    """
+    t = np.asarray(columns["t"], float)
+    ids = np.asarray(columns["support"], np.int64)
+    sensors = {name: np.stack([np.asarray(columns[f"{name}_{a}"], float) for a in "xyz"], axis=-1)
+               for name in ("gyro", "accel", "mag")}
+    finite = np.isfinite(t)
+    for v in sensors.values():
+        finite &= np.isfinite(v).all(axis=1)
+    skipped: dict[int, str] = {int(j): "no rows in support_imu" for j in set(expected) - set(ids.tolist())}
+    rows = {}
+    for j in np.unique(ids):
+        sel = np.flatnonzero(ids == j)
+        bad = sel[~finite[sel]]
+        if bad.size:
+            skipped[int(j)] = f"{bad.size} of its {sel.size} rows have NaN or infinite values (first: row {bad[0]})"
+        else:
+            rows[int(j)] = sel[np.argsort(t[sel], kind="stable")]
+    times, counts = np.unique(np.concatenate([t[r] for r in rows.values()] or [np.zeros(0)]), return_counts=True)
+    grid = times[2 * counts >= len(rows)]
+    for j, r in list(rows.items()):
+        if r.size != grid.size or np.any(t[r] != grid):
+            missing, extra = np.setdiff1d(grid, t[r]).size, r.size - np.intersect1d(grid, t[r]).size
+            skipped[j] = f"{missing} of the {grid.size} common sample times missing, {extra} others"
+            del rows[j]
+    if not rows:
+        reasons = "; ".join(f"support {j}: {why}" for j, why in sorted(skipped.items()))
+        raise ValueError(f"support_imu: no support with usable readings ({reasons or 'the stream is empty'})")
+    steps = np.diff(grid)
+    dt = float(np.median(steps)) if steps.size else 0.0
+    if not dt > 0 or np.any(np.abs(steps - dt) > 1e-6 * dt):
+        at = int(np.argmax(np.abs(steps - dt))) if steps.size else 0
+        raise ValueError(f"support_imu: the sample times are not uniform (step {steps[at] if steps.size else 0:g} s "
+                         f"at t = {grid[at]:g} s, median {dt:g} s); the filters need one sample interval")
+    order = np.array(sorted(rows))
+    sel = np.stack([rows[j] for j in order])
+    return SupportBatch(grid, order, *(np.ascontiguousarray(sensors[name][sel]) for name in ("gyro", "accel", "mag")),
+                        dict(sorted(skipped.items())), dt)
 
 
 def euler_errors(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:

@@ -30,6 +30,17 @@ def test_paper_scenarios_match_their_experiments():
     assert 6.2 < Timeline(s4).duration / 3600 < 6.6
 
 
+def test_seed002_face_instruments_supports_at_the_face_ends_and_mid_face():
+    """seed002_face (002 section 5 in the twin, issue 8): 002's ICM-42605 units on supports at both face ends and
+    mid-face, the shearer's field on, no shearer estimator (twin.support_units runs 002's filters and ours)."""
+    from twin.support_units import support_class
+
+    scn = load_scenario(SCENARIO_DIR / "seed002_face.toml")
+    units = scn.sensors.support_imu
+    assert units.grade == "icm-42605" and units.shearer_disturbance_t > 0 and scn.estimators.shearer.methods == []
+    assert {support_class(scn, j) for j in units.supports} == {"face_end", "mid_face"}
+
+
 def test_seed004_variants_change_only_what_they_say():
     """seed004_fault adds 004's rail deviation (2825-3131 s, 1 deg per two chutes); seed004_20cycles runs 20
     cycles on a longer panel; both run INS/odometer and the rail-model filter. Nothing else differs."""

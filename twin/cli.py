@@ -18,6 +18,7 @@ from estimators.csvio import export_csv, import_csv
 from estimators.logformat import STREAMS, LogError, make_table, write_stream
 from estimators.shearer_positioning import PositioningError
 from twin.estimate import format_estimators, run_estimators, write_metrics
+from twin.montecarlo import MonteCarloError
 from twin.rundir import RunDirError, atomic_run_dir, check_target
 from twin.scenario import ScenarioError, load_scenario, scenario_to_toml
 
@@ -29,8 +30,10 @@ def default_scenario() -> Path:
 
 
 def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: bool = False,
-        trials: int = 1, sensors: bool = True) -> Path:
-    """Simulate a scenario into a run directory (sensor trial 0 at the top, trials 1.. in trials/NNN/)."""
+        trials: int = 1, sensors: bool = True, workers: int = 1, ray_address: str | None = None) -> Path:
+    """Simulate a scenario into a run directory (sensor trial 0 at the top, trials 1.. in trials/NNN/, each with
+    its estimates; their metrics gathered in trials.parquet), the trials on `workers` local processes or on
+    the Ray cluster at `ray_address` (twin.montecarlo)."""
     from twin.experiment import is_experiment, run_experiment_file
     if is_experiment(scenario):  # a SINS experiment file (kind = "sins_experiment"): twin.experiment
         return run_experiment_file(scenario, out, seed, force, quiet)
@@ -39,9 +42,16 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
         return run_turntable_file(scenario, out, seed, force, quiet)
     from twin.faults import check_faults_in_run
     from twin.haulage import Timeline
+    from twin.montecarlo import (
+        TrialResult,
+        format_monte_carlo,
+        trial_context,
+        trial_runner,
+        write_monte_carlo,
+        write_sensors,
+    )
     from twin.recording import write_recording
     from twin.report import format_summary, twin_summary
-    from twin.sensors import imu_truth, sensor_streams
     from twin.simulate import simulate
 
     scn = load_scenario(scenario, seed)
@@ -52,32 +62,30 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
     out = Path(out) if out is not None else Path("runs") / f"{scn.name}-seed{scn.seed}"
     check_target(out, force)
     start = time.perf_counter()
-    stages = {"face": 0.45, "shearer": 0.2, "sensors": 0.1, "write": 0.05, "recording": 0.05, "estimators": 0.15}
+    mc_trials = range(1, trials if sensors else 1)  # trial 0 is the run itself
+    stages = {"face": 0.45, "shearer": 0.2, "sensors": 0.1, "write": 0.05, "recording": 0.05, "estimators": 0.15,
+              "trials": 0.25 * len(mc_trials)}
+    total = sum(stages.values())
     bar = tqdm(total=100, desc=f"longwall run {scn.name}", disable=quiet, leave=False,
                bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}")
     done = {k: 0.0 for k in stages}
 
     def progress(stage: str, frac: float) -> None:
         done[stage] = frac
-        bar.n = round(100 * sum(stages[k] * v for k, v in done.items()))
+        bar.n = round(100 * sum(stages[k] * v for k, v in done.items()) / total)
         bar.set_description(f"longwall run {scn.name} ({stage})")
 
-    with atomic_run_dir(out, force) as staging:
+    monte_carlo = None
+    with atomic_run_dir(out, force) as staging, trial_runner(workers, ray_address) as runner:
         result = simulate(scn, progress)
         tables = {name: make_table(STREAMS[name], cols) for name, cols in result.tables.items()}
         for name, table in tables.items():
             write_stream(staging, STREAMS[name], table)
-        ideal = imu_truth(scn, result.tables["truth_shearer"]) if sensors else None
-        for trial in range(trials if sensors else 0):
-            streams = sensor_streams(scn, result.tables, ideal, trial)
-            target = staging if trial == 0 else staging / "trials" / f"{trial:03d}"
-            target.mkdir(parents=True, exist_ok=True)
-            for name, cols in streams.items():
-                table = make_table(STREAMS[name], cols)
-                write_stream(target, STREAMS[name], table)
-                if trial == 0:
-                    tables[name] = table
-            progress("sensors", (trial + 1) / trials)
+        if sensors:
+            ctx = trial_context(scn, tables, staging)
+            runner.submit(ctx, staging, mc_trials)  # runs beside trial 0 unless sequential
+            tables.update(write_sensors(ctx, 0, staging))
+            progress("sensors", 1.0)
         (staging / "scenario.toml").write_text(scenario_to_toml(scn))
         progress("write", 1.0)
         write_recording(staging / "run.rrd", scn, {k: v for k, v in tables.items() if k.startswith("truth_")},
@@ -89,11 +97,21 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
         estimated = run_estimators(staging, scn) if sensors else {}
         write_metrics(staging, estimated)
         progress("estimators", 1.0)
+        if mc_trials:
+            results = [TrialResult(0, estimated), *runner.gather(lambda n: progress("trials", n / len(mc_trials)))]
+            monte_carlo = write_monte_carlo(staging, results, list(scn.estimators.shearer.methods),
+                                            runner.description)
         bar.close()
     if not quiet:
         print(format_summary(summary))
         print(format_estimators(estimated, scn.name))
+        if monte_carlo:
+            print(format_monte_carlo(monte_carlo))
         print(f"\nrun directory: {out}")
+    if monte_carlo and monte_carlo["failed"]:
+        print(f"longwall: warning: {monte_carlo['failed']} of {monte_carlo['trials']} Monte Carlo trials failed "
+              f"(trial {monte_carlo['failures'][0]['trial']}: {monte_carlo['failures'][0]['error']}); "
+              f"see {out / 'trials.csv'}", file=sys.stderr)
     return out
 
 
@@ -123,6 +141,10 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--trials", type=int, default=1,
                        help="Monte Carlo: sensor-error trials drawn from the same truth (default 1)")
     p_run.add_argument("--twin-only", action="store_true", help="truth only, no sensor streams")
+    p_run.add_argument("--workers", type=int, default=1,
+                       help="Monte Carlo: local processes for trials 1.. (default 1: sequential)")
+    p_run.add_argument("--ray", metavar="ADDRESS",
+                       help="Monte Carlo: run trials 1.. on the Ray cluster at ADDRESS (auto, HOST:PORT)")
     p_est = sub.add_parser("estimate", help="re-run the estimators on a run directory (simulated or imported)")
     p_est.add_argument("run_dir", type=Path)
     p_est.add_argument("--quiet", action="store_true", help="no table")
@@ -134,6 +156,8 @@ def main(argv: list[str] | None = None) -> int:
     p_exp = sub.add_parser("export", help="write a run directory's streams as CSV files")
     p_exp.add_argument("run_dir", type=Path)
     p_exp.add_argument("--csv", type=Path, required=True, help="folder for the CSV files")
+    p_rep = sub.add_parser("report", help="plots of a run directory as one HTML page (DIR/report/report.html)")
+    p_rep.add_argument("run_dir", type=Path)
     args = parser.parse_args(argv)
     try:
         if args.command == "run":
@@ -141,8 +165,14 @@ def main(argv: list[str] | None = None) -> int:
                 raise ScenarioError(f"--seed: must be >= 0 (got {args.seed})")
             if args.trials < 1:
                 raise ScenarioError(f"--trials: must be >= 1 (got {args.trials})")
+            if not 1 <= args.workers <= args.trials:
+                raise ScenarioError(f"--workers: must be >= 1 and <= --trials (got {args.workers} for "
+                                    f"{args.trials} trials)")
+            if args.ray is not None and args.workers > 1:
+                raise ScenarioError("--workers and --ray exclude each other: Ray runs the trials on the "
+                                    "cluster's CPUs")
             run(args.scenario or default_scenario(), args.out, args.seed, args.force, args.quiet, args.trials,
-                not args.twin_only)
+                not args.twin_only, args.workers, args.ray)
         elif args.command == "estimate":
             estimate(args.run_dir, args.quiet)
         elif args.command == "view":
@@ -154,7 +184,10 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == "export":
             for path in export_csv(args.run_dir, args.csv):
                 print(path)
-    except (ScenarioError, RunDirError, LogError, PositioningError, FileNotFoundError) as err:
+        elif args.command == "report":
+            from twin.report_page import build_report
+            print(build_report(args.run_dir))
+    except (ScenarioError, RunDirError, LogError, PositioningError, FileNotFoundError, MonteCarloError) as err:
         print(f"longwall: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

@@ -86,20 +86,34 @@ def true_states(scn: Scenario) -> dict[str, float]:
     return out
 
 
+def detector_thresholds(scn: Scenario) -> dict[str, float]:
+    """Thresholds of the rail model's detectors as the filter runs them: chi-square with 3 dof at the
+    false-alarm probability for the residual and dual-state tests, T1/T0 of the fading SPRT."""
+    detector = positioning_config(scn).detector
+    chi2 = chi2_threshold(3, detector.p_false_alarm)
+    return {"residual": chi2, "dual_state": chi2, "t_on": detector.t_on, "t_off": detector.t_off}
+
+
 def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict:
     """Run the scenario's shearer estimators on run_dir; writes estimates/, estimates.rrd (with `recording`) and
-    returns the metrics. A log the estimators cannot use raises PositioningError (one line)."""
+    returns the metrics. A log the estimators cannot use raises PositioningError (one line). With instrumented
+    supports the metrics also hold their canopy attitude under SUPPORT_ATTITUDE (twin.support_units)."""
     from twin.estimate_recording import write_estimate_recording
 
+    # The canopy attitude of the instrumented supports (issue 8), under the key SUPPORT_ATTITUDE.
+    from twin.support_units import SUPPORT_ATTITUDE, support_attitude
+    supports = support_attitude(run_dir, scn)
+    out = {} if supports is None else {SUPPORT_ATTITUDE: supports.metrics}
+    if recording and supports is not None and not scn.estimators.shearer.methods:
+        write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, None, {}, {}, supports=supports)
     methods = tuple(scn.estimators.shearer.methods)
     if not methods:
-        return {}
+        return out
     log = sp.load_log(run_dir)
     sols = sp.estimate(log, positioning_config(scn), methods)
     truth = read_stream(run_dir, STREAMS["truth_shearer"])
     cycles = read_stream(run_dir, STREAMS["truth_cycles"])
     states_truth = true_states(scn)
-    out = {}
     for name, sol in sols.items():
         write_estimate(run_dir, name, sp.estimate_columns(sol))
         if sol.cal is not None:
@@ -122,14 +136,11 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
         states = {name: read_estimate(run_dir, name, ESTIMATE_STATES) for name, sol in sols.items() if sol.cal is not None}
         fusion = {name: read_estimate(run_dir, name, ESTIMATE_FUSION) for name, sol in sols.items()
                   if sol.fusion is not None}
-        cfg = positioning_config(scn)
-        thresholds = {"residual": chi2_threshold(3, cfg.detector.p_false_alarm), "t_on": cfg.detector.t_on,
-                      "t_off": cfg.detector.t_off}
-        thresholds["dual_state"] = thresholds["residual"]
+        thresholds = detector_thresholds(scn)
         detectors = {name: (read_estimate(run_dir, name, ESTIMATE_DETECTORS), thresholds)
                      for name, sol in sols.items() if sol.detectors is not None}
         write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, truth, estimates, states, states_truth,
-                                 fusion=fusion, detectors=detectors)
+                                 fusion=fusion, detectors=detectors, supports=supports)
     return out
 
 
@@ -144,8 +155,12 @@ PAPER_FIGURES = {
 def format_estimators(estimators: dict, scenario: str = "") -> str:
     """Per-method SEP per cutting cycle and maximum |east|, |north| error over the run [m] as tables, with the
     paper's figures for the scenarios that reproduce one (PAPER_FIGURES)."""
+    # The supports' canopy attitude (twin.support_units) has its own table, after the shearer's.
+    from twin.support_units import SUPPORT_ATTITUDE, format_support_attitude
+    supports = format_support_attitude(estimators.get(SUPPORT_ATTITUDE))
+    estimators = {name: e for name, e in estimators.items() if name != SUPPORT_ATTITUDE}
     if not estimators:
-        return ""
+        return supports
     table, paper = PAPER_FIGURES.get(scenario, ("", ""))
     n = max(len(e["cycles"]) - 1 for e in estimators.values())
     lines = ["", "shearer position, SEP per cutting cycle [m]" + (f" ({paper})" if table == "sep" else ""),
@@ -157,7 +172,7 @@ def format_estimators(estimators: dict, scenario: str = "") -> str:
     for name, e in estimators.items():
         run = e["cycles"][-1]
         lines.append(f"{name:16s}{run['max_e']:8.3f}{run['max_n']:8.3f}{run['max_horizontal']:8.3f}")
-    return "\n".join(lines)
+    return "\n".join(lines) + supports
 
 
 def write_metrics(run_dir: Path, estimators: dict) -> None:

@@ -38,6 +38,15 @@ and for the rail kinematics model's filter (ESTIMATE_DETECTORS, 004 section IV):
 * `plots/detectors/METHOD/isolated`                   Scalars 0/1, the rail model isolated
 * `world/estimates/METHOD/rail`                       static Points3D, the rail model's predicted points (the
                                                       shearer's path it predicts), beside the true path of run.rrd
+
+and for the supports' canopy attitude (twin.support_units.SupportAttitude, issue 8; ANGLE pitch, roll, yaw):
+
+* `plots/support_attitude/angles/ANGLE/SUPPORT/{METHOD,truth}`  Scalars, each method's angle and the truth [deg]
+* `plots/support_attitude/errors/ANGLE/SUPPORT/METHOD`  Scalars, estimate - truth [deg]
+* `plots/support_attitude/magnetometer/SUPPORT`      Scalars: ours' disturbance flags 0/1 (norm, dip, gate,
+                                                      accelerating) in each plot interval, and the shearer's field
+                                                      at the unit over its peak
+* `plots/support_attitude/gd_objective`              static BarChart, the GD-UKF's objective per iteration [deg]
 """
 
 from __future__ import annotations
@@ -54,6 +63,7 @@ from estimators import earth
 from estimators.federated_kf import MAG_DISTURBED, MAG_GATED, MAG_USED
 from estimators.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT
 from estimators.metrics import attitude_errors, column, columns, position_errors
+from estimators.support_attitude_ours import FLAG_ACCEL, FLAG_DIP, FLAG_GATE, FLAG_NORM
 from twin.imu_grades import DEG, DEG_PER_H, MG
 from twin.recording import (
     APPLICATION_ID,
@@ -64,6 +74,7 @@ from twin.recording import (
     run_recording_id,
 )
 from twin.scenario import Scenario
+from twin.support_units import ANGLES, SupportAttitude
 
 PLOT_RATE_HZ = 10.0
 """Largest rate of the logged plots and the moving estimate point."""
@@ -87,7 +98,7 @@ def _names(group: str) -> list[str]:
     return [f"{group}_{a}" for a in axes] if axes else [group]
 
 
-def _plot_rows(table: pa.Table, rate_hz: float) -> tuple[pa.Table, np.ndarray]:
+def plot_rows(table: pa.Table, rate_hz: float) -> tuple[pa.Table, np.ndarray]:
     """The rows kept for plotting (first of each 1/rate_hz interval and the last) and their times."""
     keep = decimate(column(table, "t"), rate_hz)
     sub = table.take(pa.array(keep))
@@ -104,7 +115,7 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method:
                   rate_hz: float, color: np.ndarray) -> None:
     if table.num_rows == 0:
         return
-    sub, t = _plot_rows(table, rate_hz)
+    sub, t = plot_rows(table, rate_hz)
     site = scn.site
     p_t = earth.lla_to_enu(column(sub, "lat"), column(sub, "lon"), column(sub, "h"), np.radians(site.lat_deg),
                            np.radians(site.lon_deg), site.height_m).astype(np.float32)
@@ -143,7 +154,7 @@ def _log_flags(rec: rr.RecordingStream, entity: str, table: pa.Table, name: str,
 
 def _log_fusion(rec: rr.RecordingStream, truth_shearer, method: str, estimate: pa.Table, fusion: pa.Table,
                 rate_hz: float) -> None:
-    sub, t = _plot_rows(fusion, rate_hz)
+    sub, t = plot_rows(fusion, rate_hz)
     root = f"plots/fusion/{method}"
     _series(rec, f"{root}/r_yaw", t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None], [f"{method} sd yaw [deg]"])
     _series(rec, f"{root}/yaw_innovation", t, np.degrees(column(sub, "yaw_innovation"))[:, None],
@@ -153,7 +164,7 @@ def _log_fusion(rec: rr.RecordingStream, truth_shearer, method: str, estimate: p
     if not np.isfinite(beta).any():
         return  # a centralized filter: no sub-filters
     _series(rec, f"{root}/beta", t, beta, [f"{method} beta {s}" for s in SUBFILTERS])
-    est, _ = _plot_rows(estimate, rate_hz)
+    est, _ = plot_rows(estimate, rate_hz)
     _, err = position_errors(est, truth_shearer)
     for i, axis in enumerate(POSITION_AXES[:2]):
         d = np.column_stack([np.zeros(t.size)] + [column(sub, f"{s}_d_pos_{'en'[i]}") for s in SUBFILTERS])
@@ -165,7 +176,7 @@ def _log_states(rec: rr.RecordingStream, method: str, table: pa.Table, truth: di
                 rate_hz: float) -> None:
     if table.num_rows == 0:
         return
-    sub, t = _plot_rows(table, rate_hz)
+    sub, t = plot_rows(table, rate_hz)
     for group, (_, per_unit, unit) in STATE_GROUPS.items():
         names = _names(group)
         values = np.column_stack([column(sub, n) for n in names]) / per_unit
@@ -233,10 +244,65 @@ def estimate_views(methods: list[str], state_methods: list[str], fusion_methods:
     return tuple(views)
 
 
+# The supports' canopy attitude (issue 8).
+SUPPORT_FLAG_SERIES = (("norm", FLAG_NORM), ("dip", FLAG_DIP), ("gate", FLAG_GATE), ("accelerating", FLAG_ACCEL))
+SUPPORT_PLOT_RATE_HZ = 2.0
+"""Largest rate of the supports' plots: a canopy moves over seconds (an advance, the shearer's pass), and a face has
+many units."""
+
+
+def support_attitude_views(supports: SupportAttitude | None) -> tuple[rrb.View, ...]:
+    """Views of the supports' canopy attitude: each angle and its error over all supports and methods, ours'
+    magnetometer flags beside the shearer's field, the GD-UKF objective."""
+    if supports is None:
+        return ()
+    root = "plots/support_attitude"
+    return (*(rrb.TimeSeriesView(name=f"Support {a} [deg]", origin=f"{root}/angles/{a}") for a in ANGLES),
+            *(rrb.TimeSeriesView(name=f"Support {a} error [deg]", origin=f"{root}/errors/{a}") for a in ANGLES),
+            rrb.TimeSeriesView(name="Support magnetometer: ours' flags, shearer's field / peak",
+                               origin=f"{root}/magnetometer"),
+            rrb.BarChartView(name="GD-UKF objective per iteration [deg]", origin=f"{root}/gd_objective"))
+
+
+def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, rate_hz: float) -> None:
+    """Each support's angles (with the truth) and errors per method, ours' flags (OR-ed over each plot
+    interval) with the shearer's field, the GD objective; decimated to rate_hz, sent column-wise."""
+    root = "plots/support_attitude"
+    for name, t in supports.t.items():
+        keep = decimate(t, rate_hz)
+        est = np.degrees(supports.euler[name][:, keep])
+        truth = np.degrees(supports.truth_euler[name][:, keep]) if supports.truth_euler else None
+        for i, j in enumerate(supports.supports):
+            for a, angle in enumerate(ANGLES):
+                _series(rec, f"{root}/angles/{angle}/{j}/{name}", t[keep], est[i, :, a:a + 1],
+                        [f"support {j} {name} [deg]"])
+                if truth is not None:
+                    _series(rec, f"{root}/errors/{angle}/{j}/{name}", t[keep],
+                            ((est[i, :, a] - truth[i, :, a] + 180.0) % 360.0 - 180.0)[:, None],
+                            [f"support {j} {name} [deg]"])
+                    if name == "ours":
+                        _series(rec, f"{root}/angles/{angle}/{j}/truth", t[keep], truth[i, :, a:a + 1],
+                                [f"support {j} truth [deg]"])
+    t = supports.t["ours"]
+    keep = decimate(t, rate_hz)
+    for i, j in enumerate(supports.supports):
+        flags = np.bitwise_or.reduceat(supports.flags[i].astype(np.int64), keep)
+        values = [(flags & bit) != 0 for _, bit in SUPPORT_FLAG_SERIES]
+        labels = [f"support {j} ours {label}" for label, _ in SUPPORT_FLAG_SERIES]
+        if supports.near is not None:
+            values.append(np.maximum.reduceat(supports.near[i], keep))
+            labels.append(f"support {j} shearer's field / peak")
+        _series(rec, f"{root}/magnetometer/{j}", t[keep], np.column_stack(values).astype(float), labels)
+    if supports.objective:
+        rec.log(f"{root}/gd_objective", rr.BarChart(np.degrees(supports.objective)), static=True)
+
+
+
 def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates: dict[str, pa.Table],
                              states: dict[str, pa.Table], states_truth: dict[str, float] | None = None,
                              rate_hz: float = PLOT_RATE_HZ, fusion: dict[str, pa.Table] | None = None,
-                             detectors: dict[str, tuple[pa.Table, dict[str, float]]] | None = None) -> None:
+                             detectors: dict[str, tuple[pa.Table, dict[str, float]]] | None = None,
+                             supports: SupportAttitude | None = None) -> None:
     """Write the estimators' outputs as `path` (normally RUN_DIR/estimates.rrd) with the recording id of
     RUN_DIR/run.rrd.
 
@@ -245,7 +311,7 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
     true values of the sensor states by ESTIMATE_STATES column name in SI units (e.g. "gyro_bias_x" [rad/s],
     "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters);
     `detectors`: method name -> (ESTIMATE_DETECTORS table, thresholds by statistic: residual, dual_state, t_on,
-    t_off).
+    t_off); `supports`: the supports' canopy attitude (twin.support_units.support_attitude).
     Estimate times must lie within the truth span (LogError otherwise).
     """
     fusion = fusion or {}
@@ -255,8 +321,9 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=run_recording_id(path.parent) or uuid.uuid4())
-    rec.save(path, default_blueprint=blueprint(estimate_views(list(estimates), list(states), list(fusion),
-                                                                        list(detectors))))
+    # The supports' views after the shearer's.
+    views = estimate_views(list(estimates), list(states), list(fusion), list(detectors)) if estimates else ()
+    rec.save(path, default_blueprint=blueprint(views + support_attitude_views(supports)))
     try:
         for k, (method, table) in enumerate(estimates.items()):
             _log_estimate(rec, scn, truth_shearer, method, table, rate_hz, _PALETTE[k % len(_PALETTE)])
@@ -266,6 +333,8 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
             _log_fusion(rec, truth_shearer, method, estimates[method], table, rate_hz)
         for method, (table, thresholds) in detectors.items():
             _log_detectors(rec, scn, method, table, thresholds)
+        if supports is not None:
+            _log_support_attitude(rec, supports, min(rate_hz, SUPPORT_PLOT_RATE_HZ))
         rec.flush()
     finally:
         rec.disconnect()
