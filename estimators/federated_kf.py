@@ -88,10 +88,10 @@ N_MAG_PARAMS = 15  # M_H_PHI takes 1..3
 D_FADING, D_T_ON, D_T_OFF, D_CHI2, D_ISOLATE_BY, D_CAP, D_ARM = range(7)
 N_DET_PARAMS = 7
 DET_RESIDUAL, DET_DUAL, DET_FSPRT = range(3)
-N_BACK = 16
-"""Rail fixes the filter can go back over when the fading SPRT raises a fault."""
 """Detectors (004 section IV): residual chi-square, dual-state chi-square, fading SPRT; D_ISOLATE_BY names the
 one whose fault flag keeps the rail model's fixes out (-1: none)."""
+N_BACK = 16
+"""Rail fixes the filter can go back over when the fading SPRT raises a fault."""
 
 # Bits of the per-epoch magnetometer flag.
 MAG_READ = 1  # a reading was available over the epoch
@@ -308,7 +308,7 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
                 fix_applied[k_fix] = 0
                 flag |= FLAG_SKIPPED
             if isolated[0] and not was and int(det_params[D_ISOLATE_BY]) == DET_FSPRT:
-                back = _rise_start(snap_k, snap_count, fix_stats, k_fix, 0.5 * det_params[D_T_OFF])
+                back = _onset_slot(snap_k, snap_count, fix_stats, k_fix)
                 rejected_until = k_fix
             k_fix += 1
         if back >= 0:
@@ -362,19 +362,21 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
 
 
 @nb.njit(cache=True)
-def _rise_start(snap_k, snap_count, fix_stats, k_now, level):
-    """Ring slot of the earliest stored fix from which the fading SPRT stayed above `level` (half the clearing
-    threshold) up to fix k_now: the onset of the fault as the detector saw it; -1 when there is nothing to go
-    back over."""
-    best, best_k = -1, k_now
+def _onset_slot(snap_k, snap_count, fix_stats, k_now):
+    """Ring slot of the stored fix at which the fault began as the fading SPRT saw it (the change-time estimate
+    of a CUSUM): the fix before which the statistic was at its lowest over the stored fixes, the latest of equal
+    lows; -1 when there is nothing to go back over. A fix without a statistic (a trusted survey fix) is passed
+    over to the last one tested before it."""
+    best, best_k, low = -1, -1, np.inf
     for i in range(min(snap_count, N_BACK)):
         k = snap_k[i]
-        if k < best_k:
-            above = True
-            for m in range(k, k_now):
-                if not fix_stats[m, DET_FSPRT] > level:
-                    above = False
-                    break
-            if above:
-                best, best_k = i, k
+        if k >= k_now:
+            continue
+        before = 0.0
+        for m in range(k - 1, -1, -1):
+            if np.isfinite(fix_stats[m, DET_FSPRT]):
+                before = fix_stats[m, DET_FSPRT]
+                break
+        if before < low or (before == low and k > best_k):
+            best, best_k, low = i, k, before
     return best

@@ -133,20 +133,20 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
                                    advance_sd=cfg.rail_advance_sd or cfg.advance_sd)
     run = _Run(prep)
     run.r_yaw[:] = params_m[fk.M_R_YAW]
-    p_sub, beta = fk.initial_covariances(sp._p0(cfg, log), federated)
+    p_sub, beta = fk.initial_covariances(sp.initial_covariance(cfg, log), federated)
     nominal = np.zeros(kf.N_NOMINAL)
     r_buf = np.zeros((cfg.mag.window, 1, 1))
     counters = np.zeros(2, np.int64)
     fsprt = fsprt_state(3)
     isolated = np.zeros(1, np.int8)
     nav, cal = prep.nav0.copy(), prep.cal0.copy()
-    q_psd, params = sp._q_psd(cfg), sp.kf_params(cfg)
+    q_psd, params = sp.process_noise_psd(cfg), sp.kf_params(cfg)
     points = sp.face_survey_points(log, prep) if rail else Points.empty()
     surveyed = True
     mode = fk.FEDERATED if federated else fk.CENTRALIZED
     for a, b in prep.segments:
         fixes, scale_h = _rail_fixes(prep, rail_cfg, log, a, b, points, surveyed, notes) if rail \
-            else (sp._Fixes.empty(), np.zeros((0, 3)))
+            else (sp.Fixes.empty(), np.zeros((0, 3)))
         stats = np.full((fixes.epoch.size, 3), np.nan)
         applied = np.zeros(fixes.epoch.size, np.int8)
         fk.run_afkf(mode, a, b, prep.steps, prep.t_mech, prep.phi_b, prep.dv_b, prep.odo, prep.mode, mag_b,
@@ -159,10 +159,10 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
             cov[:, [0, 1, 2], [0, 1, 2]] = run.sd[a:b + 1, kf.DP] ** 2
             points = sp.segment_points(prep, rail_cfg, a, b, run.nav[a:b + 1], cov)
             surveyed = False
-    run.sd[0] = np.sqrt(np.diag(sp._p0(cfg, log)))
+    run.sd[0] = np.sqrt(np.diag(sp.initial_covariance(cfg, log)))
     run.flags |= np.where(run.mag_flags & fk.MAG_USED, FLAG_MAG, 0).astype(np.int32)
     notes += _notes(prep, cfg, run)
-    sol = sp._solution(prep, cfg, run.nav, run.sd, run.flags, run.cal, notes)
+    sol = sp.make_solution(prep, cfg, run.nav, run.sd, run.flags, run.cal, notes)
     sol.fusion = fusion_columns(prep.t_kf, run.beta, run.r_yaw, run.innov, run.mag_flags, run.delta)
     if rail:
         sol.detectors = detector_columns(prep, run)
@@ -170,7 +170,7 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
 
 
 def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Points, surveyed: bool,
-                notes: list[str]) -> tuple[sp._Fixes, np.ndarray]:
+                notes: list[str]) -> tuple[sp.Fixes, np.ndarray]:
     """The rail kinematics model's fixes over epochs (a, b] (none within cfg.end_zone_m of a face end unless from
     the face survey, before any push) with the surveyed face ends, and each fix's scale_h (federated_kf._fix_update): for `surveyed` points (the face
     survey) the along-face direction times the odometer travel."""
@@ -178,7 +178,7 @@ def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Point
     u = prep.odo - prep.odo[0]
     lo, hi = u.min() + cfg.end_zone_m, u.max() - cfg.end_zone_m
     keep = ((u[fixes.epoch] >= lo) & (u[fixes.epoch] <= hi)) | ~np.isfinite(fixes.gate) | surveyed
-    fixes = sp._Fixes(fixes.epoch[keep], fixes.llh[keep], fixes.r[keep], fixes.gate[keep])
+    fixes = sp.Fixes(fixes.epoch[keep], fixes.llh[keep], fixes.r[keep], fixes.gate[keep])
     scale_h = np.zeros((fixes.epoch.size, 3))
     if surveyed and points.u.size:
         along = points.c_bn[0][:, 1] * np.sign(points.u[-1] - points.u[0])

@@ -306,7 +306,8 @@ def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndar
     return nav, cal, notes
 
 
-def _p0(cfg: Config, log: Log) -> np.ndarray:
+def initial_covariance(cfg: Config, log: Log) -> np.ndarray:
+    """P0 of the 19 error states (001 Appendix A (A2) form): the configured sigmas, heading from the survey."""
     sd = np.zeros(kf.N_STATES)
     sd[kf.DV] = cfg.sd_velocity0
     sd[kf.PHI] = [cfg.sd_level0, cfg.sd_level0, log.survey_sd[0, 2]]
@@ -318,7 +319,8 @@ def _p0(cfg: Config, log: Log) -> np.ndarray:
     return np.diag((cfg.p0_scale * sd) ** 2)
 
 
-def _q_psd(cfg: Config) -> np.ndarray:
+def process_noise_psd(cfg: Config) -> np.ndarray:
+    """Diagonal process-noise densities of the 19 error states (001 Appendix A (A3) form)."""
     q = np.zeros(kf.N_STATES)
     q[kf.DV] = cfg.imu.accel_vrw ** 2 + cfg.vibration_vrw ** 2
     q[kf.PHI] = cfg.imu.gyro_arw ** 2
@@ -368,7 +370,9 @@ def _sd(p: np.ndarray) -> np.ndarray:
 
 
 @dataclass
-class _Prepared:
+class Prepared:
+    """The log resampled for the filters: mechanization increments, filter epochs, odometer, cuts, segments."""
+
     t_mech: np.ndarray
     phi_b: np.ndarray
     dv_b: np.ndarray
@@ -391,7 +395,7 @@ def body_increments(log: Log, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
     return log.dtheta @ mat_bs.T, log.dv @ mat_bs.T
 
 
-def prepare(log: Log, cfg: Config) -> _Prepared:
+def prepare(log: Log, cfg: Config) -> Prepared:
     if log.survey_t.size == 0:
         raise PositioningError("survey: no rows; the start position and heading must be surveyed")
     imu_rate = 1.0 / np.median(np.diff(log.imu_t))
@@ -430,7 +434,7 @@ def prepare(log: Log, cfg: Config) -> _Prepared:
     if log.ram_t.size and len(cfg.support_u_m) >= 2:
         rams = RamLog.from_rows(log.ram_t, log.ram_support, log.ram_extension, log.ram_valid, cfg.support_u_m,
                                cfg.ram_noise_sd)
-    return _Prepared(t_mech, phi_b, dv_b, steps, t_kf, odo, mode, cuts, segments, survey_epochs, rams, nav0,
+    return Prepared(t_mech, phi_b, dv_b, steps, t_kf, odo, mode, cuts, segments, survey_epochs, rams, nav0,
                      cal0, notes)
 
 
@@ -454,7 +458,7 @@ class _Forward:
 
 
 @dataclass
-class _Fixes:
+class Fixes:
     """Position fixes of a segment, in epoch order: epoch, lat/lon/h, ENU covariance, NIS gate."""
 
     epoch: np.ndarray
@@ -463,12 +467,12 @@ class _Fixes:
     gate: np.ndarray
 
     @classmethod
-    def empty(cls) -> _Fixes:
+    def empty(cls) -> Fixes:
         return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0))
 
 
-def fixes_for(prep: _Prepared, cfg: Config, log: Log, a: int, b: int, points: Points | None,
-              notes: list[str], face_ends: bool = True) -> _Fixes:
+def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Points | None,
+              notes: list[str], face_ends: bool = True) -> Fixes:
     """Position fixes of epochs (a, b]: surveyed face ends (trusted: never gated; with `face_ends`), then CPOEM
     points crossed on a straight cut (gated at cfg.fix_gate)."""
     sel = np.flatnonzero((prep.survey_epochs > a) & (prep.survey_epochs <= b) & face_ends)
@@ -493,12 +497,12 @@ def fixes_for(prep: _Prepared, cfg: Config, log: Log, a: int, b: int, points: Po
                 notes.append(f"CPOEM: no push-ram stroke at u = {', '.join(f'{v:.1f}' for v in skipped)} m "
                              f"(t {prep.t_kf[lo]:.0f}-{prep.t_kf[hi]:.0f} s): points skipped")
     if not j:
-        return _Fixes.empty()
+        return Fixes.empty()
     order = np.argsort(j, kind="stable")
-    return _Fixes(np.array(j, np.int64)[order], np.array(llh)[order], np.array(r)[order], np.array(gate)[order])
+    return Fixes(np.array(j, np.int64)[order], np.array(llh)[order], np.array(r)[order], np.array(gate)[order])
 
 
-def face_survey_points(log: Log, prep: _Prepared) -> Points:
+def face_survey_points(log: Log, prep: Prepared) -> Points:
     """The installed face line (FACE_SURVEY) as CPOEM points of the first cut, with the survey's covariance. Its
     face coordinate is a true distance, the filter's the odometer's: the two part by the odometer's scale error,
     which the rail-model filter puts in the fix's measurement model (estimators.federated_kf._fix_update)."""
@@ -513,7 +517,7 @@ def face_survey_points(log: Log, prep: _Prepared) -> Points:
     return Points(sign * log.face_u, np.full(log.face_u.size, prep.t_kf[0]), log.face_llh.copy(), cov, c_bn.copy())
 
 
-def segment_points(prep: _Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, cov_enu: np.ndarray) -> Points:
+def segment_points(prep: Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, cov_enu: np.ndarray) -> Points:
     """CPOEM points of the straight cut inside epochs [a, b] from navigation rows nav and position covariances
     cov_enu (3, 3) (epochs a..b)."""
     u = prep.odo - prep.odo[0]
@@ -530,16 +534,16 @@ def segment_points(prep: _Prepared, cfg: Config, a: int, b: int, nav: np.ndarray
     return Points.empty()
 
 
-def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
+def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
            keep_dir: Path | None = None) -> tuple[Solution, Solution | None, _Forward]:
     """One forward run; with `smooth`, the online RTS at each pass end (its output and CPOEM points)."""
     n = prep.t_kf.size - 1
     fwd = _Forward(n, keep_dir)
     nav = prep.nav0.copy()
     cal = prep.cal0.copy()
-    p = _p0(cfg, log)
+    p = initial_covariance(cfg, log)
     fwd.nav[0], fwd.sd[0] = nav, _sd(p)
-    q_psd = _q_psd(cfg)
+    q_psd = process_noise_psd(cfg)
     params = kf_params(cfg)
     nominal = np.zeros(kf.N_NOMINAL)
     smooth_nav = fwd.nav.copy() if smooth else None
@@ -548,7 +552,7 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     notes = list(prep.notes)
     n_fixes = n_gated = 0
     for a, b in prep.segments:
-        fixes = fixes_for(prep, cfg, log, a, b, points, notes) if cpoem else _Fixes.empty()
+        fixes = fixes_for(prep, cfg, log, a, b, points, notes) if cpoem else Fixes.empty()
         m = b - a + 1
         x_post = np.zeros((m, kf.N_STATES))
         p_post = np.zeros((m, kf.N_STATES, kf.N_STATES))
@@ -588,15 +592,16 @@ def run_kf(log: Log, cfg: Config, prep: _Prepared, cpoem: bool, smooth: bool,
     if missing.size:
         notes.append(f"odometer: no data over {missing.size} filter steps ({missing.size / cfg.filter_rate_hz:.1f} s, "
                      f"first at t = {prep.t_kf[missing[0]]:.1f} s): velocity updates skipped")
-    forward = _solution(prep, cfg, fwd.nav, fwd.sd, fwd.flags, fwd.cal, notes)
+    forward = make_solution(prep, cfg, fwd.nav, fwd.sd, fwd.flags, fwd.cal, notes)
     smoothed = None
     if smooth:
-        smoothed = _solution(prep, cfg, smooth_nav, smooth_sd, fwd.flags | FLAG_SMOOTHED, fwd.cal, notes)
+        smoothed = make_solution(prep, cfg, smooth_nav, smooth_sd, fwd.flags | FLAG_SMOOTHED, fwd.cal, notes)
     return forward, smoothed, fwd
 
 
-def _solution(prep: _Prepared, cfg: Config, nav: np.ndarray, sd_all: np.ndarray, flags: np.ndarray, cal: np.ndarray,
-              notes: list[str]) -> Solution:
+def make_solution(prep: Prepared, cfg: Config, nav: np.ndarray, sd_all: np.ndarray, flags: np.ndarray,
+                  cal: np.ndarray, notes: list[str]) -> Solution:
+    """A Solution from navigation rows and the one-sigma of the 19 states at the filter epochs."""
     sd = np.column_stack([sd_all[:, kf.DP], sd_all[:, kf.DV], sd_all[:, kf.PHI]])
     sd_cal = np.column_stack([sd_all[:, kf.GYRO_BIAS], sd_all[:, kf.ACCEL_BIAS], sd_all[:, kf.ODO_MOUNT],
                               sd_all[:, kf.ODO_SCALE]])
@@ -604,7 +609,7 @@ def _solution(prep: _Prepared, cfg: Config, nav: np.ndarray, sd_all: np.ndarray,
                     nav[:, kf.QUAT].copy(), sd, flags.copy(), cal.copy(), sd_cal, list(notes))
 
 
-def rts_offline(prep: _Prepared, cfg: Config, fwd: _Forward) -> Solution:
+def rts_offline(prep: Prepared, cfg: Config, fwd: _Forward) -> Solution:
     """One backward pass (001 eqs. 29-31) over the whole forward run, segment by segment from the end.
 
     Row 0 of a stored segment is the previous segment's last epoch: its update is that segment's last row, and
@@ -626,10 +631,10 @@ def rts_offline(prep: _Prepared, cfg: Config, fwd: _Forward) -> Solution:
         _apply_rows(nav[a:b], cal[a:b], x_s[:-1] - x_post[:-1])
         sd[a:b] = _sd(p_s[:-1])
         x_known, p_known = x_s[0], p_s[0]
-    return _solution(prep, cfg, nav, sd, fwd.flags | FLAG_SMOOTHED, cal, [])
+    return make_solution(prep, cfg, nav, sd, fwd.flags | FLAG_SMOOTHED, cal, [])
 
 
-def dead_reckoning(log: Log, cfg: Config, prep: _Prepared, cal: np.ndarray | None = None) -> Solution:
+def dead_reckoning(log: Log, cfg: Config, prep: Prepared, cal: np.ndarray | None = None) -> Solution:
     """001's traditional method: the free SINS attitude carries the odometer distance along body y (with `cal`,
     the biases, odometer mounting and scale of a filter are applied first)."""
     gyro = cal[kf.CAL_GYRO] if cal is not None else np.zeros(3)
