@@ -53,10 +53,12 @@ def _windows(t: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
 
 
 def fsprt_alarms(detectors: dict[str, np.ndarray], t_on: float) -> np.ndarray:
-    """Times of the tested fixes at which the FSPRT statistic crosses T1 from below."""
+    """Times of the tested fixes at which the FSPRT statistic crosses T1 from below and raises the isolation (the
+    first fixes, before the detectors are armed, show the statistic but raise nothing: ARM_FIXES)."""
     tested = np.isfinite(detectors["fsprt"])
     above = detectors["fsprt"][tested] > t_on
-    return detectors["t"][tested][above & ~np.concatenate([[False], above[:-1]])]
+    raised = above & ~np.concatenate([[False], above[:-1]]) & (detectors["isolated"][tested] > 0)
+    return detectors["t"][tested][raised]
 
 
 def detector_figures(sol: sp.Solution, name: str, threshold: float, t0: float, t1: float, hours: float,
