@@ -353,7 +353,7 @@ def stage_support(seconds: float, ahrs_supports: int, ahrs_seconds: float, have_
 
     from estimators.support_attitude import ukf
     from estimators.support_attitude_ours import ours
-    from twin.support_units import UNTUNED_VAR_DEG2_S2
+    from twin.support_estimate import UNTUNED_VAR_DEG2_S2
 
     w, f, m, model, settings = face_readings(seconds, np.random.default_rng(0))
     dt = 1.0 / RATE_HZ

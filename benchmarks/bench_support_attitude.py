@@ -9,7 +9,7 @@ run (002 tuned in the lab) and evaluated on the test run (held out). Optionally 
 
 Part 2: the throughput of ours (estimators.support_attitude_ours), 002's UKF and KF (estimators.support_attitude)
 for 200 supports at 100 Hz, each one batched kernel call over all supports with seed002_face's settings
-(twin.support_units.unit_model, ours_settings), as a multiple of real time (target >= 100x for ours): the best of
+(twin.support_estimate.unit_model, ours_settings), as a multiple of real time (target >= 100x for ours): the best of
 three wall-clock runs on all the cores numba uses, and per core from the process's CPU time (the figure that does
 not depend on what else runs on a shared machine). On the 2-core development machine before the kernels were
 made allocation-free (one exp per sample, sequential scalar updates, the UKF's linear prediction without sigma
@@ -34,8 +34,8 @@ from estimators.rotations import euler_to_quat, quat_conj, quat_rotate
 from estimators.support_attitude import kf, ukf
 from estimators.support_attitude_ours import ours
 from twin.scenario import load_scenario
+from twin.support_estimate import UNTUNED_VAR_DEG2_S2, ours_settings, unit_model
 from twin.support_turntable import FILTERS, load_turntable, run_turntable
-from twin.support_units import UNTUNED_VAR_DEG2_S2, ours_settings, unit_model
 
 RATE_HZ = 100.0
 SUPPORTS = 200
@@ -76,21 +76,29 @@ def throughput(seconds: float) -> None:
               f"{seconds / min(cpu):7.1f}x per core")
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=1, help="turntable runs with seeds 2, 3, ... (default 1)")
-    parser.add_argument("--seconds", type=float, default=60.0, help="data length of the throughput run [s]")
-    parser.add_argument("--throughput-only", action="store_true", help="part 2 only")
-    args = parser.parse_args()
+def turntable(seeds: int) -> dict:
+    """Part 1 on seeds 2, 3, ...: print each run's table; return per seed the RMSE [deg] per filter (FILTERS) of
+    pitch, roll, yaw over the dynamic then the static segments (`rmse`) and each run's metrics (`metrics`)."""
     path = Path(str(resources.files("twin.scenarios") / "seed002_turntable.toml"))
-    rmse = []
-    for s in range(0 if args.throughput_only else args.seeds):
+    rmse, mets = [], []
+    for s in range(seeds):
         tt = load_turntable(path, seed=2 + s)
         start = time.perf_counter()
         res, rows = run_turntable(tt)
         print("\n".join(rows) + f"\n(seed {tt.seed}: {time.perf_counter() - start:.1f} s)\n")
         rmse.append([[res["metrics"][n][seg][a] for seg in ("dynamic", "static") for a in ("pitch", "roll", "yaw")]
                      for n in FILTERS])
+        mets.append(res["metrics"])
+    return {"rmse": rmse, "metrics": mets}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=1, help="turntable runs with seeds 2, 3, ... (default 1)")
+    parser.add_argument("--seconds", type=float, default=60.0, help="data length of the throughput run [s]")
+    parser.add_argument("--throughput-only", action="store_true", help="part 2 only")
+    args = parser.parse_args()
+    rmse = turntable(0 if args.throughput_only else args.seeds)["rmse"]
     if args.seeds > 1:
         mean = np.mean(rmse, axis=0)
         print(f"mean over {args.seeds} seeds: pitch/roll/yaw dynamic, then static [deg]")

@@ -32,8 +32,8 @@ def test_paper_scenarios_match_their_experiments():
 
 def test_seed002_face_instruments_supports_at_the_face_ends_and_mid_face():
     """seed002_face (002 section 5 in the twin, issue 8): 002's ICM-42605 units on supports at both face ends and
-    mid-face, the shearer's field on, no shearer estimator (twin.support_units runs 002's filters and ours)."""
-    from twin.support_units import support_class
+    mid-face, the shearer's field on, no shearer estimator (twin.support_estimate runs 002's filters and ours)."""
+    from twin.support_estimate import support_class
 
     scn = load_scenario(SCENARIO_DIR / "seed002_face.toml")
     units = scn.sensors.support_imu

@@ -1,4 +1,4 @@
-"""Canopy attitude of every instrumented support in a face run (twin.support_units.support_attitude, issue 8):
+"""Canopy attitude of every instrumented support in a face run (twin.support_estimate.support_attitude, issue 8):
 the in-face scenario seed002_face end to end, the batch against one support at a time, bad support_imu logs."""
 
 from __future__ import annotations
@@ -21,13 +21,15 @@ from estimators.logformat import (
 from estimators.support_attitude_ours import ours
 from twin.cli import main
 from twin.scenario import scenario_to_toml
-from twin.support_units import (
+from twin.support_estimate import (
     METHODS,
     SUPPORT_ATTITUDE,
     ours_settings,
     support_attitude,
-    support_imu_stream,
     unit_model,
+)
+from twin.support_units import (
+    support_imu_stream,
 )
 
 from .conftest import simulated

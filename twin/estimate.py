@@ -97,11 +97,11 @@ def detector_thresholds(scn: Scenario) -> dict[str, float]:
 def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict:
     """Run the scenario's shearer estimators on run_dir; writes estimates/, estimates.rrd (with `recording`) and
     returns the metrics. A log the estimators cannot use raises PositioningError (one line). With instrumented
-    supports the metrics also hold their canopy attitude under SUPPORT_ATTITUDE (twin.support_units)."""
+    supports the metrics also hold their canopy attitude under SUPPORT_ATTITUDE (twin.support_estimate)."""
     from twin.estimate_recording import write_estimate_recording
 
     # The canopy attitude of the instrumented supports (issue 8), under the key SUPPORT_ATTITUDE.
-    from twin.support_units import SUPPORT_ATTITUDE, support_attitude
+    from twin.support_estimate import SUPPORT_ATTITUDE, support_attitude
     supports = support_attitude(run_dir, scn)
     out = {} if supports is None else {SUPPORT_ATTITUDE: supports.metrics}
     if recording and supports is not None and not scn.estimators.shearer.methods:
@@ -155,8 +155,8 @@ PAPER_FIGURES = {
 def format_estimators(estimators: dict, scenario: str = "") -> str:
     """Per-method SEP per cutting cycle and maximum |east|, |north| error over the run [m] as tables, with the
     paper's figures for the scenarios that reproduce one (PAPER_FIGURES)."""
-    # The supports' canopy attitude (twin.support_units) has its own table, after the shearer's.
-    from twin.support_units import SUPPORT_ATTITUDE, format_support_attitude
+    # The supports' canopy attitude (twin.support_estimate) has its own table, after the shearer's.
+    from twin.support_estimate import SUPPORT_ATTITUDE, format_support_attitude
     supports = format_support_attitude(estimators.get(SUPPORT_ATTITUDE))
     estimators = {name: e for name, e in estimators.items() if name != SUPPORT_ATTITUDE}
     if not estimators:

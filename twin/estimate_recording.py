@@ -39,7 +39,7 @@ and for the rail kinematics model's filter (ESTIMATE_DETECTORS, 004 section IV):
 * `world/estimates/METHOD/rail`                       static Points3D, the rail model's predicted points (the
                                                       shearer's path it predicts), beside the true path of run.rrd
 
-and for the supports' canopy attitude (twin.support_units.SupportAttitude, issue 8; ANGLE pitch, roll, yaw):
+and for the supports' canopy attitude (twin.support_estimate.SupportAttitude, issue 8; ANGLE pitch, roll, yaw):
 
 * `plots/support_attitude/angles/ANGLE/SUPPORT/{METHOD,truth}`  Scalars, each method's angle and the truth [deg]
 * `plots/support_attitude/errors/ANGLE/SUPPORT/METHOD`  Scalars, estimate - truth [deg]
@@ -74,7 +74,7 @@ from twin.recording import (
     run_recording_id,
 )
 from twin.scenario import Scenario
-from twin.support_units import ANGLES, SupportAttitude
+from twin.support_estimate import ANGLES, SupportAttitude
 
 PLOT_RATE_HZ = 10.0
 """Largest rate of the logged plots and the moving estimate point."""
@@ -311,7 +311,7 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
     true values of the sensor states by ESTIMATE_STATES column name in SI units (e.g. "gyro_bias_x" [rad/s],
     "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters);
     `detectors`: method name -> (ESTIMATE_DETECTORS table, thresholds by statistic: residual, dual_state, t_on,
-    t_off); `supports`: the supports' canopy attitude (twin.support_units.support_attitude).
+    t_off); `supports`: the supports' canopy attitude (twin.support_estimate.support_attitude).
     Estimate times must lie within the truth span (LogError otherwise).
     """
     fusion = fusion or {}
