@@ -80,7 +80,9 @@ def settled(ok: np.ndarray, t: np.ndarray) -> float:
     return float(t[bad[-1] + 1]) if bad.size else float(t[0])
 
 
-def run_grade(gname: str, seed: int) -> None:
+def run_grade(gname: str, seed: int) -> dict:
+    """Print the grade's rows; return per filter its figures (final errors [deg], ratios to the floors, level
+    deviation, whether the level and heading settled by the end, settling and run times)."""
     g, seconds = grade(gname), SECONDS[gname]
     q_true = euler_to_quat(0.0, 0.0, YAW)
     c_true = quat_to_mat(q_true)
@@ -106,6 +108,7 @@ def run_grade(gname: str, seed: int) -> None:
           f" {'E/fl':>5s} {'N/fl':>5s} {'U/fl':>6s} {'lvl dev':>7s} | {'pitch':>9s} {'roll':>9s} {'yaw':>9s} |"
           f" {'t_lvl':>6s} {'t_hdg':>6s} {'run':>5s}   [deg, s]")
     gyrocompass = abs(fl[2]) < ERR0[2]
+    figures = {}
     for m in METHODS:
         t0 = time.perf_counter()
         res = fine_align(dtheta, dv, 1 / RATE, LAT, q0, (g.gyro_arw, g.accel_vrw), ERR0, m, h=H,
@@ -131,9 +134,14 @@ def run_grade(gname: str, seed: int) -> None:
               f" {r[2]:6.2f} {dev_t[-1]:7.3f} | {np.degrees(d[0]):+9.5f} {np.degrees(d[1]):+9.5f}"
               f" {np.degrees(d[2]):+9.4f} | {settled(dev_t <= 0.1, res.t):6.0f} {settled(hdg_ok, res.t):6.0f}"
               f" {el:5.2f}")
+        figures[m] = {"phi_deg": np.degrees(phi).tolist(), "sigma_deg": np.degrees(s).tolist(), "ratio": r.tolist(),
+                      "level_dev": float(dev_t[-1]), "level_ok": bool(dev_t[-1] <= 0.1), "heading_ok": bool(hdg_ok[-1]),
+                      "t_level": settled(dev_t <= 0.1, res.t), "t_heading": settled(hdg_ok, res.t), "seconds": el}
+    return figures
 
 
-def main(seed: int = 0, nav_seconds: float = SECONDS["nav-004"]) -> None:
+def main(seed: int = 0, nav_seconds: float = SECONDS["nav-004"]) -> dict:
+    """Print 000 Table 1 and every grade's rows; return {grade: run_grade's figures}."""
     SECONDS["nav-004"] = nav_seconds
     print(f"000 Table 1 setup: L = 34.27 deg, h = {H:.0f} m, heading 270 deg, initial errors 3, 3, 5 deg, 200 Hz, "
           f"stationary, seed {seed}")
@@ -146,8 +154,7 @@ def main(seed: int = 0, nav_seconds: float = SECONDS["nav-004"]) -> None:
     dtheta, dv = np.zeros((200, 3)), np.tile([0.0, 0.0, 9.8 / RATE], (200, 1))
     for m in METHODS:  # compile the numba kernels before anything is timed
         fine_align(dtheta, dv, 1 / RATE, LAT, euler_to_quat(0.0, 0.0, 0.0), (1e-4, 1e-4), ERR0, m, on_motion="flag")
-    for gname in SECONDS:
-        run_grade(gname, seed)
+    return {gname: run_grade(gname, seed) for gname in SECONDS}
 
 
 if __name__ == "__main__":

@@ -40,7 +40,10 @@ def sep_row(sol: sp.Solution, truth: dict, cycles: dict) -> list[float]:
     return [c["sep"] for c in metrics.cycle_metrics(t, err, cycles)]
 
 
-def main(sweep: bool = True) -> None:
+def figures(sweep: bool = True) -> dict:
+    """Print the benchmark; return its figures: SEP per cycle [m] per method (`sep`), with the face ends of the
+    first cut only (`sep_first_cut`), per CPOEM spacing (`sep_delta`), per Par k of the sweep (`sweep`), throughput."""
+    figs: dict = {"sep": {}, "sep_delta": {}, "sweep": {}}
     scn = load_scenario(default_scenario().parent / "seed001.toml")
     t0 = time.perf_counter()
     result = simulate(scn)
@@ -52,13 +55,14 @@ def main(sweep: bool = True) -> None:
     cfg = positioning_config(scn)
     sp.estimate(log, cfg, ("kf_cpoem_rts",))  # compile
     t0 = time.perf_counter()
-    sols = sp.estimate(log, cfg)
+    sols = sp.estimate(log, cfg, tuple(OURS))  # the methods of 001 (the mag and rail filters need other streams)
     wall = time.perf_counter() - t0
     print(f"\nSEP per cutting cycle [m], {scn.sensors.imu.grade}, CPOEM spacing {cfg.cpoem_spacing_m} m, survey of "
           f"the face ends: {scn.sensors.survey.face_ends}")
     print(f"{'method':36s} {'A1':>6s} {'A2':>6s} {'A3':>6s} {'A4':>6s}   | 001 Table 3: A1 A2 A3 A4")
     for name, sol in sols.items():
         row = sep_row(sol, truth, cycles)
+        figs["sep"][name] = row[:4]
         paper = TABLE3.get(OURS[name])
         ref = "  ".join(f"{v:.2f}" for v in paper) if paper else "-"
         print(f"{OURS[name] + ' (' + name + ')':36s} " + " ".join(f"{v:6.3f}" for v in row[:4]) + f"   | {ref}")
@@ -66,7 +70,8 @@ def main(sweep: bool = True) -> None:
     data["sensors"]["survey"]["face_ends"] = "first_cut"
     first = parse_scenario(data, "seed001-first-cut")
     sol = sp.estimate(log_of(sensor_streams(first, result.tables, ideal, 0)), cfg, ("kf_cpoem_rts",))["kf_cpoem_rts"]
-    print(f"{'same, face ends of the 1st cut only':36s} " + " ".join(f"{v:6.3f}" for v in sep_row(sol, truth, cycles)[:4])
+    figs["sep_first_cut"] = sep_row(sol, truth, cycles)[:4]
+    print(f"{'same, face ends of the 1st cut only':36s} " + " ".join(f"{v:6.3f}" for v in figs["sep_first_cut"])
           + "   | (001's survey: both ends of the first cut)")
     e = sols["kf_cpoem_rts"]
     print(f"odometer scale error: estimated {e.cal[-1, 9]:+.4f}, true {1 / (1 + scn.sensors.odometer.scale_error) - 1:+.4f}; "
@@ -75,14 +80,16 @@ def main(sweep: bool = True) -> None:
     print("\nCPOEM point spacing Delta (001 section 4: 2, 6, 10 m), KF + CPOEM + RTS, SEP per cycle [m]")
     for delta in (2.0, 6.0, 10.0):
         sol = sp.estimate(log, dataclasses.replace(cfg, cpoem_spacing_m=delta), ("kf_cpoem_rts",))["kf_cpoem_rts"]
-        print(f"Delta {delta:4.0f} m " + " ".join(f"{v:6.3f}" for v in sep_row(sol, truth, cycles)[:4]))
+        figs["sep_delta"][delta] = sep_row(sol, truth, cycles)[:4]
+        print(f"Delta {delta:4.0f} m " + " ".join(f"{v:6.3f}" for v in figs["sep_delta"][delta]))
     t0 = time.perf_counter()
     sp.estimate(log, cfg, ("kf_cpoem_rts",))
     one = time.perf_counter() - t0
+    figs["throughput"] = log.imu_t.size / one
     print(f"\nthroughput: KF + CPOEM + online RTS {log.imu_t.size / one:,.0f} IMU samples/s "
           f"({log.imu_t.size:,} samples in {one:.2f} s; all six methods {wall:.2f} s); target >= 100,000")
     if not sweep:
-        return
+        return figs
     print("\n001 Table 2 sweep (Par 1-12), KF + CPOEM + RTS, SEP per cycle [m]")
     for k in range(1, 13):
         data = scn.model_dump()
@@ -90,7 +97,13 @@ def main(sweep: bool = True) -> None:
         s_k = parse_scenario(data, f"seed001-par{k}")
         sol = sp.estimate(log_of(sensor_streams(s_k, result.tables, ideal, 0)), positioning_config(s_k),
                           ("kf_cpoem_rts",))["kf_cpoem_rts"]
-        print(f"Par {k:2d} " + " ".join(f"{v:6.3f}" for v in sep_row(sol, truth, cycles)[:4]))
+        figs["sweep"][k] = sep_row(sol, truth, cycles)[:4]
+        print(f"Par {k:2d} " + " ".join(f"{v:6.3f}" for v in figs["sweep"][k]))
+    return figs
+
+
+def main(sweep: bool = True) -> None:
+    figures(sweep)
 
 
 def throughput(run_dir: str) -> None:

@@ -88,6 +88,15 @@ def detector_figures(sol: sp.Solution, name: str, threshold: float, t0: float, t
 
 
 def main(trials: int = 20) -> None:
+    figures(trials)
+
+
+def figures(trials: int = 20) -> dict:
+    """Print the benchmark; return its figures: trial 0's RMSE per cycle (`rmse`: method -> (cycles, 2) east,
+    north [m]), the faulted run's detectors (`detectors`: name -> detector_figures plus `error_in_fault` [m]; the
+    fault-free filter's `clean_error_in_fault`, no isolation's `none_error_in_fault`), and the fault-free Monte
+    Carlo trials 1..trials: FSPRT alarms per trial (`alarms`) and RMSE per cycle (`mc_rmse`, (trials, cycles, 2))."""
+    figs: dict = {"detectors": {}}
     t_start = time.perf_counter()
     scn = load_scenario(default_scenario().parent / "seed004.toml")
     scn_fault = load_scenario(default_scenario().parent / "seed004_fault.toml")
@@ -107,6 +116,7 @@ def main(trials: int = 20) -> None:
     rail = fp.run_rail(log, cfg, prep)
     t_rail = time.perf_counter() - t0
     rmse = {"kf": _cycle_rmse(kf_sol, tables), "fkf_rail": _cycle_rmse(rail, tables)}
+    figs["rmse"] = rmse
     print(f"seed004 (simulated in {t_sim:.0f} s), trial 0: RMSE per cycle [m], ours beside 004 Table 2")
     print(f"{'cycle':>5s}  {'INS/ODO E':>18s} {'INS/ODO N':>18s}   {'with model E':>18s} {'with model N':>18s}")
     for k in range(rmse["kf"].shape[0]):
@@ -124,28 +134,35 @@ def main(trials: int = 20) -> None:
           f"{fault.t_end_s:g} s; detectors (threshold: chi-square {thr:.1f}, FSPRT {cfg.detector.t_on:g} / "
           f"{cfg.detector.t_off:g}, fading {cfg.detector.fading:g})")
     clean_err = _window_error(rail, tables, fault)
+    figs["clean_error_in_fault"] = clean_err
     print(f"{'isolating detector':20s} {'delay [s]':>9s} {'clear [s]':>9s} {'missed':>8s} {'false/h':>8s} "
           f"{'max horiz. error in fault [m]':>30s}  (fault-free {clean_err:.3f}; target <= +0.05)")
     for name in fp.DETECTORS:
         sol = fp.run_rail(f_log, cfg, f_prep, isolate_by=name)
         fig = detector_figures(sol, name, thr, fault.t_start_s, fault.t_end_s, hours, cfg.detector.t_on)
+        fig["error_in_fault"] = _window_error(sol, tables, fault)
+        figs["detectors"][name] = fig
         print(f"{name:20s} {fig['delay']:9.1f} {fig['clear']:9.1f} {fig['missed']:4d}/{fig['fixes']:<3d} "
-              f"{fig['false_per_h']:8.2f} {_window_error(sol, tables, fault):30.3f}")
+              f"{fig['false_per_h']:8.2f} {fig['error_in_fault']:30.3f}")
     none = fp.run_rail(f_log, cfg, f_prep, isolate_by=None)
-    print(f"{'none (no isolation)':20s} {'':9s} {'':9s} {'':8s} {'':8s} {_window_error(none, tables, fault):30.3f}")
+    figs["none_error_in_fault"] = _window_error(none, tables, fault)
+    print(f"{'none (no isolation)':20s} {'':9s} {'':9s} {'':8s} {'':8s} {figs['none_error_in_fault']:30.3f}")
     print("targets: FSPRT delay <= 60 s, clear <= 60 s after the fault ends")
 
-    alarms, worst = [], []
+    alarms, worst, mc_rmse = [], [], []
     for trial in range(1, trials + 1):
         tlog = _log(scn, tables, ideal, trial)
         sol = fp.run_rail(tlog, cfg, sp.prepare(tlog, cfg))
         alarms.append(int(fsprt_alarms(sol.detectors, cfg.detector.t_on).size))
-        worst.append(_cycle_rmse(sol, tables).max(axis=0))
+        mc_rmse.append(_cycle_rmse(sol, tables))
+        worst.append(mc_rmse[-1].max(axis=0))
     worst = np.array(worst)
+    figs["alarms"], figs["mc_rmse"] = alarms, np.array(mc_rmse)
     print(f"\nfault-free Monte Carlo, {trials} trials of seed004 ({trials * hours:.0f} h): FSPRT false alarms "
           f"{sum(alarms)} (target 0; per trial {alarms}); worst cycle RMSE E {worst[:, 0].mean():.3f} +- "
           f"{worst[:, 0].std():.3f}, N {worst[:, 1].mean():.3f} +- {worst[:, 1].std():.3f} m")
     print(f"\ntotal {time.perf_counter() - t_start:.0f} s")
+    return figs
 
 
 def _window_error(sol: sp.Solution, tables, fault) -> float:

@@ -3,6 +3,9 @@
 Target (issue 4): >= 1,000,000 IMU samples/s on this 2-core machine, printed with the ratio to pyins's
 integrator (package `python-ins`, a benchmark-only dependency: pip install python-ins) on the same increments
 in the same process. The data: 6.4 h at 200 Hz (4.6 M samples) of a slowly turning, accelerating body.
+`schuler()` (not printed by main; benchmarks/compare.py's 000 row): 24 h stationary at 34 deg latitude with a
+0.01 deg/h z-gyro bias, height held, the mechanization's position and attitude errors against the linear SINS
+error model (Schuler 84.4 min and 24 h components); target (issue 4) within 5 %.
 Run: python benchmarks/bench_strapdown.py
 """
 
@@ -48,6 +51,23 @@ def pyins_time(t, dtheta, dv) -> float | None:
     inc = strapdown.compute_increments_from_imu(imu, "increment")
     strapdown.Integrator(pva).integrate(inc)
     return time.perf_counter() - start
+
+
+def schuler() -> dict:
+    """Largest deviation of the mechanization from the linear error model (estimators.error_model.stationary_day),
+    north, east position and attitude, in % of the linear model's largest error (`north_pct`, `east_pct`,
+    `attitude_pct`), and that largest east error [m]."""
+    from estimators.error_model import stationary_day
+
+    d = stationary_day()
+
+    def pct(ours, lin):
+        return float(100 * np.abs(ours - lin).max() / np.abs(lin).max())
+
+    return {"north_pct": pct(d["north"], d["lin_north"]), "east_pct": pct(d["east"], d["lin_east"]),
+            "attitude_pct": float(100 * np.linalg.norm(d["phi"] - d["lin_phi"], axis=1).max()
+                                  / np.linalg.norm(d["lin_phi"], axis=1).max()),
+            "east_max_m": float(np.abs(d["lin_east"]).max())}
 
 
 def main() -> None:

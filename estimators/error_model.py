@@ -68,3 +68,39 @@ def sensor_input(q_nb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     g_gyro[PHI] = -mat_nb
     g_accel[DV] = mat_nb
     return g_gyro, g_accel
+
+
+def stationary_day(lat: float = np.radians(34.0), hours: float = 24.0, gyro_bias_z: float = np.radians(0.01) / 3600,
+                   rate: float = 10.0, step: int = 600) -> dict[str, np.ndarray]:
+    """The mechanization (estimators.strapdown, height held) of a level stationary IMU with a z-gyro bias [rad/s]
+    beside this linear model (vertical channel removed, the bias a constant augmented state), every `step`
+    samples: north, east [m] and attitude error phi (3,) [rad] of each, as `north`, `east`, `phi` and
+    `lin_north`, `lin_east`, `lin_phi`. The Schuler (84.4 min) and 24 h oscillations of both must agree."""
+    from scipy.linalg import expm
+
+    from estimators.rotations import quat_conj, quat_mul, quat_to_rotvec
+    from estimators.strapdown import mechanize
+
+    n = int(hours * 3600 * rate) + 1
+    t = np.arange(n) / rate
+    gamma = earth.normal_gravity(lat, 0.0)
+    dtheta = np.tile((earth.earth_rate_n(lat) + [0.0, 0.0, gyro_bias_z]) / rate, (n, 1))
+    dv = np.tile([0.0, 0.0, gamma / rate], (n, 1))
+    dtheta[0] = dv[0] = 0.0
+    q0 = np.array([1.0, 0.0, 0.0, 0.0])  # level, body y north: b = n
+    nav = mechanize(t, dtheta, dv, lat, 0.0, 0.0, np.zeros(3), q0, n_samples=1, hold_height=True)
+    r_m, r_n = earth.radii(lat)
+    idx = np.arange(0, n, step)
+    keep = np.r_[0:5, DLAT, DLON]
+    a = np.zeros((8, 8))
+    a[:7, :7] = system_matrix(lat, 0.0, np.zeros(3), np.array([0.0, 0.0, gamma]))[np.ix_(keep, keep)]
+    a[:7, 7] = (sensor_input(q0)[0] @ [0.0, 0.0, gyro_bias_z])[keep]
+    transition = expm(a * step / rate)
+    lin = np.zeros((idx.size, 8))
+    lin[0, 7] = 1.0
+    for k in range(1, idx.size):
+        lin[k] = transition @ lin[k - 1]
+    return {"north": (nav.lat[idx] - lat) * r_m, "east": nav.lon[idx] * r_n * np.cos(lat),
+            "phi": -quat_to_rotvec(quat_mul(nav.q_nb[idx], quat_conj(q0))),  # C_n^n' = I - [phi x]
+            "lin_north": lin[:, 5] * r_m, "lin_east": lin[:, 6] * r_n * np.cos(lat), "lin_phi": lin[:, PHI]}
+

@@ -763,13 +763,18 @@ def run_experiment_file(scenario: Path, out: Path | None, seed: int | None, forc
     return out
 
 
+def run_shipped(name: str, seed: int | None = None) -> ExperimentResult:
+    """Run the shipped experiment file scenarios/NAME.toml (its seed, or `seed`): ours and the paper's figures."""
+    from importlib import resources
+
+    return run_experiment(load_experiment(Path(str(resources.files("twin.scenarios") / f"{name}.toml")), seed))
+
+
 def benchmark(names: list[str]) -> None:
     """Run shipped experiment files (scenarios/NAME.toml) and print ours beside the paper's with run times: the
     benchmarks' entry point (benchmarks/bench_coning_sculling.py, bench_lever_arm.py)."""
-    from importlib import resources
-
     for name in names:
         start = time.perf_counter()
-        result = run_experiment(load_experiment(Path(str(resources.files("twin.scenarios") / f"{name}.toml"))))
+        result = run_shipped(name)
         print("\n".join(result.table))
         print(f"({name}: {time.perf_counter() - start:.1f} s)\n")
