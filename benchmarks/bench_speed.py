@@ -43,6 +43,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(Path(__file__).resolve().parent) not in sys.path:
     sys.path.insert(0, str(Path(__file__).resolve().parent))  # the sibling benchmarks, when imported from tests
 
+from tables import markdown_table, text_table  # a sibling: after the path above
+
 INSTALL_HINT = 'pip install -e ".[bench]"'
 TARGET_SENSORS = 500_000.0
 TARGET_STRAPDOWN = 1_000_000.0
@@ -114,22 +116,12 @@ def table_cells(rows: Sequence[Row]) -> list[list[str]]:
 
 def format_text(rows: Sequence[Row]) -> str:
     cells = table_cells(rows)
-    widths = [max(len(line[i]) for line in cells) for i in range(5)]
-    lines = []
-    for k, line in enumerate(cells):
-        lines.append("  ".join(c.ljust(w) for c, w in zip(line[:5], widths)).rstrip())
-        if k == 0:
-            lines.append("  ".join("-" * w for w in widths))
     notes = [f"  {line[0]}: {line[5]}" for line in cells[1:] if line[5]]
-    return "\n".join(lines + (["", "notes:"] + notes if notes else []))
+    return "\n".join([text_table([line[:5] for line in cells])] + (["", "notes:"] + notes if notes else []))
 
 
 def format_markdown(rows: Sequence[Row], title: str = "Speed table") -> str:
-    cells = table_cells(rows)
-    esc = [[c.replace("|", "\\|") for c in line] for line in cells]
-    lines = [f"# {title}", "", "| " + " | ".join(esc[0]) + " |", "|" + "---|" * len(esc[0])]
-    lines += ["| " + " | ".join(line) + " |" for line in esc[1:]]
-    return "\n".join(lines) + "\n"
+    return markdown_table(title, table_cells(rows))
 
 
 CSV_FIELDS = ["figure", "unit", "ours", "peer_name", "peer", "ratio", "peer_status", "target", "target_met", "note"]

@@ -44,6 +44,8 @@ import numpy as np
 if str(Path(__file__).resolve().parent) not in sys.path:
     sys.path.insert(0, str(Path(__file__).resolve().parent))  # the sibling benchmarks, when imported from tests
 
+from tables import markdown_table, text_table  # a sibling: after the path above
+
 PAPERS = ("000", "001", "002", "003", "004")
 COLUMNS = ["paper", "table/section", "figure", "paper's value", "ours", "target", "met"]
 
@@ -139,15 +141,8 @@ def build_table(specs: Sequence[RowSpec], figures: dict[str, object]) -> list[Ro
     return [build_row(s, figures[s.source]) for s in specs if s.source in figures]
 
 
-def _escape(cell: str) -> str:
-    return cell.replace("|", "\\|")
-
-
 def markdown(rows: Sequence[Row], title: str, notes: Sequence[str] = ()) -> str:
-    lines = [f"# {title}", "", *notes, *([""] if notes else []),
-             "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
-    lines += ["| " + " | ".join(_escape(c) for c in r.cells()) + " |" for r in rows]
-    return "\n".join(lines) + "\n"
+    return markdown_table(title, [COLUMNS, *(r.cells() for r in rows)], notes)
 
 
 def write_table(rows: Sequence[Row], out_dir: Path, title: str, notes: Sequence[str] = ()) -> tuple[Path, Path]:
@@ -165,11 +160,7 @@ def write_table(rows: Sequence[Row], out_dir: Path, title: str, notes: Sequence[
 
 
 def format_text(rows: Sequence[Row]) -> str:
-    cells = [COLUMNS, *(r.cells() for r in rows)]
-    widths = [max(len(c[i]) for c in cells) for i in range(len(COLUMNS))]
-    out = ["  ".join(c.ljust(w) for c, w in zip(line, widths)).rstrip() for line in cells]
-    out.insert(1, "  ".join("-" * w for w in widths))
-    return "\n".join(out)
+    return text_table([COLUMNS, *(r.cells() for r in rows)])
 
 
 # ------------------------------------------------------------------------------------------------------------
