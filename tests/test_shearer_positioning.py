@@ -110,3 +110,21 @@ def test_nan_increment_names_the_row(default_log):
     dtheta[1234, 1] = np.nan
     with pytest.raises(sp.PositioningError, match=r"imu: dtheta row 1235 is not finite"):
         sp.estimate(dataclasses.replace(log, dtheta=dtheta), positioning_config(scn), ("kf",))
+
+
+def test_true_mounting_is_in_the_frame_the_filter_estimates_it_in():
+    """The filter turns the IMU axes into b with the calibrated pitch and roll mounting only, so the odometer's
+    yaw mounting it can find is the odometer's minus the IMU's (a truth of -0.3 deg against an estimate near
+    -0.8 deg would be a false miss); x and y are the odometer's own to first order."""
+    import math
+
+    from twin.estimate import true_states
+    from twin.scenario import load_scenario
+
+    scn = load_scenario("scenarios/default.toml")
+    sensors = scn.sensors.model_copy(update={
+        "imu": scn.sensors.imu.model_copy(update={"misalignment_deg": [0.0, 0.0, 0.5]}),
+        "odometer": scn.sensors.odometer.model_copy(update={"mounting_deg": [0.2, 0.0, -0.3]})})
+    truth = true_states(scn.model_copy(update={"sensors": sensors}))
+    assert math.degrees(truth["odo_mount_z"]) == pytest.approx(-0.8, abs=1e-6)
+    assert math.degrees(truth["odo_mount_x"]) == pytest.approx(0.2, abs=1e-3)

@@ -27,6 +27,7 @@ from estimators.logformat import (
     write_estimate,
 )
 from estimators.ram_checks import RamLayout
+from estimators.rotations import euler_to_mat, mat_to_quat, quat_to_rotvec
 from twin.imu_grades import grade
 from twin.layout import support_stations
 from twin.scenario import Scenario
@@ -78,11 +79,19 @@ def ram_layout(scn: Scenario) -> RamLayout:
 
 
 def true_states(scn: Scenario) -> dict[str, float]:
-    """True odometer scale-factor error and mounting angles (twin.odometer: dk_D = 1 / (1 + e) - 1)."""
+    """True odometer scale-factor error (twin.odometer: dk_D = 1 / (1 + e) - 1) and mounting angles, the latter
+    as the filter holds them: the rotation vector of C_m^b' in the frame b' the filter's increments are in.
+
+    positioning_config turns the IMU axes into b with the calibrated pitch and roll mounting only, so b' is b
+    turned back by the IMU's yaw mounting m_z (C_s^b = Rz(m_z) Rx Ry, hence C_b^b' = Rz(-m_z)), and the odometer's
+    yaw mounting the filter can find is a_z - m_z."""
     odo = scn.sensors.odometer
+    m_z = math.radians(scn.sensors.imu.misalignment_deg[2])
+    a = np.radians(odo.mounting_deg)
+    c_mb_filter = euler_to_mat(0.0, 0.0, -m_z) @ euler_to_mat(a[0], a[1], a[2])
     out = {"odo_scale": 1.0 / (1.0 + odo.scale_error) - 1.0}
-    for a, v in zip("xyz", odo.mounting_deg):
-        out[f"odo_mount_{a}"] = math.radians(v)
+    for axis, v in zip("xyz", quat_to_rotvec(mat_to_quat(c_mb_filter))):
+        out[f"odo_mount_{axis}"] = float(v)
     return out
 
 
