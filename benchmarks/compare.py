@@ -21,7 +21,10 @@ Sources (benchmark: rows):
   003  bench_federated.run_trials + summary: Table 2 maximum errors, improvement, interference case, N trials
   004  bench_rail.figures: Table 2 RMSE per cycle (N fault-free trials), detectors on seed004_fault, false alarms
 
-Run: python benchmarks/compare.py [--trials N] [--only PAPER,...] [--out DIR] [--verbose]
+The speed table of issue 9 (benchmarks/bench_speed.py) follows in the same run, written as DIR/speed.md and .csv,
+unless --no-speed.
+
+Run: python benchmarks/compare.py [--trials N] [--only PAPER,...] [--out DIR] [--no-speed] [--verbose]
      (the whole table with the default 20 trials takes about an hour on a 2-core machine, 004 most of it: 6.5 min
      with 1 trial; --only 000 --trials 2 takes under a minute, --only 002,003 --trials 2 about 1.5 min)
 """
@@ -443,6 +446,8 @@ def main(argv: Sequence[str] | None = None) -> list[Row]:
     parser.add_argument("--only", default=",".join(PAPERS), help="papers, comma-separated (000,001,002,003,004)")
     parser.add_argument("--out", type=Path, default=Path("runs/bench"), help="directory of compare.md and .csv")
     parser.add_argument("--verbose", action="store_true", help="show the benchmarks' own printout (on stderr)")
+    parser.add_argument("--no-speed", action="store_true",
+                        help="skip the speed table (bench_speed.py on seed004, about 5 min) that follows the comparison")
     args = parser.parse_args(argv)
     papers = [p.strip() for p in args.only.split(",") if p.strip()]
     unknown = [p for p in papers if p not in PAPERS]
@@ -461,7 +466,20 @@ def main(argv: Sequence[str] | None = None) -> list[Row]:
     print(format_text(rows))
     md, csv_path = write_table(rows, args.out, title, notes)
     print(f"\nwritten: {md}, {csv_path}")
+    if not args.no_speed:
+        run_speed_table(args.out)
     return rows
+
+
+def run_speed_table(out: Path) -> None:
+    """The speed table of the same run (benchmarks/bench_speed.py), written beside the comparison as speed.md/.csv."""
+    import bench_speed  # a sibling benchmark: imported only when the speed table is asked for
+
+    print("\nrunning the speed table (bench_speed.py, seed004) ...", file=sys.stderr, flush=True)
+    try:
+        bench_speed.main(["--out", str(out / "speed.md")])
+    except Exception as exc:  # noqa: BLE001 -- the comparison above stands without it
+        print(f"speed table failed: {one_line(exc)}")
 
 
 if __name__ == "__main__":
