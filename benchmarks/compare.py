@@ -265,19 +265,23 @@ def _rows_000() -> list[RowSpec]:
     src = "000 alignment"
     for grade in bench_alignment.SECONDS:
         for m in bench_alignment.METHODS:
+            label = f"{bench_alignment.NAMES[m]} {{}}, {grade} {bench_alignment.SECONDS[grade]:.0f} s"
             for i, angle in enumerate(("phi_E", "phi_N", "phi_U")):
-                if i < 2:
-                    target, key = "level within 10 % of the floor (issue 4)", "level_ok"
-                elif grade == "nav-004":
-                    target, key = "within 10 % of the gyrocompassing floor (+ 3 ARW sigma) (issue 4)", "heading_ok"
-                else:
-                    target, key = "start error kept (MEMS cannot gyrocompass)", "heading_ok"
+                # The level errors are the biases' (a draw's floor), not the filter's: the target is on the
+                # deviation from the floor, its own row below; the heading's target is per draw.
+                target, check = "-", None
+                if i == 2:
+                    target = ("within 10 % of the gyrocompassing floor (+ 3 ARW sigma) (issue 4)" if grade == "nav-004"
+                              else "start error kept (MEMS cannot gyrocompass)")
+                    check = (lambda _v, f, g=grade, m=m: all(d[g][m]["heading_ok"] for d in f))
                 rows.append(RowSpec(
-                    "000", "Table 1 (units not stated)",
-                    f"{bench_alignment.NAMES[m]} {angle} [deg], {grade} {bench_alignment.SECONDS[grade]:.0f} s",
+                    "000", "Table 1 (units not stated)", label.format(f"{angle} [deg]"),
                     f"{PAPER_TABLE1[m]['error'][i]:g}", src,
-                    lambda f, g=grade, m=m, i=i: [d[g][m]["phi_deg"][i] for d in f], target,
-                    lambda _v, f, g=grade, m=m, k=key: all(d[g][m][k] for d in f), ".4f"))
+                    lambda f, g=grade, m=m, i=i: [d[g][m]["phi_deg"][i] for d in f], target, check, ".4f"))
+            rows.append(RowSpec(
+                "000", "Table 1 (issue 4 floor)", label.format("level deviation from the draw's floor [%]"),
+                "-", src, lambda f, g=grade, m=m: [100 * d[g][m]["level_dev"] for d in f],
+                "<= 10 % (issue 4; mean over draws)", at_most(10.0), ".1f"))
     for key, what in (("north_pct", "north position"), ("east_pct", "east position"), ("attitude_pct", "attitude")):
         rows.append(RowSpec(
             "000", "Schuler, 24 h stationary (issue 4)", f"{what} error vs linear error model, largest deviation [%]",

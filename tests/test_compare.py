@@ -98,7 +98,7 @@ def test_real_specs_read_synthetic_figures(cmp):
     """Every row of the real table reads figures shaped like the benchmarks' (no row fails on its getter)."""
     n = 2
     lever = {f"table{t}": {"reduction_pct": [80.0, 70.0, 90.0]} for t in (2, 3)}
-    align_one = {"phi_deg": [0.1, -0.1, 1.0], "level_ok": True, "heading_ok": False}
+    align_one = {"phi_deg": [0.1, -0.1, 1.0], "level_dev": 0.12, "heading_ok": False}
     align = [{g: {m: dict(align_one) for m in ("ekf", "ukf", "optimized_ukf")} for g in ("mti-g-700", "nav-004")}
              for _ in range(n)]
     seg = {"pitch": 0.05, "roll": 0.06, "yaw": 0.5}
@@ -124,6 +124,9 @@ def test_real_specs_read_synthetic_figures(cmp):
     assert by[("001", "worst cycle SEP over Par 1-12 [m], KF + CPOEM + RTS, trial 0")].ours == "0.400"
     assert by[("001", "SEP cycle A1 [m], KF + CPOEM + RTS")].met == "yes"
     assert by[("000", "EKF phi_U [deg], nav-004 1800 s")].met == "no"
+    assert by[("000", "EKF phi_E [deg], nav-004 1800 s")].met == "-"  # the level's target is on its deviation
+    level = by[("000", "EKF level deviation from the draw's floor [%], nav-004 1800 s")]
+    assert (level.ours, level.met) == ("12.0 ± 0.0", "no")
     assert by[("000", "attitude error vs linear error model, largest deviation [%]")].met == "no"
     assert by[("004", "fading SPRT: max horizontal error in the fault [m]")].met == "yes"
     assert by[("004", "fading SPRT false alarms per trial")].met == "yes"
