@@ -4,7 +4,13 @@ two-sided 95 % chi-square band (Bar-Shalom section 5.4.2).
 
 Physics once: seed001 is simulated once; each trial redraws every sensor error (IMU, odometer, push rams,
 survey) from the same truth. NEES uses the estimators' one-sigma columns (diagonal covariance).
-Run: python benchmarks/bench_positioning_mc.py [TRIALS] [METHOD ...]
+Run: python benchmarks/bench_positioning_mc.py [TRIALS] [METHOD ...] [--axes] [--off SOURCE ...]
+
+--axes prints, per method and axis (east, north, up), the attitude error's rms against the claimed one-sigma (rms
+over trials and epochs) and the per-axis ANEES (1 dof), and the final odometer scale and mounting x and z estimates.
+--off SOURCE switches one of the twin's error sources off (ablation; the filter's configuration is kept):
+vibration, nonorth (gyro and accelerometer), gm (in-run bias instability), turnon (turn-on biases), imu_mount
+(the IMU mounting misalignment, also in the filter's calibration), odo_mount, odo_scale, noise (white noise).
 """
 
 from __future__ import annotations
@@ -17,23 +23,63 @@ import numpy as np
 
 from estimators import metrics
 from estimators import shearer_positioning as sp
+from twin import imu_grades
 from twin.cli import default_scenario
-from twin.estimate import positioning_config
+from twin.estimate import positioning_config, true_states
 from twin.scenario import load_scenario
 from twin.sensors import imu_truth, sensor_streams
 from twin.simulate import simulate
 
+GRADE_OFF = {"nonorth": ("gyro_nonorth", "accel_nonorth"), "gm": ("gyro_bias_instability", "accel_bias_instability"),
+             "turnon": ("gyro_bias", "accel_bias"), "noise": ("gyro_arw", "accel_vrw"),
+             "accel_turnon": ("accel_bias",), "gyro_turnon": ("gyro_bias",)}
+SOURCES = ("vibration", "imu_mount", "odo_mount", "odo_scale", *GRADE_OFF)
 
-def main(trials: int = 20, methods: tuple[str, ...] = ("kf_cpoem", "kf_cpoem_rts"), **overrides) -> dict:
-    """`overrides`: Config fields to change (tuning studies). Prints the table; returns per method the SEP per
-    trial and cycle [m] (`sep`, trials x cycles) and the median ANEES of position and attitude (`anees_pos`,
-    `anees_att`) with the band (`band`)."""
-    figs: dict = {"sep": {}, "anees_pos": {}, "anees_att": {}, "band": None}
-    scn = load_scenario(default_scenario().parent / "seed001.toml")
+
+def _switch_off(scn, off: tuple[str, ...]):
+    """The scenario with the twin's error sources `off` switched off (ablation); a new grade where needed."""
+    unknown = [o for o in off if o not in SOURCES]
+    if unknown:
+        raise ValueError(f"unknown error source {unknown[0]!r} (sources: {', '.join(SOURCES)})")
+    sensors = scn.sensors
+    if "vibration" in off:
+        sensors = sensors.model_copy(update={"vibration": sensors.vibration.model_copy(update={"enabled": False})})
+    if "imu_mount" in off:
+        sensors = sensors.model_copy(update={"imu": sensors.imu.model_copy(update={"misalignment_deg": [0.0] * 3})})
+    odo = {}
+    if "odo_mount" in off:
+        odo["mounting_deg"] = [0.0] * 3
+    if "odo_scale" in off:
+        odo["scale_error"] = 0.0
+    if odo:
+        sensors = sensors.model_copy(update={"odometer": sensors.odometer.model_copy(update=odo)})
+    zero = [f for o in off for f in GRADE_OFF.get(o, ())]
+    if zero:
+        name = f"{sensors.imu.grade}-ablation"
+        imu_grades.GRADES[name] = dataclasses.replace(imu_grades.grade(sensors.imu.grade), **dict.fromkeys(zero, 0.0))
+        sensors = sensors.model_copy(update={"imu": sensors.imu.model_copy(update={"grade": name})})
+    return scn.model_copy(update={"sensors": sensors})
+
+
+def main(trials: int = 20, methods: tuple[str, ...] = ("kf_cpoem", "kf_cpoem_rts"), off: tuple[str, ...] = (),
+         axes: bool = False, **overrides) -> dict:
+    """`overrides`: Config fields to change (tuning studies); `off`: the twin's error sources to switch off
+    (the filter's configuration stays that of seed001, but for the IMU mounting, which it is given exactly).
+    Prints the table; returns per method the SEP per trial and cycle [m] (`sep`, trials x cycles) and the median
+    ANEES of position and attitude (`anees_pos`, `anees_att`) with the band (`band`); with `axes` also the
+    attitude rms error and claimed sd per axis (`att_rms`, `att_sd` [rad], east/north/up)."""
+    figs: dict = {"sep": {}, "anees_pos": {}, "anees_att": {}, "band": None, "att_rms": {}, "att_sd": {}}
+    scn0 = load_scenario(default_scenario().parent / "seed001.toml")
+    scn = _switch_off(scn0, off)
     result = simulate(scn)
     truth, cycles = result.tables["truth_shearer"], result.tables["truth_cycles"]
     ideal = imu_truth(scn, truth)
-    cfg = dataclasses.replace(positioning_config(scn), **overrides)
+    cfg_scn = scn0 if "imu_mount" not in off else scn0.model_copy(update={"sensors": scn.sensors.model_copy(
+        update={"imu": scn0.sensors.imu.model_copy(update={"misalignment_deg": [0.0] * 3})})})
+    cfg = dataclasses.replace(positioning_config(cfg_scn), **overrides)
+    att_err = {m: [] for m in methods}
+    att_sd = {m: [] for m in methods}
+    final = {m: [] for m in methods}
     seps = {m: [] for m in methods}
     nees_pos = {m: [] for m in methods}
     nees_att = {m: [] for m in methods}
@@ -48,6 +94,10 @@ def main(trials: int = 20, methods: tuple[str, ...] = ("kf_cpoem", "kf_cpoem_rts
             seps[m].append([c["sep"] for c in metrics.cycle_metrics(t, err, cycles)])
             nees_pos[m].append(metrics.nees(err, sol.sd[:, 0:3]))
             nees_att[m].append(metrics.nees(att, sol.sd[:, 6:9]))
+            att_err[m].append(att)
+            att_sd[m].append(sol.sd[:, 6:9])
+            if sol.cal is not None:
+                final[m].append([sol.cal[-1, 9], sol.cal[-1, 6], sol.cal[-1, 8]])
     wall = time.perf_counter() - t0
     lo, hi = metrics.nees_band(3, trials)
     figs["band"] = (lo, hi)
@@ -63,9 +113,39 @@ def main(trials: int = 20, methods: tuple[str, ...] = ("kf_cpoem", "kf_cpoem_rts
         print(f"{m:14s} {cells}   {np.median(a_pos):6.2f} ({np.mean((a_pos >= lo) & (a_pos <= hi)):4.0%})"
               f"        {np.median(a_att):6.2f} ({np.mean((a_att >= lo) & (a_att <= hi)):4.0%})")
     print("ANEES columns: median over epochs of the trial-averaged NEES, and the share of epochs inside the band")
+    if off:
+        print(f"error sources switched off in the twin: {', '.join(off)}")
+    if axes:
+        lo1, hi1 = metrics.nees_band(1, trials)
+        st = true_states(scn)
+        print(f"attitude per axis [deg]: rms error / rms claimed sd (epoch 0 | run), ANEES 1 dof [{lo1:.2f}, {hi1:.2f}]")
+        for m in methods:
+            e, sd = np.array(att_err[m]), np.array(att_sd[m])
+            rms, rsd = np.sqrt(np.mean(e[:, 1:] ** 2, axis=(0, 1))), np.sqrt(np.mean(sd[:, 1:] ** 2, axis=(0, 1)))
+            r0, s0 = np.sqrt(np.mean(e[:, 0] ** 2, axis=0)), np.sqrt(np.mean(sd[:, 0] ** 2, axis=0))
+            a1 = np.median(np.mean((e / sd)[:, 1:] ** 2, axis=0), axis=0)
+            figs["att_rms"][m], figs["att_sd"][m] = rms, rsd
+            print(f"{m:14s} " + "  ".join(f"{a} {np.degrees(r0[i]):.3f}/{np.degrees(s0[i]):.3f} | "
+                                          f"{np.degrees(rms[i]):.3f}/{np.degrees(rsd[i]):.3f} ({a1[i]:5.2f})"
+                                          for i, a in enumerate("ENU")))
+            if final[m]:
+                fs = np.array(final[m])
+                print(f"{'':14s} final odometer scale {fs[:, 0].mean():+.5f} +- {fs[:, 0].std():.5f} "
+                      f"(truth {st['odo_scale']:+.5f}), mounting x {np.degrees(fs[:, 1]).mean():+.3f} +- "
+                      f"{np.degrees(fs[:, 1]).std():.3f} deg (truth {np.degrees(st['odo_mount_x']):+.3f}), mounting z "
+                      f"{np.degrees(fs[:, 2]).mean():+.3f} +- {np.degrees(fs[:, 2]).std():.3f} deg "
+                      f"(truth {np.degrees(st['odo_mount_z']):+.3f})")
     return figs
 
 
 if __name__ == "__main__":
-    n = int(sys.argv[1]) if len(sys.argv) > 1 else 20
-    main(n, tuple(sys.argv[2:]) or ("kf_cpoem", "kf_cpoem_rts"))
+    args = sys.argv[1:]
+    n = int(args.pop(0)) if args and args[0].isdigit() else 20
+    axes = "--axes" in args
+    args = [a for a in args if a != "--axes"]
+    off = tuple(args[args.index("--off") + 1:]) if "--off" in args else ()
+    args = args[:args.index("--off")] if "--off" in args else args
+    try:
+        main(n, tuple(args) or ("kf_cpoem", "kf_cpoem_rts"), off=off, axes=axes)
+    except (ValueError, sp.PositioningError) as exc:
+        sys.exit(f"bench_positioning_mc: error: {exc}")

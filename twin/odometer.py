@@ -11,7 +11,10 @@ odometer's forward axis in b is therefore the second column of C_m^b,
 
     y_m^b = [-sin a_z cos a_x, cos a_z cos a_x, sin a_x],
 
-and a rotation about y (a_y) leaves it unchanged (001: delta alpha_y is unobservable).
+and a rotation about y (a_y) leaves it unchanged. The shearer itself moves along body y (it rides the pan
+rails), so these angles only shorten the count by their cosine; the mounting 001's filter estimates, between
+the IMU and the frame the machine moves in, is the IMU's misalignment (twin.imu, [sensors.imu]
+misalignment_deg), and its truth is twin.estimate.true_states.
 
 True travel. The encoder measures travel along its own forward axis (001 eq. 2: v^m = [0, v_y^m, 0]), i.e.
 the body's ground velocity projected on y_m,

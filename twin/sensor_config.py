@@ -72,7 +72,9 @@ class Odometer(_Section):
     scale_error: Annotated[float, Field(ge=-0.1, le=0.1, allow_inf_nan=False)] = 0.003
     """Relative error of the nominal metres per pulse (0.003 = 3 per mille)."""
     mounting_deg: Vector3 = [0.2, 0.0, -0.3]
-    """Mounting angles of the odometer frame m relative to b (001 eq. 10): about x, y, z."""
+    """Angles of the encoder's axis relative to b (about x, y, z): the encoder counts travel along that axis, so
+    they change its count by their cosine only. 001's mounting angles (eq. 10), between the IMU and the frame the
+    machine moves in, are [sensors.imu] misalignment_deg here: the machine moves along b."""
 
 
 class PushRam(_Section):
