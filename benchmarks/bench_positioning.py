@@ -18,7 +18,7 @@ import numpy as np
 from estimators import metrics
 from estimators import shearer_positioning as sp
 from twin.cli import default_scenario
-from twin.estimate import positioning_config
+from twin.estimate import positioning_config, true_states
 from twin.scenario import load_scenario, parse_scenario
 from twin.sensors import imu_truth, sensor_streams
 from twin.simulate import simulate
@@ -73,10 +73,10 @@ def figures(sweep: bool = True) -> dict:
     figs["sep_first_cut"] = sep_row(sol, truth, cycles)[:4]
     print(f"{'same, face ends of the 1st cut only':36s} " + " ".join(f"{v:6.3f}" for v in figs["sep_first_cut"])
           + "   | (001's survey: both ends of the first cut)")
-    e = sols["kf_cpoem_rts"]
-    print(f"odometer scale error: estimated {e.cal[-1, 9]:+.4f}, true {1 / (1 + scn.sensors.odometer.scale_error) - 1:+.4f}; "
+    e, st = sols["kf_cpoem_rts"], true_states(scn)
+    print(f"odometer scale error: estimated {e.cal[-1, 9]:+.4f}, true {st['odo_scale']:+.4f}; "
           f"mounting x, z [deg]: estimated {np.degrees(e.cal[-1, 6]):+.3f}, {np.degrees(e.cal[-1, 8]):+.3f}, true "
-          f"{scn.sensors.odometer.mounting_deg[0]:+.3f}, {scn.sensors.odometer.mounting_deg[2]:+.3f}")
+          f"{np.degrees(st['odo_mount_x']):+.3f}, {np.degrees(st['odo_mount_z']):+.3f}")
     print("\nCPOEM point spacing Delta (001 section 4: 2, 6, 10 m), KF + CPOEM + RTS, SEP per cycle [m]")
     for delta in (2.0, 6.0, 10.0):
         sol = sp.estimate(log, dataclasses.replace(cfg, cpoem_spacing_m=delta), ("kf_cpoem_rts",))["kf_cpoem_rts"]
