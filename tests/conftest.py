@@ -6,8 +6,11 @@ checks are the same as over the full run, and the full runs are the benchmarks' 
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 from functools import cache
 from pathlib import Path
+from types import ModuleType
 
 import pytest
 
@@ -52,3 +55,12 @@ def simulated(name: str) -> tuple[Scenario, SimResult]:
 @pytest.fixture(params=SCENARIOS + list(VARIANTS))
 def run(request) -> tuple[Scenario, SimResult]:
     return simulated(request.param)
+
+
+def benchmark_module(name: str) -> ModuleType:
+    """benchmarks/NAME.py imported as module NAME (the benchmarks are scripts, not a package)."""
+    spec = importlib.util.spec_from_file_location(name, SCENARIO_DIR.parent / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault(name, module)  # dataclasses look the module up
+    spec.loader.exec_module(module)
+    return module

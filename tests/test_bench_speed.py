@@ -3,22 +3,15 @@
 from __future__ import annotations
 
 import csv
-import importlib.util
-import sys
-from pathlib import Path
 
 import pytest
 
-BENCH = Path(__file__).resolve().parent.parent / "benchmarks" / "bench_speed.py"
+from .conftest import benchmark_module
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location("bench_speed", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("bench_speed", module)  # dataclasses look the module up
-    spec.loader.exec_module(module)
-    return module
+    return benchmark_module("bench_speed")
 
 
 @pytest.fixture

@@ -4,23 +4,16 @@ column, failed rows, the Markdown and CSV files, every paper present."""
 from __future__ import annotations
 
 import csv
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-BENCH = Path(__file__).resolve().parent.parent / "benchmarks" / "compare.py"
+from .conftest import benchmark_module
 
 
 @pytest.fixture(scope="module")
 def cmp():
-    spec = importlib.util.spec_from_file_location("compare", BENCH)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("compare", module)  # dataclasses look the module up
-    spec.loader.exec_module(module)
-    return module
+    return benchmark_module("compare")
 
 
 @pytest.fixture
