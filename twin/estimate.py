@@ -27,7 +27,6 @@ from estimators.logformat import (
     write_estimate,
 )
 from estimators.ram_checks import RamLayout
-from estimators.rotations import euler_to_mat, mat_to_quat, quat_to_rotvec
 from twin.imu_grades import grade
 from twin.layout import support_stations
 from twin.scenario import Scenario
@@ -88,12 +87,8 @@ def true_states(scn: Scenario) -> dict[str, float]:
     IMU's yaw mounting m_z: C_m^b' = Rz(-m_z), and the true angles are (0, 0, -m_z). The twin's
     [sensors.odometer] mounting_deg turns the encoder's axis, which changes its count only by the cosine of the
     angle (1.4e-5 at 0.3 deg) and is not a mounting the motion constraints can see."""
-    m_z = math.radians(scn.sensors.imu.misalignment_deg[2])
-    c_mb_filter = euler_to_mat(0.0, 0.0, -m_z)
-    out = {"odo_scale": 1.0 / (1.0 + scn.sensors.odometer.scale_error) - 1.0}
-    for axis, v in zip("xyz", quat_to_rotvec(mat_to_quat(c_mb_filter))):
-        out[f"odo_mount_{axis}"] = float(v)
-    return out
+    return {"odo_scale": 1.0 / (1.0 + scn.sensors.odometer.scale_error) - 1.0, "odo_mount_x": 0.0,
+            "odo_mount_y": 0.0, "odo_mount_z": -math.radians(scn.sensors.imu.misalignment_deg[2])}
 
 
 def detector_thresholds(scn: Scenario) -> dict[str, float]:
