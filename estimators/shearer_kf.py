@@ -85,9 +85,9 @@ CAL_MOUNT = slice(6, 9)
 CAL_SCALE = 9
 N_CAL = 10
 
-N_NOMINAL = 5
-"""Length of the kernels' running "nominal" vector: the odometer speed and specific force the models are
-linearized at (odometer_update, transition) and the last odometer speed."""
+N_NOMINAL = 8
+"""Length of the kernels' running "nominal" vector: the odometer speed (0), the specific force's two low-pass
+stages (1:4, 5:8) the models are linearized at (odometer_update, transition) and the last odometer speed (4)."""
 
 # Indices of the kernel's parameter vector.
 P_R_LATERAL, P_R_ALONG, P_R_VERTICAL, P_R_ZUPT, P_R_ZARU, P_TAU_FWD, P_TAU_FORCE, P_LEVER = range(8)
@@ -228,16 +228,22 @@ def mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, u0, steps):
 
 @nb.njit(cache=True)
 def transition(nav, nominal, f_sum, t_span, q_psd, tau_force):
-    """(Phi, Q_d) over the epoch, F evaluated at the nominal specific force (nominal[1:4], updated here).
+    """(Phi, Q_d) over the epoch, F evaluated at the nominal specific force (updated here).
 
-    F uses the running mean of the specific force over tau_force, not this step's, which carries the machine's
-    vibration whose velocity is also in the innovations (errors in variables again: the vibration would "reveal"
-    a heading error through f x phi that is not there)."""
+    F uses the specific force low-passed by two first-order stages of tau_force each (nominal[1:4], then
+    nominal[5:8], which F takes), not this step's: the step's carries the machine's vibration, whose velocity is
+    also in the innovations (errors in variables again: the vibration would "reveal" a heading error through
+    f x phi that is not there). Two stages cut the drum tone by the square of one stage's factor at a delay of
+    2 tau_force, so a speed change (a reversal) still reaches F within seconds, with its area kept."""
+    f_now = f_sum / t_span
     if nominal[1] == 0.0 and nominal[2] == 0.0 and nominal[3] == 0.0:
-        nominal[1:4] = f_sum / t_span
+        nominal[1:4] = f_now
+        nominal[5:8] = f_now
     else:
-        nominal[1:4] += (f_sum / t_span - nominal[1:4]) * min(1.0, t_span / tau_force)
-    return discretize(system_matrix(nav, nominal[1:4].copy()), q_psd, t_span)
+        gain = min(1.0, t_span / tau_force)
+        nominal[1:4] += (f_now - nominal[1:4]) * gain
+        nominal[5:8] += (nominal[1:4] - nominal[5:8]) * gain
+    return discretize(system_matrix(nav, nominal[5:8].copy()), q_psd, t_span)
 
 
 @nb.njit(cache=True)

@@ -142,7 +142,12 @@ class Config:
     speed_tau_s: float = 20.0
     """Time constant [s] of the odometer speed the velocity measurement is linearized at: long, because the
     quantization error of an encoder at constant speed is a sawtooth, correlated over many epochs."""
-    force_tau_s: float = 2.0  # time constant of the specific force the error dynamics are linearized at [s]
+    force_tau_s: float = 5.0
+    """Time constant [s] of each of the two low-pass stages of the specific force the error dynamics are linearized
+    at (estimators.shearer_kf.transition). The drum tone (0.5-1 Hz) shakes the IMU horizontally; its velocity is in
+    the innovations, and an F that carries its acceleration correlates the heading gain with that velocity, which
+    rectifies into a heading drift (9 deg/h on seed001 with an error-free IMU through one 2 s stage). Two 5 s
+    stages pass 0.3 % of a 0.6 Hz tone with 10 s of delay."""
     vibration_vrw: float = 5e-4
     """Velocity random walk [m/s/sqrt(s)] added for the cutting machine's vibration: what sculling compensation at
     the IMU rate leaves of a 30 Hz pick band (about 1e-4 m/s^2 that comes and goes with the cutting)."""
