@@ -270,8 +270,8 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
         p_od[:, :] = p_od_pred
         flag = 0
         if odo_mode[j] == 1:
-            odometer_update(x_od, p_od, nav, cal, disp, t_span, odo_dist[j] - odo_dist[j - 1], nominal, r_vel,
-                            params[P_TAU_FWD])
+            odometer_update(x_od, p_od, nav, cal, disp, w_sum, lever, t_span, odo_dist[j] - odo_dist[j - 1], nominal,
+                            r_vel, params[P_TAU_FWD])
             flag |= FLAG_VELOCITY
         elif odo_mode[j] == 0:
             stand_update(x_od, p_od, nav, w_sum, t_span, nominal, params[P_R_ZUPT], params[P_R_ZARU])

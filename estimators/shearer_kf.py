@@ -247,10 +247,12 @@ def transition(nav, nominal, f_sum, t_span, q_psd, tau_force):
 
 
 @nb.njit(cache=True)
-def odometer_update(x, p, nav, cal, disp, t_span, d_odo, nominal, r_vel, tau_fwd):
+def odometer_update(x, p, nav, cal, disp, w_sum, lever, t_span, d_odo, nominal, r_vel, tau_fwd):
     """Odometer + motion-constraint velocity update (001 eqs. 18-20) of (x, P); returns the innovation (3,).
 
-    d_odo is the odometer distance over the epoch. 001 eq. 20 evaluates H at the true velocity. Measured
+    d_odo is the odometer distance over the epoch, travel of the body reference point; disp is the IMU's
+    displacement, so the IMU's turn about the lever arm, w_eb x l (w_sum the angle increment in b), is taken out
+    of its velocity first (in the snake's bends it is 0.3 w_z along the face for a lever arm of 0.3 m across). 001 eq. 20 evaluates H at the true velocity. Measured
     velocities there (the odometer's quantization, the IMU's vibration) would put the same noise into H and z, and
     that correlation biases the scale and mounting estimates at every update (errors in variables). H uses the
     nominal motion instead: along the odometer axis at the odometer speed averaged up to two epochs back
@@ -259,7 +261,8 @@ def odometer_update(x, p, nav, cal, disp, t_span, d_odo, nominal, r_vel, tau_fwd
     c_bn = quat_mat(nav[QUAT])
     c_nb = c_bn.T
     c_bm = rotvec_mat(cal[CAL_MOUNT]).T
-    v_b = c_nb @ (disp / t_span)
+    w_ie, _w_en = nav_rates(nav[LAT], nav[HGT], nav[VEL])
+    v_b = c_nb @ (disp / t_span) - cross3(w_sum / t_span - c_nb @ w_ie, lever)
     v_od = d_odo / t_span / (1 + cal[CAL_SCALE])
     v_b_nom = np.array([0.0, nominal[0], 0.0])
     h = np.zeros((3, x.size))
@@ -334,7 +337,7 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
         x[:] = 0.0
         flag = 0
         if odo_mode[j] == 1:
-            vel_innov[j] = odometer_update(x, p, nav, cal, disp, t_span, odo_dist[j] - odo_dist[j - 1], nominal,
+            vel_innov[j] = odometer_update(x, p, nav, cal, disp, w_sum, lever, t_span, odo_dist[j] - odo_dist[j - 1], nominal,
                                            r_vel, params[P_TAU_FWD])
             flag |= FLAG_VELOCITY
         elif odo_mode[j] == 0:

@@ -148,3 +148,28 @@ def test_machine_vibration_does_not_turn_the_heading():
         _, att = metrics.attitude_errors(sp.estimate_columns(sol), truth)
         ratio[tau] = np.sqrt(np.mean(att[1:, 2] ** 2)) / np.sqrt(np.mean(sol.sd[1:, 8] ** 2))
     assert ratio[cfg.force_tau_s] < 0.5 < ratio[0.1], ratio
+
+
+def test_odometer_update_takes_the_turn_about_the_lever_arm_out_of_the_imu_velocity():
+    """A body turning at 0.01 rad/s in the snake while moving at 0.1 m/s along y; the IMU 0.3 m across and 0.5 m
+    ahead of the body point moves at v + w x l. With the exact displacement, angle increment and odometer distance
+    the velocity innovation is zero: the odometer counts the body point, not the IMU."""
+    lat, h, t_span = np.radians(34.0), 100.0, 0.1
+    q = euler_to_quat(0.01, 0.02, 0.3)
+    c_bn = kf.quat_mat(q)
+    nav = np.zeros(kf.N_NAV)
+    nav[:3] = lat, 0.0, h
+    nav[kf.QUAT] = q
+    lever = np.array([0.3, 0.5, 0.2])
+    w_eb = np.array([0.0, 0.0, 0.01])
+    v_body_b = np.array([0.0, 0.1, 0.0])
+    v_imu_n = c_bn @ (v_body_b + np.cross(w_eb, lever))
+    nav[kf.VEL] = v_imu_n
+    w_ie, _ = kf.nav_rates(lat, h, v_imu_n)
+    w_sum = (w_eb + c_bn.T @ w_ie) * t_span
+    x, p = np.zeros(kf.N_STATES), np.eye(kf.N_STATES) * 1e-4
+    nominal = np.zeros(kf.N_NOMINAL)
+    r_vel = np.eye(3) * 1e-4
+    innov = kf.odometer_update(x, p, nav, np.zeros(kf.N_CAL), v_imu_n * t_span, w_sum, lever, t_span, 0.1 * t_span,
+                               nominal, r_vel, 20.0)
+    assert np.abs(innov).max() < 1e-12
