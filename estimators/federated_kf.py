@@ -3,13 +3,13 @@
 
 Both share one SINS (estimators.shearer_kf's mechanization, error states and odometer blocks):
 
-* sub-filter 1, SINS/odometer (003 section 3.1): the 19 error states of estimators.shearer_kf, the odometer plus
+* sub-filter 1, SINS/odometer (003 section 3.1): the error states of estimators.shearer_kf, the odometer plus
   motion-constraint velocity closing error, and the zero-velocity and zero-rate updates while the shearer stands;
 * sub-filter 2, SINS/magnetometer (003 section 3.2): the yaw closing error z = yaw_SINS - yaw_mag with H on phi
   from estimators.magnetic.yaw_h_phi and R estimated from its innovations over a sliding window (003 section
   4.2, estimators.adaptive), readings whose field norm or dip disagree with the geomagnetic model left out.
 
-Both carry the same 19 error states (003's SINS/MAG sub-filter has the 15 SINS states; carrying the odometer
+Both carry the same error states (003's SINS/MAG sub-filter has the 15 SINS states; carrying the odometer
 mounting and scale as well, unobserved by it, lets the fusion cover the whole state and keeps it exact: a
 sub-filter of a subset would have to give those states back through their regression on the common ones, and
 the process noise of the common states then leaks into them at every reset).
@@ -21,7 +21,7 @@ x_i = 0, P_i = P_g / beta_i. With fusion at every epoch and this reset the fused
 centralized filter whatever the beta_i (the information P_g^-1 is split, not copied; tests/test_federated_kf.py);
 the fault tolerance comes from each sub-filter's own measurement noise and disturbance test.
 
-The centralized mode runs the same measurements on one 19-state filter with the nominal yaw noise and no
+The centralized mode runs the same measurements on one filter with the nominal yaw noise and no
 disturbance test: 003's CKF.
 """
 
@@ -161,7 +161,7 @@ def fuse_epoch(x_od, p_od, x_aiding, p_aiding, inverse_sharing):
 
 @nb.njit(cache=True)
 def initial_covariances(p0, federated):
-    """(P_sub (2, 19, 19), beta (2,)): the initial information split between the sub-filters (Carlson) or, in
+    """(P_sub (2, N_STATES, N_STATES), beta (2,)): the initial information split between the sub-filters (Carlson) or, in
     the centralized mode, P0 in slot SUB_ODOMETER (the one filter)."""
     beta = np.full(N_SUB, 1.0 / N_SUB)
     p_sub = np.empty((N_SUB, N_STATES, N_STATES))
@@ -228,11 +228,11 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
     (fix_epoch sorted, fix_llh (F, 3), fix_r (F, 3, 3), fix_scale_h (F, 3), fix_trusted (F,): see _fix_update)
     go to sub-filter 2 (in the centralized mode to the one
     filter) through the detectors of det_params (D_*). params are estimators.shearer_kf's, mag_params the M_*
-    vector. The state carried across calls, updated in place: nav, cal, p_sub (2, 19, 19) (initial_covariances),
+    vector. The state carried across calls, updated in place: nav, cal, p_sub (2, N_STATES, N_STATES) (initial_covariances),
     beta (2,), nominal (N_NOMINAL,) (zeros at the start), the yaw-noise window r_buf (W, 1, 1) with counters[0] its
     count, counters[1] the rail fixes tested so far, the FSPRT state fsprt and its fault flag isolated[0].
 
-    Stores per epoch: navigation and calibration, one-sigma of the 19 states, filter and magnetometer flags, beta
+    Stores per epoch: navigation and calibration, one-sigma of the states, filter and magnetometer flags, beta
     (NaN in the centralized mode), the yaw R used, the yaw innovation, per sub-filter x_i - x_g of position and
     attitude (6,) before the reset; per fix the detector statistics (3,) and whether it was applied."""
     r_vel = np.diag(np.array([params[P_R_LATERAL], params[P_R_ALONG], params[P_R_VERTICAL]]) ** 2)

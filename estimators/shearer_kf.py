@@ -1,16 +1,22 @@
-"""The 19-state SINS/odometer error Kalman filter of 001 section 3 as one sequential numba kernel.
+"""The SINS/odometer error Kalman filter of 001 section 3 (19 states) plus the accelerometer triad's
+non-orthogonality (3 states) as one sequential numba kernel.
 
-Error state (001 eq. 12, this order; errors are estimate - truth):
+Error state (001 eq. 12, this order, then the non-orthogonality; errors are estimate - truth):
 
     x = [dv_n (ENU, m/s), phi (attitude error, C_b^n' = (I - [phi x]) C_b^n, rad), dp (ENU, m),
          eps (gyro bias, b, rad/s), nabla (accelerometer bias, b, m/s^2), dalpha (odometer mounting, rad),
-         dk_D (odometer scale-factor error)]
+         dk_D (odometer scale-factor error), da (accelerometer non-orthogonality a_xy, a_xz, a_yz, rad)]
+
+The non-orthogonality is not in 001. A symmetric A in f~ = (I + A) f + nabla is, while the body stays level, one
+more bias (A [0, 0, g]); but as the pitch follows the floor the z accelerometer reads a_yz g sin(theta), which
+looks like an along-face bias, and a filter without it takes the pitch changes as separating the level from
+the bias: its pitch comes out wrong by a_yz while it claims a fraction of that (seed001: 0.065 deg against 0.029).
 
 Position errors are kept in metres east/north/up instead of 001's (longitude, latitude, height): the same state
 through the diagonal matrix C of 001 eq. 7, and better conditioned. Dynamics (001 eqs. 13-15, with the Earth and
 transport rates kept in full and the free-air gravity gradient on the vertical channel):
 
-    d(dv)/dt  = f_n x phi - (2 w_ie + w_en) x dv + C_b^n nabla + w_a
+    d(dv)/dt  = f_n x phi - (2 w_ie + w_en) x dv + C_b^n (nabla + N(f_b) da) + w_a
     d(phi)/dt = -(w_ie + w_en) x phi - C_b^n eps + w_g
     d(dp)/dt  = dv,   d(eps)/dt = w_eps,   d(nabla)/dt = w_nabla,   d(dalpha)/dt = 0,   d(dk_D)/dt = 0
 
@@ -69,8 +75,9 @@ GYRO_BIAS = slice(9, 12)
 ACCEL_BIAS = slice(12, 15)
 ODO_MOUNT = slice(15, 18)
 ODO_SCALE = 18
-N_STATES = 19
-_DV, _PHI, _DP, _BG, _BA, _AL = 0, 3, 6, 9, 12, 15  # block starts, for the kernel
+ACCEL_NONORTH = slice(19, 22)
+N_STATES = 22
+_DV, _PHI, _DP, _BG, _BA, _AL, _NA = 0, 3, 6, 9, 12, 15, 19  # block starts, for the kernel
 
 # Navigation vector of the kernel: geodetic position, ENU velocity, attitude q_nb.
 LAT, LON, HGT = 0, 1, 2
@@ -83,7 +90,8 @@ CAL_GYRO = slice(0, 3)
 CAL_ACCEL = slice(3, 6)
 CAL_MOUNT = slice(6, 9)
 CAL_SCALE = 9
-N_CAL = 10
+CAL_NONORTH = slice(10, 13)  # (a_xy, a_xz, a_yz): dv_b <- dv_b - A dv_b
+N_CAL = 13
 
 N_NOMINAL = 8
 """Length of the kernels' running "nominal" vector: the odometer speed (0), the specific force's two low-pass
@@ -95,8 +103,18 @@ N_PARAMS = 11  # the lever arm takes 7..9, one spare
 
 
 @nb.njit(cache=True)
+def nonorth_matrix(v):
+    """N(v) (3 x 3) with A v = N(v) (a_xy, a_xz, a_yz) for the symmetric zero-diagonal A."""
+    n = np.zeros((3, 3))
+    n[0, 0], n[0, 1] = v[1], v[2]
+    n[1, 0], n[1, 2] = v[0], v[2]
+    n[2, 1], n[2, 2] = v[0], v[1]
+    return n
+
+
+@nb.njit(cache=True)
 def system_matrix(nav, f_n):
-    """F (19 x 19) of the error dynamics at the navigation state `nav` with specific force f_n."""
+    """F (N_STATES x N_STATES) of the error dynamics at the navigation state `nav` with specific force f_n."""
     lat, h = nav[LAT], nav[HGT]
     v = nav[VEL]
     w_ie, w_en = nav_rates(lat, h, v)
@@ -105,6 +123,7 @@ def system_matrix(nav, f_n):
     f[_DV:_DV + 3, _DV:_DV + 3] = -skew3(2 * w_ie + w_en)
     f[_DV:_DV + 3, _PHI:_PHI + 3] = skew3(f_n)
     f[_DV:_DV + 3, _BA:_BA + 3] = c_bn
+    f[_DV:_DV + 3, _NA:_NA + 3] = c_bn @ nonorth_matrix(c_bn.T @ f_n)
     r_m, r_n = radii_nb(lat)
     f[_DV + 2, _DP + 2] = 2 * gravity_nb(lat, h) / np.sqrt((r_m + h) * (r_n + h))
     f[_PHI:_PHI + 3, _PHI:_PHI + 3] = -skew3(w_ie + w_en)
@@ -157,6 +176,7 @@ def apply_correction(nav, cal, x):
     for i in range(3):
         cal[i] += x[_BG + i]
         cal[3 + i] += x[_BA + i]
+        cal[CAL_NONORTH.start + i] += x[_NA + i]
     # C_b^m <- C_b^m (I - [dalpha x]), i.e. C_m^b <- (I + [dalpha x]) C_m^b, kept as a rotation vector.
     cal[6:9] = mat_rotvec(rotvec_mat(x[_AL:_AL + 3]) @ rotvec_mat(cal[6:9]))
     cal[CAL_SCALE] = (1 + cal[CAL_SCALE]) * (1 + x[ODO_SCALE]) - 1
@@ -219,7 +239,8 @@ def mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, u0, steps):
     for u in range(u0, u0 + steps):
         dt = t_mech[u + 1] - t_mech[u]
         ph = phi_b[u] - cal[CAL_GYRO] * dt
-        dv_n, v_bar = _mech_step(nav, ph, dv_b[u] - cal[CAL_ACCEL] * dt, dt)
+        dv = dv_b[u] - nonorth_matrix(dv_b[u]) @ cal[CAL_NONORTH] - cal[CAL_ACCEL] * dt
+        dv_n, v_bar = _mech_step(nav, ph, dv, dt)
         f_sum += dv_n
         disp += v_bar * dt
         w_sum += ph

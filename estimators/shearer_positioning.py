@@ -67,6 +67,7 @@ class ImuNoise:
     accel_bias: float  # m/s^2
     gyro_bias_psd: float = 0.0  # rad^2/s^3, random-walk density of the in-run bias
     accel_bias_psd: float = 0.0  # m^2/s^5
+    accel_nonorth: float = 1e-6  # rad, one-sigma of each element of the accelerometers' symmetric A (tiny: none)
 
 
 @dataclass(frozen=True)
@@ -312,20 +313,21 @@ def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndar
 
 
 def initial_covariance(cfg: Config, log: Log) -> np.ndarray:
-    """P0 of the 19 error states (001 Appendix A (A2) form): the configured sigmas, heading from the survey."""
+    """P0 of the error states (001 Appendix A (A2) form): the configured sigmas, heading from the survey."""
     sd = np.zeros(kf.N_STATES)
     sd[kf.DV] = cfg.sd_velocity0
     sd[kf.PHI] = [cfg.sd_level0, cfg.sd_level0, log.survey_sd[0, 2]]
     sd[kf.DP] = [log.survey_sd[0, 0], log.survey_sd[0, 0], log.survey_sd[0, 1]]
     sd[kf.GYRO_BIAS] = cfg.imu.gyro_bias
     sd[kf.ACCEL_BIAS] = cfg.imu.accel_bias
+    sd[kf.ACCEL_NONORTH] = cfg.imu.accel_nonorth
     sd[kf.ODO_MOUNT] = cfg.sd_odo_mount0
     sd[kf.ODO_SCALE] = cfg.sd_odo_scale0
     return np.diag((cfg.p0_scale * sd) ** 2)
 
 
 def process_noise_psd(cfg: Config) -> np.ndarray:
-    """Diagonal process-noise densities of the 19 error states (001 Appendix A (A3) form)."""
+    """Diagonal process-noise densities of the error states (001 Appendix A (A3) form)."""
     q = np.zeros(kf.N_STATES)
     q[kf.DV] = cfg.imu.accel_vrw ** 2 + cfg.vibration_vrw ** 2
     q[kf.PHI] = cfg.imu.gyro_arw ** 2

@@ -40,7 +40,7 @@ def test_standing_filter_finds_the_gyro_bias_and_leaves_the_heading_alone():
     q0 = euler_to_quat(0.015, 0.015, 0.32)
     nav[kf.QUAT] = q0
     sd = np.array([0.01] * 3 + [0.005, 0.005, 0.02] + [0.05] * 3 + [720 * DEG_H] * 3 + [1e-4] * 3 + [0.02] * 3 +
-                  [0.01])
+                  [0.01] + [1e-6] * 3)
     p = np.diag(sd ** 2)
     params = np.zeros(kf.N_PARAMS)
     params[:7] = [0.01, 0.01, 0.01, 0.002, 5e-4, 1.0, 2.0]
@@ -173,3 +173,28 @@ def test_odometer_update_takes_the_turn_about_the_lever_arm_out_of_the_imu_veloc
     innov = kf.odometer_update(x, p, nav, np.zeros(kf.N_CAL), v_imu_n * t_span, w_sum, lever, t_span, 0.1 * t_span,
                                nominal, r_vel, 20.0)
     assert np.abs(innov).max() < 1e-12
+
+
+def test_nonorthogonality_states_move_the_velocity_as_the_mechanization_does():
+    """F's block of the accelerometer non-orthogonality against the mechanization itself: correcting the
+    increments by a symmetric A changes the velocity over an epoch by -C_b^n N(f_b) da T, as F says for a change of
+    -da in the residual (the state is the truth minus the correction)."""
+    lat, h, steps, dt = np.radians(34.0), 100.0, 5, 0.02
+    q = euler_to_quat(0.03, -0.02, 0.7)
+    f_b = quat_rotate(quat_conj(q), np.array([0.2, -0.1, earth.normal_gravity(lat, h)]))
+    t_mech = np.arange(steps + 1) * dt
+    phi_b = np.tile(quat_rotate(quat_conj(q), earth.earth_rate_n(lat)) * dt, (steps, 1))
+    dv_b = np.tile(f_b * dt, (steps, 1))
+    nav0 = np.zeros(kf.N_NAV)
+    nav0[:3] = lat, 0.0, h
+    nav0[kf.QUAT] = q
+    da = np.array([3e-4, -2e-4, 5e-4])
+    vel = []
+    for a in (np.zeros(3), da):
+        nav, cal = nav0.copy(), np.zeros(kf.N_CAL)
+        cal[kf.CAL_NONORTH] = a
+        kf.mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, 0, steps)
+        vel.append(nav[kf.VEL])
+    f_n = quat_rotate(q, f_b)
+    expected = -kf.system_matrix(nav0, f_n)[kf.DV, kf.ACCEL_NONORTH] @ da * steps * dt
+    assert np.abs(vel[1] - vel[0] - expected).max() < 1e-4 * np.abs(expected).max()

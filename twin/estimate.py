@@ -64,7 +64,8 @@ def positioning_config(scn: Scenario) -> sp.Config:
                       gyro_bias=max(g.gyro_bias, g.gyro_bias_instability, 1e-7),
                       accel_bias=max(g.accel_bias, g.accel_bias_instability, 1e-5),
                       gyro_bias_psd=_psd(g.gyro_bias_instability, g.gyro_bias_tau),
-                      accel_bias_psd=_psd(g.accel_bias_instability, g.accel_bias_tau))
+                      accel_bias_psd=_psd(g.accel_bias_instability, g.accel_bias_tau),
+                      accel_nonorth=max(g.accel_nonorth, 1e-6))
     return sp.Config(imu=imu, **kw)
 
 
