@@ -608,7 +608,7 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
 
 def make_solution(prep: Prepared, cfg: Config, nav: np.ndarray, sd_all: np.ndarray, flags: np.ndarray,
                   cal: np.ndarray, notes: list[str]) -> Solution:
-    """A Solution from navigation rows and the one-sigma of the 19 states at the filter epochs."""
+    """A Solution from navigation rows and the one-sigma of the error states at the filter epochs."""
     sd = np.column_stack([sd_all[:, kf.DP], sd_all[:, kf.DV], sd_all[:, kf.PHI]])
     sd_cal = np.column_stack([sd_all[:, kf.GYRO_BIAS], sd_all[:, kf.ACCEL_BIAS], sd_all[:, kf.ODO_MOUNT],
                               sd_all[:, kf.ODO_SCALE]])
