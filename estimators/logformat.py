@@ -45,7 +45,11 @@ class Stream:
         return next(c for c in self.columns if c.name == name)
 
 
-def _xyz(prefix: str, unit: str, doc: str, axes: str = "xyz") -> tuple[Column, ...]:
+NONORTH_AXES = ("xy", "xz", "yz")
+"""The elements of the accelerometers' symmetric non-orthogonality A, in the filter's state order."""
+
+
+def _xyz(prefix: str, unit: str, doc: str, axes: str | tuple[str, ...] = "xyz") -> tuple[Column, ...]:
     return tuple(Column(f"{prefix}_{a}", unit, "f8", f"{doc}, {a} component") for a in axes)
 
 
@@ -268,10 +272,12 @@ ESTIMATE_STATES = Stream(
         *_xyz("accel_bias", "m/s^2", "accelerometer bias in b"),
         *_xyz("odo_mount", "rad", "odometer mounting angle (001 eq. 10)"),
         Column("odo_scale", "1", "f8", "odometer scale-factor error delta k_D (001 eq. 1)"),
+        *_xyz("accel_nonorth", "rad", "accelerometer non-orthogonality (symmetric A)", NONORTH_AXES),
         *_xyz("sd_gyro_bias", "rad/s", "one-sigma gyro bias"),
         *_xyz("sd_accel_bias", "m/s^2", "one-sigma accelerometer bias"),
         *_xyz("sd_odo_mount", "rad", "one-sigma odometer mounting angle"),
         Column("sd_odo_scale", "1", "f8", "one-sigma odometer scale-factor error"),
+        *_xyz("sd_accel_nonorth", "rad", "one-sigma accelerometer non-orthogonality", NONORTH_AXES),
     ),
 )
 

@@ -37,7 +37,7 @@ from estimators import shearer_kf as kf
 from estimators.cpoem import Points, RamLog, crossings, predict_fixes, record
 from estimators.fault_detection import DetectorConfig
 from estimators.fine_alignment import fine_align
-from estimators.logformat import FLAG_SMOOTHED
+from estimators.logformat import FLAG_SMOOTHED, NONORTH_AXES
 from estimators.rotations import (
     euler_to_mat,
     euler_to_quat,
@@ -213,7 +213,7 @@ class Solution:
     sd: np.ndarray  # (K, 9): position ENU, velocity ENU, attitude ENU (NaN without covariance)
     flags: np.ndarray
     cal: np.ndarray | None = None  # (K, 10) estimators.shearer_kf calibration vector
-    sd_cal: np.ndarray | None = None  # (K, 10)
+    sd_cal: np.ndarray | None = None  # (K, N_CAL), in the calibration vector's order
     notes: list[str] = field(default_factory=list)
     fusion: dict[str, np.ndarray] | None = None  # ESTIMATE_FUSION columns of a federated filter
     detectors: dict[str, np.ndarray] | None = None  # ESTIMATE_DETECTORS columns of the rail-model filter
@@ -611,7 +611,7 @@ def make_solution(prep: Prepared, cfg: Config, nav: np.ndarray, sd_all: np.ndarr
     """A Solution from navigation rows and the one-sigma of the error states at the filter epochs."""
     sd = np.column_stack([sd_all[:, kf.DP], sd_all[:, kf.DV], sd_all[:, kf.PHI]])
     sd_cal = np.column_stack([sd_all[:, kf.GYRO_BIAS], sd_all[:, kf.ACCEL_BIAS], sd_all[:, kf.ODO_MOUNT],
-                              sd_all[:, kf.ODO_SCALE]])
+                              sd_all[:, kf.ODO_SCALE], sd_all[:, kf.ACCEL_NONORTH]])
     return Solution(prep.t_kf, _body_llh(nav, np.asarray(cfg.lever_arm_m, float)), nav[:, kf.VEL].copy(),
                     nav[:, kf.QUAT].copy(), sd, flags.copy(), cal.copy(), sd_cal, list(notes))
 
@@ -763,9 +763,10 @@ def estimate_columns(sol: Solution) -> dict[str, np.ndarray]:
 
 def state_columns(sol: Solution) -> dict[str, np.ndarray]:
     """A filter Solution's calibration as ESTIMATE_STATES columns."""
-    out = {"t": sol.t, "odo_scale": sol.cal[:, kf.CAL_SCALE], "sd_odo_scale": sol.sd_cal[:, 9]}
-    for i, a in enumerate("xyz"):
-        for name, start in (("gyro_bias", 0), ("accel_bias", 3), ("odo_mount", 6)):
-            out[f"{name}_{a}"] = sol.cal[:, start + i]
-            out[f"sd_{name}_{a}"] = sol.sd_cal[:, start + i]
+    out = {"t": sol.t, "odo_scale": sol.cal[:, kf.CAL_SCALE], "sd_odo_scale": sol.sd_cal[:, kf.CAL_SCALE]}
+    for name, cal, axes in (("gyro_bias", kf.CAL_GYRO, "xyz"), ("accel_bias", kf.CAL_ACCEL, "xyz"),
+                            ("odo_mount", kf.CAL_MOUNT, "xyz"), ("accel_nonorth", kf.CAL_NONORTH, NONORTH_AXES)):
+        for i, a in enumerate(axes):
+            out[f"{name}_{a}"] = sol.cal[:, cal.start + i]
+            out[f"sd_{name}_{a}"] = sol.sd_cal[:, cal.start + i]
     return out

@@ -61,7 +61,7 @@ import rerun.blueprint as rrb
 
 from estimators import earth
 from estimators.federated_kf import MAG_DISTURBED, MAG_GATED, MAG_USED
-from estimators.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT
+from estimators.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT, NONORTH_AXES
 from estimators.metrics import attitude_errors, column, columns, position_errors
 from estimators.support_attitude_ours import FLAG_ACCEL, FLAG_DIP, FLAG_GATE, FLAG_NORM
 from twin.imu_grades import DEG, DEG_PER_H, MG
@@ -86,6 +86,7 @@ STATE_GROUPS = {  # state column prefix: (axes, SI value per display unit, displ
     "accel_bias": ("xyz", MG, "mg"),
     "odo_mount": ("xyz", DEG, "deg"),
     "odo_scale": ("", 1.0, "1"),
+    "accel_nonorth": (NONORTH_AXES, DEG, "deg"),
 }
 FLAG_SERIES = (("position fix", FLAG_POSITION), ("ZUPT", FLAG_ZUPT), ("skipped", FLAG_SKIPPED))
 MAG_SERIES = (("used", MAG_USED), ("disturbed", MAG_DISTURBED), ("gated", MAG_GATED))
