@@ -274,7 +274,7 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
                             r_vel, params[P_TAU_FWD])
             flag |= FLAG_VELOCITY
         elif odo_mode[j] == 0:
-            stand_update(x_od, p_od, nav, w_sum, t_span, nominal, params[P_R_ZUPT], params[P_R_ZARU])
+            stand_update(x_od, p_od, nav, disp, w_sum, t_span, nominal, params[P_R_ZUPT], params[P_R_ZARU])
             flag |= FLAG_ZUPT
         else:
             flag |= FLAG_SKIPPED

@@ -410,7 +410,7 @@ def motion_test(nis: np.ndarray, dof: int, T: float) -> float | None:
 
 def fine_align(dtheta, dv, dt: float, lat: float, q0_nb, grade_noise: tuple[float, float], initial_sigma_rad,
                method: str = "ukf", *, h: float = 0.0, gyro_bias_sigma: float = 0.0, accel_bias_sigma: float = 0.0,
-               velocity_sigma: float = 1e-3, update_rate: float = 10.0, gyro_bias_psd: float = 0.0,
+               velocity_sigma: float = 1e-3, rate_sigma: float = 0.0, update_rate: float = 10.0, gyro_bias_psd: float = 0.0,
                accel_bias_psd: float = 0.0, zero_rate: bool = True, on_motion: str = "raise") -> FineAlignment:
     """Fine alignment of a stationary IMU from increments (rows over equal intervals dt [s]).
 
@@ -418,7 +418,9 @@ def fine_align(dtheta, dv, dt: float, lat: float, q0_nb, grade_noise: tuple[floa
     vrw [m/s/sqrt(s)]); initial_sigma_rad: (3,) sigma of the initial attitude errors phi_E, phi_N, phi_U [rad];
     method: 'ekf', 'ukf' or 'optimized_ukf'. gyro_bias_sigma [rad/s] and accel_bias_sigma [m/s^2]: priors of the
     bias states (the grade's turn-on bias; 0 keeps them at zero). velocity_sigma [m/s]: the measurement noise of
-    the zero-velocity observation (vibration of the standing machine). gyro_bias_psd [rad^2/s^3] and
+    the zero-velocity observation (vibration of the standing machine). rate_sigma [rad/s]: the same machine's
+    vibration in the zero-rate observation, as noise of the mean rate over an update block, added to the gyro's
+    random walk (a navigation-grade gyro's walk is far below a standing shearer's rocking). gyro_bias_psd [rad^2/s^3] and
     accel_bias_psd [m^2/s^5]: random-walk PSD of the bias states for an in-run bias instability (000 eq. 16 takes
     them as random constants, the default 0; a Gauss-Markov bias of sigma s and time tau gives 2 s^2 / tau).
     zero_rate: use the vertical zero-rate measurement (module docstring). on_motion: 'raise' (AlignmentError) or
@@ -455,7 +457,7 @@ def fine_align(dtheta, dv, dt: float, lat: float, q0_nb, grade_noise: tuple[floa
     w = earth.earth_rate_n(lat)
     gamma = float(earth.normal_gravity(lat, h))
     g_n = earth.gravity_n(lat, h)
-    r_vel, r_rate = velocity_sigma ** 2, max(arw, 1e-9) ** 2 * T
+    r_vel, r_rate = velocity_sigma ** 2, max(arw, 1e-9) ** 2 * T + (rate_sigma * T) ** 2
     c = quat_to_mat(np.asarray(q0_nb, float) / np.linalg.norm(q0_nb))
 
     c_out = np.empty((n_upd, 3, 3))

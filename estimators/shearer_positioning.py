@@ -293,7 +293,7 @@ def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndar
     res = fine_align(dtheta_s[:n_imu], dv_s[:n_imu], imu_dt, lat, q_nb, (cfg.imu.gyro_arw, cfg.imu.accel_vrw),
                      np.array([cfg.sd_level0, cfg.sd_level0, log.survey_sd[0, 2]]), "ekf", h=h,
                      gyro_bias_sigma=cfg.imu.gyro_bias, accel_bias_sigma=cfg.imu.accel_bias,
-                     velocity_sigma=cfg.r_zupt, on_motion="flag")
+                     velocity_sigma=cfg.r_zupt, rate_sigma=cfg.r_zaru, on_motion="flag")
     if res.motion_t is None:
         q_nb = res.attitude(min(10.0, 0.5 * n * dt))
         cal[kf.CAL_ACCEL.start:kf.CAL_ACCEL.start + 2] = res.bias[-1, :2]

@@ -62,6 +62,39 @@ def test_standing_filter_finds_the_gyro_bias_and_leaves_the_heading_alone():
     assert abs(err[2] - err0[2]) < np.radians(0.01) and abs(err0[2]) > np.radians(1.0)
 
 
+def test_standing_machine_tone_locked_to_the_epochs_does_not_move_the_position():
+    """A standing IMU shaken by a 30 Hz tone (1 mm/s velocity amplitude along x and up): three periods per 0.1 s
+    epoch, so every epoch ends at the same phase of it. The zero-velocity update of the epoch's mean velocity
+    holds the position (an update of the epoch-end velocity moved it 0.06 m over these 100 s)."""
+    lat, h = np.radians(34.0), 100.0
+    q = euler_to_quat(0.01, 0.02, 0.3)
+    w_b = quat_rotate(quat_conj(q), earth.earth_rate_n(lat))
+    f_b = quat_rotate(quat_conj(q), np.array([0, 0, earth.normal_gravity(lat, h)]))
+    steps, n_kf, dt = 5, 1000, 0.02
+    t_mech = np.arange(n_kf * steps + 1) * dt
+    v_tone = 1e-3 * np.sin(2 * np.pi * 30.0 * t_mech + 0.7)[:, None] * np.array([1.0, 0.0, 1.0])
+    phi_b, dv_b = np.tile(w_b * dt, (n_kf * steps, 1)), np.tile(f_b * dt, (n_kf * steps, 1)) + np.diff(v_tone, axis=0)
+    nav = np.zeros(kf.N_NAV)
+    nav[:3] = lat, 0.0, h
+    nav[kf.QUAT] = q
+    nav[kf.VEL] = quat_rotate(q, v_tone[0])
+    sd = np.array([0.01] * 3 + [1e-4] * 3 + [0.05] * 3 + [1 * DEG_H] * 3 + [1e-4] * 3 + [0.02] * 3 + [0.01] +
+                  [1e-6] * 3)
+    params = np.zeros(kf.N_PARAMS)
+    params[:7] = [0.01, 0.01, 0.01, 0.002, 5e-4, 1.0, 2.0]
+    z = np.zeros
+    out_nav = z((n_kf + 1, kf.N_NAV))
+    store = [z((n_kf + 1, kf.N_STATES))] + [z((n_kf + 1, kf.N_STATES, kf.N_STATES)) for _ in range(3)]
+    kf.run_filter(0, n_kf, steps, t_mech, phi_b, dv_b, z(n_kf + 1), np.zeros(n_kf + 1, np.int8),
+                  np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), z(0), np.full(kf.N_STATES, 1e-12), params, nav,
+                  z(kf.N_CAL), np.diag(sd ** 2), z(kf.N_NOMINAL), out_nav, z((n_kf + 1, kf.N_CAL)), *store,
+                  np.zeros(n_kf + 1, np.int32), z(0), z((n_kf + 1, 3)))
+    r_m, r_n = earth.radii(lat)
+    moved = np.array([out_nav[-1, kf.LON] * (r_n + h) * np.cos(lat), (out_nav[-1, kf.LAT] - lat) * (r_m + h),
+                      out_nav[-1, kf.HGT] - h])
+    assert np.abs(moved).max() < 0.01, moved
+
+
 @pytest.fixture(scope="module")
 def default_log():
     scn, result = simulated("default")
