@@ -135,6 +135,10 @@ class Config:
     # face ends are trusted, never gated
     sd_velocity0: float = 0.01
     sd_level0: float = 0.3 * DEG
+    level_from_accelerometers: bool = True
+    """P0 of the level: the start attitude is levelled with the accelerometers, so its tilt error is the one the
+    accelerometers' bias and non-orthogonality put there (initial_covariance), plus sd_level0 independent of them.
+    False: sd_level0 alone, independent (001 Appendix A's diagonal P0)."""
     sd_odo_mount0: float = 1.0 * DEG
     sd_odo_scale0: float = 0.01
     p0_scale: float = 1.0
@@ -173,7 +177,8 @@ class Config:
         """001 Table 1 / Appendix A: P0 of (A2) (Table 1 values x 3) and Q of (A3) (MTi-G-700 noise x 5)."""
         imu = ImuNoise(gyro_arw=0.6 * DEG / 60, accel_vrw=0.08e-3 * 9.80665, gyro_bias=720 * DEG / 3600,
                        accel_bias=3e-3 * 9.80665)
-        return cls(imu=imu, sd_velocity0=0.01, sd_level0=0.3 * DEG, sd_odo_mount0=3 * DEG, sd_odo_scale0=0.05,
+        return cls(imu=imu, sd_velocity0=0.01, sd_level0=0.3 * DEG, level_from_accelerometers=False,
+                   sd_odo_mount0=3 * DEG, sd_odo_scale0=0.05,
                    p0_scale=3.0, q_scale=5.0, **kw)
 
 
@@ -312,8 +317,16 @@ def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndar
     return nav, cal, notes
 
 
-def initial_covariance(cfg: Config, log: Log) -> np.ndarray:
-    """P0 of the error states (001 Appendix A (A2) form): the configured sigmas, heading from the survey."""
+def initial_covariance(cfg: Config, log: Log, q_nb0: np.ndarray) -> np.ndarray:
+    """P0 of the error states (001 Appendix A (A2) form): the configured sigmas, heading from the survey; with
+    cfg.level_from_accelerometers the level error of the start attitude q_nb0 tied to the accelerometer errors.
+
+    Levelled at rest, the attitude leaves no velocity drift in the filter's own model (shearer_kf.system_matrix):
+    f_n x phi + C_b^n e = 0 horizontally, e = b + N(f_b) a the accelerometer error at f_b = C_n^b (0, 0, g), so
+    phi_E = -(C_b^n e)_N / g and phi_N = (C_b^n e)_E / g. A diagonal P0 takes the level as known to sd_level0
+    besides the bias, and the first stand's zero-velocity updates, which see only phi and e together, then
+    "learn" the across-face bias from that prior (seed001: roll sd 0.175 -> 0.151 deg at the first stand, with
+    the true roll error staying -b_x / g)."""
     sd = np.zeros(kf.N_STATES)
     sd[kf.DV] = cfg.sd_velocity0
     sd[kf.PHI] = [cfg.sd_level0, cfg.sd_level0, log.survey_sd[0, 2]]
@@ -323,7 +336,17 @@ def initial_covariance(cfg: Config, log: Log) -> np.ndarray:
     sd[kf.ACCEL_NONORTH] = cfg.imu.accel_nonorth
     sd[kf.ODO_MOUNT] = cfg.sd_odo_mount0
     sd[kf.ODO_SCALE] = cfg.sd_odo_scale0
-    return np.diag((cfg.p0_scale * sd) ** 2)
+    p0 = np.diag((cfg.p0_scale * sd) ** 2)
+    if not cfg.level_from_accelerometers:
+        return p0
+    c_bn = quat_to_mat(q_nb0)
+    g = float(earth.normal_gravity(log.survey_llh[0, 0], log.survey_llh[0, 2]))
+    tilt_per_error = np.vstack([-c_bn[1], c_bn[0]]) / g  # (phi_E, phi_N) per unit e in b
+    t = np.eye(kf.N_STATES)
+    level = slice(kf.PHI.start, kf.PHI.start + 2)
+    t[level, kf.ACCEL_BIAS] = tilt_per_error
+    t[level, kf.ACCEL_NONORTH] = tilt_per_error @ kf.nonorth_matrix(c_bn.T @ np.array([0.0, 0.0, g]))
+    return t @ p0 @ t.T
 
 
 def process_noise_psd(cfg: Config) -> np.ndarray:
@@ -548,7 +571,7 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
     fwd = _Forward(n, keep_dir)
     nav = prep.nav0.copy()
     cal = prep.cal0.copy()
-    p = initial_covariance(cfg, log)
+    p = initial_covariance(cfg, log, prep.nav0[kf.QUAT])
     fwd.nav[0], fwd.sd[0] = nav, _sd(p)
     q_psd = process_noise_psd(cfg)
     params = kf_params(cfg)

@@ -114,6 +114,33 @@ def test_every_method_runs_on_a_simulated_face_without_nan(default_log):
     assert (flags & FLAG_ZUPT).any() and (flags & FLAG_VELOCITY).any()
 
 
+def test_level_prior_is_the_accelerometer_error_so_a_stand_learns_no_bias(default_log):
+    """P0 ties the start level to the accelerometer bias and non-orthogonality the way the filter's own F does
+    at rest (no horizontal velocity drift from the pair), so conditioning on what a stand's zero-velocity
+    updates see, the drift f_n x phi + C_b^n e, leaves the bias variance as it was. A diagonal P0 (001 Appendix
+    A) turns the level prior into across-face bias information."""
+    scn, log = default_log
+    cfg = positioning_config(scn)
+    q_nb0 = euler_to_quat(0.03, -0.02, 1.1)
+    nav = np.zeros(kf.N_NAV)
+    nav[:3] = log.survey_llh[0]
+    nav[kf.QUAT] = q_nb0
+    g = earth.normal_gravity(log.survey_llh[0, 0], log.survey_llh[0, 2])
+    drift = kf.system_matrix(nav, np.array([0.0, 0.0, g]))[kf.DV][:2]
+    bias_var = {}
+    for correlated in (True, False):
+        p0 = sp.initial_covariance(dataclasses.replace(cfg, level_from_accelerometers=correlated), log, q_nb0)
+        if correlated:
+            cols = np.r_[kf.ACCEL_BIAS, kf.ACCEL_NONORTH]
+            tied = drift @ p0[:, cols]  # covariance of the drift with the accelerometer errors
+            assert np.abs(tied).max() < 1e-12 * np.abs(drift @ p0 @ drift.T).max()
+        cross = p0 @ drift.T
+        posterior = p0 - cross @ np.linalg.solve(drift @ p0 @ drift.T, cross.T)
+        bias_var[correlated] = np.diag(posterior)[kf.ACCEL_BIAS] / np.diag(p0)[kf.ACCEL_BIAS]
+    assert np.allclose(bias_var[True], 1.0, atol=1e-9), bias_var
+    assert bias_var[False].min() < 0.9, bias_var
+
+
 def test_odometer_dropout_is_skipped_and_flagged(default_log):
     scn, log = default_log
     keep = (log.odo_t < 100.0) | (log.odo_t > 110.0)
