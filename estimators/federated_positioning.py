@@ -24,6 +24,7 @@ import dataclasses
 
 import numpy as np
 
+from estimators import earth
 from estimators import federated_kf as fk
 from estimators import shearer_kf as kf
 from estimators import shearer_positioning as sp
@@ -180,11 +181,26 @@ def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Point
     keep = ((u[fixes.epoch] >= lo) & (u[fixes.epoch] <= hi)) | ~np.isfinite(fixes.gate) | surveyed
     fixes = sp.Fixes(fixes.epoch[keep], fixes.llh[keep], fixes.r[keep], fixes.gate[keep])
     scale_h = np.zeros((fixes.epoch.size, 3))
-    if surveyed and points.u.size:
-        along = points.c_bn[0][:, 1] * np.sign(points.u[-1] - points.u[0])
-        rail = np.isfinite(fixes.gate)
-        scale_h[rail] = along * u[fixes.epoch[rail], None]
+    rail = np.isfinite(fixes.gate)
+    if surveyed and np.count_nonzero(rail) >= 2:
+        scale_h[rail] = surveyed_line_direction(fixes.llh[rail], u[fixes.epoch[rail]]) * u[fixes.epoch[rail], None]
     return fixes, scale_h
+
+
+def surveyed_line_direction(llh: np.ndarray, u: np.ndarray, half_window_m: float = 9.0) -> np.ndarray:
+    """(K, 3) ENU direction of the surveyed face line at each of its points (llh (K, 3) in order along it, u (K,)
+    their face coordinates): the local least-squares slope of E, N, U against u over +-half_window_m. A shift of
+    the face coordinate moves a fix along the line as surveyed, through its roll and undulation, not along one
+    straight direction; a window of a few chutes keeps the survey's point noise (0.05 m) out of the slope."""
+    enu = earth.lla_to_enu(llh[:, 0], llh[:, 1], llh[:, 2], *llh[0])
+    out = np.zeros((u.size, 3))
+    for k in range(u.size):
+        near = np.abs(u - u[k]) <= half_window_m
+        if np.count_nonzero(near) < 2:
+            near = np.argsort(np.abs(u - u[k]))[:2]
+        du = u[near] - u[near].mean()
+        out[k] = du @ (enu[near] - enu[near].mean(axis=0)) / (du @ du)
+    return out
 
 
 def _notes(prep, cfg: sp.Config, run: _Run) -> list[str]:
