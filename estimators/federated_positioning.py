@@ -173,8 +173,8 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
 def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Points, surveyed: bool,
                 notes: list[str]) -> tuple[sp.Fixes, np.ndarray]:
     """The rail kinematics model's fixes over epochs (a, b] (none within cfg.end_zone_m of a face end unless from
-    the face survey, before any push) with the surveyed face ends, and each fix's scale_h (federated_kf._fix_update): for `surveyed` points (the face
-    survey) the along-face direction times the odometer travel."""
+    the face survey, before any push) with the surveyed face ends, and each fix's scale_h (federated_kf._fix_update):
+    for `surveyed` points (the face survey) the line's direction at the fix times the odometer travel."""
     fixes = sp.fixes_for(prep, cfg, log, a, b, points, notes)
     u = prep.odo - prep.odo[0]
     lo, hi = u.min() + cfg.end_zone_m, u.max() - cfg.end_zone_m
@@ -182,16 +182,21 @@ def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Point
     fixes = sp.Fixes(fixes.epoch[keep], fixes.llh[keep], fixes.r[keep], fixes.gate[keep])
     scale_h = np.zeros((fixes.epoch.size, 3))
     rail = np.isfinite(fixes.gate)
-    if surveyed and np.count_nonzero(rail) >= 2:
-        scale_h[rail] = surveyed_line_direction(fixes.llh[rail], u[fixes.epoch[rail]]) * u[fixes.epoch[rail], None]
+    if surveyed and points.u.size >= 2 and rail.any():
+        # The direction comes from the survey itself: the fixes carry the ram strokes, and a faulty one bends them.
+        order = np.argsort(points.u)
+        direction = line_direction(points.llh[order], points.u[order])
+        u_fix = u[fixes.epoch[rail]]
+        along = np.column_stack([np.interp(u_fix, points.u[order], direction[:, i]) for i in range(3)])
+        scale_h[rail] = along * u_fix[:, None]
     return fixes, scale_h
 
 
-def surveyed_line_direction(llh: np.ndarray, u: np.ndarray, half_window_m: float = 9.0) -> np.ndarray:
-    """(K, 3) ENU direction of the surveyed face line at each of its points (llh (K, 3) in order along it, u (K,)
-    their face coordinates): the local least-squares slope of E, N, U against u over +-half_window_m. A shift of
-    the face coordinate moves a fix along the line as surveyed, through its roll and undulation, not along one
-    straight direction; a window of a few chutes keeps the survey's point noise (0.05 m) out of the slope."""
+def line_direction(llh: np.ndarray, u: np.ndarray, half_window_m: float = 9.0) -> np.ndarray:
+    """(K, 3) ENU direction of a face line at each of its points (llh (K, 3) in order along it, u (K,) their face
+    coordinates): the local least-squares slope of E, N, U against u over +-half_window_m. A shift of the face
+    coordinate moves a fix along the line as surveyed, through its roll and undulation, not along one straight
+    direction; a window of a few chutes keeps the survey's point noise (0.05 m) out of the slope."""
     enu = earth.lla_to_enu(llh[:, 0], llh[:, 1], llh[:, 2], *llh[0])
     out = np.zeros((u.size, 3))
     for k in range(u.size):

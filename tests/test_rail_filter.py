@@ -75,7 +75,7 @@ def test_surveyed_line_direction_follows_the_line_through_its_undulation():
                                np.tan(np.radians(2.0)) + 0.1 * k * np.cos(k * u + 1.0)])
     noisy = enu + np.random.default_rng(4).normal(0.0, 0.05, enu.shape)
     llh = np.column_stack(earth.enu_to_lla(noisy, np.radians(34.0), np.radians(110.0), 40.0))
-    direction = fp.surveyed_line_direction(llh, u)
+    direction = fp.line_direction(llh, u)
     straight = (enu[-1] - enu[0]) / (u[-1] - u[0])
     rms = [np.sqrt(np.mean((d - tangent)[:, 1:] ** 2)) for d in (direction, straight)]
     assert rms[0] < 0.007 and rms[1] > 0.015, rms
