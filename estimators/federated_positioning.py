@@ -134,7 +134,8 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
                                    advance_sd=cfg.rail_advance_sd or cfg.advance_sd)
     run = _Run(prep)
     run.r_yaw[:] = params_m[fk.M_R_YAW]
-    p_sub, beta = fk.initial_covariances(sp.initial_covariance(cfg, log, prep.nav0[kf.QUAT]), federated)
+    p0 = sp.initial_covariance(cfg, log, prep.nav0[kf.QUAT])
+    p_sub, beta = fk.initial_covariances(p0, federated)
     nominal = np.zeros(kf.N_NOMINAL)
     r_buf = np.zeros((cfg.mag.window, 1, 1))
     counters = np.zeros(2, np.int64)
@@ -160,7 +161,7 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
             cov[:, [0, 1, 2], [0, 1, 2]] = run.sd[a:b + 1, kf.DP] ** 2
             points = sp.segment_points(prep, rail_cfg, a, b, run.nav[a:b + 1], cov)
             surveyed = False
-    run.sd[0] = np.sqrt(np.diag(sp.initial_covariance(cfg, log, prep.nav0[kf.QUAT])))
+    run.sd[0] = np.sqrt(np.diag(p0))
     run.flags |= np.where(run.mag_flags & fk.MAG_USED, FLAG_MAG, 0).astype(np.int32)
     notes += _notes(prep, cfg, run)
     sol = sp.make_solution(prep, cfg, run.nav, run.sd, run.flags, run.cal, notes)
