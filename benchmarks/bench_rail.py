@@ -18,7 +18,6 @@ import numpy as np
 from estimators import federated_positioning as fp
 from estimators import metrics
 from estimators import shearer_positioning as sp
-from estimators.fault_detection import chi2_threshold
 from estimators.logformat import FLAG_ISOLATED
 from twin.cli import default_scenario
 from twin.estimate import positioning_config
@@ -129,9 +128,10 @@ def figures(trials: int = 20) -> dict:
     fault = scn_fault.faults[0]
     f_log = _log(scn_fault, tables, ideal, 0)
     f_prep = sp.prepare(f_log, cfg)
-    thr = chi2_threshold(3, cfg.detector.p_false_alarm)
+    thr = dict(zip(("residual", "dual_state"), fp.detector_chi2(cfg.detector)))
     print(f"\nseed004_fault, trial 0: rail deviation {fault.value:g} deg per two chutes, {fault.t_start_s:g}-"
-          f"{fault.t_end_s:g} s; detectors (threshold: chi-square {thr:.1f}, FSPRT {cfg.detector.t_on:g} / "
+          f"{fault.t_end_s:g} s; detectors (thresholds: residual chi-square {thr['residual']:.1f}, dual-state "
+          f"{thr['dual_state']:.1f}, FSPRT {cfg.detector.t_on:g} / "
           f"{cfg.detector.t_off:g}, fading {cfg.detector.fading:g})")
     clean_err = _window_error(rail, tables, fault)
     figs["clean_error_in_fault"] = clean_err
@@ -139,7 +139,7 @@ def figures(trials: int = 20) -> dict:
           f"{'max horiz. error in fault [m]':>30s}  (fault-free {clean_err:.3f}; target <= +0.05)")
     for name in fp.DETECTORS:
         sol = fp.run_rail(f_log, cfg, f_prep, isolate_by=name)
-        fig = detector_figures(sol, name, thr, fault.t_start_s, fault.t_end_s, hours, cfg.detector.t_on)
+        fig = detector_figures(sol, name, thr.get(name, np.nan), fault.t_start_s, fault.t_end_s, hours, cfg.detector.t_on)
         fig["error_in_fault"] = _window_error(sol, tables, fault)
         figs["detectors"][name] = fig
         print(f"{name:20s} {fig['delay']:9.1f} {fig['clear']:9.1f} {fig['missed']:4d}/{fig['fixes']:<3d} "

@@ -170,16 +170,17 @@ class RamLog:
 
 def predict_fixes(points: Points, u: np.ndarray, t: np.ndarray, epochs: np.ndarray, marks: np.ndarray,
                   rams: RamLog, advance_sd: float, path_sd: float,
-                  path_along_sd: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  path_along_sd: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fixes for the crossings (epochs, marks) of the current pass from the previous pass's points (001 eq. 6).
 
     The predicted point is moved along the face (body y at the point) by u[j] - u_i so that it refers to the
     epoch where it is applied. R = point covariance + the change of the path between the passes, in the body axes
     at the point: advance_sd and path_sd across the face (x), path_along_sd along it (y), path_sd vertically (z).
-    Returns (epochs, llh (F, 3), R (F, 3, 3), skipped face coordinates)."""
+    Returns (epochs, llh (F, 3), R (F, 3, 3), skipped face coordinates, advance direction in n at each point
+    (F, 3), the direction along which the ram stroke moved it)."""
     path_b = np.diag([advance_sd ** 2 + path_sd ** 2, path_along_sd ** 2, path_sd ** 2])
     idx = {round(v / 1e-6): k for k, v in enumerate(points.u)}
-    out_j, out_llh, out_r, skipped = [], [], [], []
+    out_j, out_llh, out_r, out_adv, skipped = [], [], [], [], []
     for j, m in zip(epochs, marks):
         k = idx.get(round(m / 1e-6))
         if k is None:
@@ -195,6 +196,7 @@ def predict_fixes(points: Points, u: np.ndarray, t: np.ndarray, epochs: np.ndarr
         out_j.append(j)
         out_llh.append([lat + shift[1] / (r_m + h), lon + shift[0] / ((r_n + h) * np.cos(lat)), h + shift[2]])
         out_r.append(points.cov[k] + c @ path_b @ c.T)
+        out_adv.append(c[:, 0])
     if not out_j:
-        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.array(skipped)
-    return np.array(out_j, np.int64), np.array(out_llh), np.array(out_r), np.array(skipped)
+        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.array(skipped), np.zeros((0, 3))
+    return np.array(out_j, np.int64), np.array(out_llh), np.array(out_r), np.array(skipped), np.array(out_adv)

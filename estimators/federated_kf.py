@@ -85,11 +85,15 @@ FEDERATED, CENTRALIZED = 0, 1
 N_MAG_PARAMS = 15  # M_H_PHI takes 1..3
 
 # Indices of the detector parameter vector, and of the detector statistics per fix.
-D_FADING, D_T_ON, D_T_OFF, D_CHI2, D_ISOLATE_BY, D_CAP, D_ARM = range(7)
-N_DET_PARAMS = 7
+D_FADING, D_T_ON, D_T_OFF, D_CHI2, D_CHI2_DUAL, D_ISOLATE_BY, D_CAP, D_ARM, D_WINDOW, D_SD_FLOOR = range(10)
+N_DET_PARAMS = 10
 DET_RESIDUAL, DET_DUAL, DET_FSPRT = range(3)
 """Detectors (004 section IV): residual chi-square, dual-state chi-square, fading SPRT; D_ISOLATE_BY names the
 one whose fault flag keeps the rail model's fixes out (-1: none)."""
+DET_DOF = 1
+"""The residual chi-square and the fading SPRT test one component of a rail fix's innovation (_fix_update); the
+dual-state chi-square compares the position, DUAL_DOF = 3 components."""
+DUAL_DOF = 3
 N_BACK = 16
 """Rail fixes the filter can go back over when the fading SPRT raises a fault."""
 
@@ -171,12 +175,24 @@ def initial_covariances(p0, federated):
 
 
 @nb.njit(cache=True)
-def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, trusted, x_other, p_other, det_params, fsprt,
-                isolated, seen, stats):
+def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, trusted, x_other, p_other, det_params,
+                fsprt, isolated, counters, det_buf, stats):
     """Position fix of the rail kinematics model (004 eq. 9) with the three detectors on its innovation (004
     eqs. 15-24): residual chi-square, dual-state chi-square against the other sub-filter, fading SPRT (with its
     hysteresis in isolated[0]). stats[:] = the three statistics. Applied unless the isolating detector holds a
     fault; returns True when applied. A `trusted` fix (a surveyed face end) is applied without the detectors.
+    counters[1] counts the fixes tested, counters[2] the fixes in the ring buffer det_buf (W, 2).
+
+    The residual chi-square and the fading SPRT test the innovation's component v along the fix's `advance`
+    direction (unit, n): the rail model's faults are in the push-ram strokes, and a stroke moves a predicted
+    point along that direction only (004's scalar form, eqs. 18-19). Its variance (004 eq. 16's sigma_k^2) is
+    kappa (h P h^T + R): with det_params[D_WINDOW] > 0, kappa = sum v^2 / sum (h P h^T + R) over the last
+    D_WINDOW applied fixes (det_buf holds their v^2 and h P h^T + R), sigma_k^2 floored at D_SD_FLOOR^2; before
+    the window is full, and with D_WINDOW = 0, kappa = 1. A rail-model fix comes from the filter's own previous
+    pass: its error and the filter's are largely the same error, so v^2 falls far below h P h^T + R (seed004:
+    0.012 m against 0.07 m rms across the face; R - 2 cov(fix error, filter error) is negative, and a window
+    estimate of it as 003's R is a small difference of large numbers). A fault would hide below the model's
+    variance. With kappa the variance still follows P where it grows (a stretch without fixes).
 
     scale_h (3,): for a point whose face coordinate is a true distance (the face survey), the along-face
     direction in n times the odometer travel u at the fix. Such a fix lies u k_true along the face from where the
@@ -190,27 +206,42 @@ def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, trusted, x_other
         stats[:] = np.nan
         return True
     v = z - h @ x
-    s = h @ p @ h.T + fix_r
-    stats[DET_RESIDUAL] = chi2_residual(v, s)
+    ha = advance @ h
+    v_a = np.array([advance @ v])
+    s_model = ha @ p @ ha + advance @ fix_r @ advance
+    s_a = np.array([[s_model]])
+    window = int(det_params[D_WINDOW])
+    if window > 0 and counters[2] >= window:
+        kappa = np.sum(det_buf[:, 0]) / np.sum(det_buf[:, 1])
+        s_a[0, 0] = max(kappa * s_model, det_params[D_SD_FLOOR] ** 2)
+    stats[DET_RESIDUAL] = chi2_residual(v_a, s_a)
     # The detectors are armed once the aiding sub-filter has taken its first fixes (before, the fading SPRT only
     # shows what it would say, from a copy of its state).
-    seen[0] += 1
-    armed = seen[0] > det_params[D_ARM]
+    counters[1] += 1
+    armed = counters[1] > det_params[D_ARM]
     state = fsprt if armed else fsprt.copy()
-    lam = min(fsprt_update(state, v, s, det_params[D_FADING]), det_params[D_CAP])
+    lam = min(fsprt_update(state, v_a, s_a, det_params[D_FADING]), det_params[D_CAP])
     state[FSPRT_LAMBDA] = lam  # capped: a large fault must not delay the readmission by its size
     stats[DET_FSPRT] = lam
     if armed:
-        isolated[0] = hysteresis(isolated[0], lam, det_params[D_T_ON], det_params[D_T_OFF])
+        flag = hysteresis(isolated[0], lam, det_params[D_T_ON], det_params[D_T_OFF])
+        # Readmitted only on a fix that passes the residual test as well (chi-square and SPRT combined, 004 ref
+        # [23]): when a large fault shrinks, the fix no longer looks like the fading mean and lambda drops below
+        # T0 in one step, while the fix is still far off.
+        isolated[0] = flag or (isolated[0] and stats[DET_RESIDUAL] > det_params[D_CHI2])
     # The dual-state test compares the estimate with this fix (a trial update) against the one without it.
     x_try, p_try = x.copy(), p.copy()
     joseph_update(x_try, p_try, z, h, fix_r)
     stats[DET_DUAL] = chi2_dual_state(x_try[DP], p_try[DP, DP].copy(), x_other[DP], p_other[DP, DP].copy())
     by = int(det_params[D_ISOLATE_BY])
-    reject = armed and ((by == DET_FSPRT and isolated[0]) or (by == DET_RESIDUAL and stats[DET_RESIDUAL] > det_params[D_CHI2])
-                        or (by == DET_DUAL and stats[DET_DUAL] > det_params[D_CHI2]))
+    reject = armed and ((by == DET_FSPRT and isolated[0])
+                        or (by == DET_RESIDUAL and stats[DET_RESIDUAL] > det_params[D_CHI2])
+                        or (by == DET_DUAL and stats[DET_DUAL] > det_params[D_CHI2_DUAL]))
     if reject:
         return False
+    if armed and window > 0:
+        det_buf[counters[2] % window] = v_a[0] ** 2, s_model
+        counters[2] += 1
     x[:] = x_try
     p[:, :] = p_try
     return True
@@ -218,19 +249,21 @@ def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, trusted, x_other
 
 @nb.njit(cache=True)
 def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b, fix_epoch, fix_llh, fix_r,
-             fix_scale_h, fix_trusted, q_psd, params, mag_params, det_params, nav, cal, p_sub, beta, nominal, r_buf, counters, fsprt, isolated,
+             fix_scale_h, fix_advance, fix_trusted, q_psd, params, mag_params, det_params, nav, cal, p_sub, beta, nominal, r_buf, counters, fsprt, isolated, det_buf,
              out_nav, out_cal, out_sd, flags, mag_flags, beta_out, r_yaw_out, yaw_innov, sub_delta, fix_stats,
              fix_applied):
     """Run the federated (mode FEDERATED) or centralized (CENTRALIZED) filter over epochs j0+1 .. j1.
 
     Inputs per epoch j: odometer distance and mode (estimators.shearer_kf.run_filter), mag_b (3,) the calibrated
     mean magnetometer reading over the epoch (NaN where none). Position fixes of the rail kinematics model
-    (fix_epoch sorted, fix_llh (F, 3), fix_r (F, 3, 3), fix_scale_h (F, 3), fix_trusted (F,): see _fix_update)
+    (fix_epoch sorted, fix_llh (F, 3), fix_r (F, 3, 3), fix_scale_h (F, 3), fix_advance (F, 3), fix_trusted (F,):
+    see _fix_update)
     go to sub-filter 2 (in the centralized mode to the one
     filter) through the detectors of det_params (D_*). params are estimators.shearer_kf's, mag_params the M_*
     vector. The state carried across calls, updated in place: nav, cal, p_sub (2, N_STATES, N_STATES) (initial_covariances),
     beta (2,), nominal (N_NOMINAL,) (zeros at the start), the yaw-noise window r_buf (W, 1, 1) with counters[0] its
-    count, counters[1] the rail fixes tested so far, the FSPRT state fsprt and its fault flag isolated[0].
+    count, counters[1] the rail fixes tested so far, counters[2] the rail-fix innovations in the detectors' ring
+    buffer det_buf (W, 2) (_fix_update), the FSPRT state fsprt and its fault flag isolated[0].
 
     Stores per epoch: navigation and calibration, one-sigma of the states, filter and magnetometer flags, beta
     (NaN in the centralized mode), the yaw R used, the yaw innovation, per sub-filter x_i - x_g of position and
@@ -254,6 +287,7 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
     snap_nav, snap_cal = np.zeros((N_BACK, nav.size)), np.zeros((N_BACK, cal.size))
     snap_p = np.zeros((N_BACK, N_SUB, N_STATES, N_STATES))
     snap_beta, snap_nominal = np.zeros((N_BACK, N_SUB)), np.zeros((N_BACK, nominal.size))
+    snap_buf, snap_buf_count = np.zeros((N_BACK,) + det_buf.shape), np.zeros(N_BACK, np.int64)
     snap_count = 0
     rejected_until = -1
     j = j0 + 1
@@ -263,6 +297,7 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
             snap_j[slot], snap_k[slot] = j, k_fix
             snap_nav[slot], snap_cal[slot], snap_p[slot] = nav, cal, p_sub
             snap_beta[slot], snap_nominal[slot] = beta, nominal
+            snap_buf[slot], snap_buf_count[slot] = det_buf, counters[2]
             snap_count += 1
         t_span, f_sum, disp, w_sum = mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, (j - 1) * steps, steps)
         phi, qd = transition(nav, nominal, f_sum, t_span, q_psd, params[P_TAU_FORCE])
@@ -300,7 +335,7 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
                 continue
             was = isolated[0]
             if _fix_update(x2, p2, nav, cal, lever, fix_llh[k_fix], fix_r[k_fix], fix_scale_h[k_fix],
-                           fix_trusted[k_fix], x_od, p_od, det_params, fsprt, isolated, counters[1:],
+                           fix_advance[k_fix], fix_trusted[k_fix], x_od, p_od, det_params, fsprt, isolated, counters, det_buf,
                            fix_stats[k_fix]):
                 fix_applied[k_fix] = 1
                 flag |= FLAG_POSITION
@@ -315,6 +350,7 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
             j, k_fix = snap_j[back], snap_k[back]
             nav[:], cal[:], p_sub[:] = snap_nav[back], snap_cal[back], snap_p[back]
             beta[:], nominal[:] = snap_beta[back], snap_nominal[back]
+            det_buf[:], counters[2] = snap_buf[back], snap_buf_count[back]
             x_od[:] = 0.0
             x_aid[:] = 0.0
             snap_count = 0

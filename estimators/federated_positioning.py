@@ -24,7 +24,6 @@ import dataclasses
 
 import numpy as np
 
-from estimators import earth
 from estimators import federated_kf as fk
 from estimators import shearer_kf as kf
 from estimators import shearer_positioning as sp
@@ -41,6 +40,9 @@ from estimators.magnetic import (
 ARM_FIXES = 3
 """The detectors judge the rail model from its fourth fix on: the first ones pull the filter from the start
 stand's solution onto the rail (a drift of a few decimetres over a long alignment stand) and are not faults."""
+CAP = 1.25
+"""The fading SPRT's statistic is held at or below CAP * t_on: a fault of any size keeps the flag raised, and once
+it has gone the statistic falls to t_off in ln(CAP t_on / t_off) / ln(1 / fading) clean fixes (3 at 25, 10, 0.6)."""
 DETECTORS = ("residual", "dual_state", "fsprt")
 """The detectors of 004 section IV in the order of federated_kf.DET_*: residual chi-square, dual-state
 chi-square, fading SPRT."""
@@ -80,16 +82,22 @@ def mag_params(mag: sp.MagSettings, ref: GeomagneticReference, per_epoch: float)
     return out
 
 
+def detector_chi2(det: DetectorConfig) -> tuple[float, float]:
+    """Thresholds of the residual and the dual-state chi-square tests at det.p_false_alarm."""
+    return (chi2_threshold(fk.DET_DOF, det.p_false_alarm), chi2_threshold(fk.DUAL_DOF, det.p_false_alarm))
+
+
 def detector_params(det: DetectorConfig, isolate_by: str | None) -> np.ndarray:
-    """The D_* parameter vector of estimators.federated_kf for position fixes in 3 dimensions."""
+    """The D_* parameter vector of estimators.federated_kf."""
     if isolate_by is not None and isolate_by not in DETECTORS:
         raise sp.PositioningError(f"detector {isolate_by!r}: use one of {', '.join(DETECTORS)}")
     out = np.zeros(fk.N_DET_PARAMS)
-    out[[fk.D_FADING, fk.D_T_ON, fk.D_T_OFF, fk.D_CHI2]] = (det.fading, det.t_on, det.t_off,
-                                                            chi2_threshold(3, det.p_false_alarm))
+    out[[fk.D_FADING, fk.D_T_ON, fk.D_T_OFF]] = (det.fading, det.t_on, det.t_off)
+    out[fk.D_CHI2], out[fk.D_CHI2_DUAL] = detector_chi2(det)
     out[fk.D_ISOLATE_BY] = -1 if isolate_by is None else DETECTORS.index(isolate_by)
-    out[fk.D_CAP] = 2.0 * det.t_on
+    out[fk.D_CAP] = CAP * det.t_on
     out[fk.D_ARM] = ARM_FIXES
+    out[[fk.D_WINDOW, fk.D_SD_FLOOR]] = (det.window, det.sd_floor)
     return out
 
 
@@ -138,29 +146,29 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
     p_sub, beta = fk.initial_covariances(p0, federated)
     nominal = np.zeros(kf.N_NOMINAL)
     r_buf = np.zeros((cfg.mag.window, 1, 1))
-    counters = np.zeros(2, np.int64)
-    fsprt = fsprt_state(3)
+    counters = np.zeros(3, np.int64)
+    det_buf = np.zeros((max(cfg.detector.window, 1), 2))
+    fsprt = fsprt_state(fk.DET_DOF)
     isolated = np.zeros(1, np.int8)
     nav, cal = prep.nav0.copy(), prep.cal0.copy()
     q_psd, params = sp.process_noise_psd(cfg), sp.kf_params(cfg)
-    points = sp.face_survey_points(log, prep) if rail else Points.empty()
-    surveyed = True
+    points, direction = sp.face_survey_points(log, prep) if rail else (Points.empty(), np.zeros((0, 3)))
     mode = fk.FEDERATED if federated else fk.CENTRALIZED
     for a, b in prep.segments:
-        fixes, scale_h = _rail_fixes(prep, rail_cfg, log, a, b, points, surveyed, notes) if rail \
+        fixes, scale_h = _rail_fixes(prep, rail_cfg, log, a, b, points, direction, notes) if rail \
             else (sp.Fixes.empty(), np.zeros((0, 3)))
         stats = np.full((fixes.epoch.size, 3), np.nan)
         applied = np.zeros(fixes.epoch.size, np.int8)
         fk.run_afkf(mode, a, b, prep.steps, prep.t_mech, prep.phi_b, prep.dv_b, prep.odo, prep.mode, mag_b,
-                    fixes.epoch, fixes.llh, fixes.r, scale_h, ~np.isfinite(fixes.gate), q_psd, params, params_m, params_d, nav, cal, p_sub, beta,
-                    nominal, r_buf, counters, fsprt, isolated, run.nav, run.cal, run.sd, run.flags, run.mag_flags,
+                    fixes.epoch, fixes.llh, fixes.r, scale_h, fixes.advance, ~np.isfinite(fixes.gate), q_psd, params, params_m, params_d, nav, cal, p_sub, beta,
+                    nominal, r_buf, counters, fsprt, isolated, det_buf, run.nav, run.cal, run.sd, run.flags, run.mag_flags,
                     run.beta, run.r_yaw, run.innov, run.delta, stats, applied)
         run.fixes.append((fixes.epoch, fixes.llh, stats, applied))
         if rail:
             cov = np.zeros((b - a + 1, 3, 3))
             cov[:, [0, 1, 2], [0, 1, 2]] = run.sd[a:b + 1, kf.DP] ** 2
             points = sp.segment_points(prep, rail_cfg, a, b, run.nav[a:b + 1], cov)
-            surveyed = False
+            direction = np.zeros((0, 3))
     run.sd[0] = np.sqrt(np.diag(p0))
     run.flags |= np.where(run.mag_flags & fk.MAG_USED, FLAG_MAG, 0).astype(np.int32)
     notes += _notes(prep, cfg, run)
@@ -171,42 +179,27 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
     return sol
 
 
-def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Points, surveyed: bool,
+def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Points, direction: np.ndarray,
                 notes: list[str]) -> tuple[sp.Fixes, np.ndarray]:
     """The rail kinematics model's fixes over epochs (a, b] (none within cfg.end_zone_m of a face end unless from
     the face survey, before any push) with the surveyed face ends, and each fix's scale_h (federated_kf._fix_update):
-    for `surveyed` points (the face survey) the line's direction at the fix times the odometer travel."""
+    for points of the face survey, which come with the line's `direction` d enu / d u at each point (K, 3; empty
+    for points of an earlier pass), that direction times the odometer travel."""
+    surveyed = direction.shape[0] > 0
     fixes = sp.fixes_for(prep, cfg, log, a, b, points, notes)
     u = prep.odo - prep.odo[0]
     lo, hi = u.min() + cfg.end_zone_m, u.max() - cfg.end_zone_m
     keep = ((u[fixes.epoch] >= lo) & (u[fixes.epoch] <= hi)) | ~np.isfinite(fixes.gate) | surveyed
-    fixes = sp.Fixes(fixes.epoch[keep], fixes.llh[keep], fixes.r[keep], fixes.gate[keep])
+    fixes = fixes.take(keep)
     scale_h = np.zeros((fixes.epoch.size, 3))
     rail = np.isfinite(fixes.gate)
     if surveyed and points.u.size >= 2 and rail.any():
         # The direction comes from the survey itself: the fixes carry the ram strokes, and a faulty one bends them.
         order = np.argsort(points.u)
-        direction = line_direction(points.llh[order], points.u[order])
         u_fix = u[fixes.epoch[rail]]
-        along = np.column_stack([np.interp(u_fix, points.u[order], direction[:, i]) for i in range(3)])
+        along = np.column_stack([np.interp(u_fix, points.u[order], direction[order, i]) for i in range(3)])
         scale_h[rail] = along * u_fix[:, None]
     return fixes, scale_h
-
-
-def line_direction(llh: np.ndarray, u: np.ndarray, half_window_m: float = 9.0) -> np.ndarray:
-    """(K, 3) ENU direction of a face line at each of its points (llh (K, 3) in order along it, u (K,) their face
-    coordinates): the local least-squares slope of E, N, U against u over +-half_window_m. A shift of the face
-    coordinate moves a fix along the line as surveyed, through its roll and undulation, not along one straight
-    direction; a window of a few chutes keeps the survey's point noise (0.05 m) out of the slope."""
-    enu = earth.lla_to_enu(llh[:, 0], llh[:, 1], llh[:, 2], *llh[0])
-    out = np.zeros((u.size, 3))
-    for k in range(u.size):
-        near = np.abs(u - u[k]) <= half_window_m
-        if np.count_nonzero(near) < 2:
-            near = np.argsort(np.abs(u - u[k]))[:2]
-        du = u[near] - u[near].mean()
-        out[k] = du @ (enu[near] - enu[near].mean(axis=0)) / (du @ du)
-    return out
 
 
 def _notes(prep, cfg: sp.Config, run: _Run) -> list[str]:

@@ -35,6 +35,7 @@ import numpy as np
 from estimators import earth
 from estimators import shearer_kf as kf
 from estimators.cpoem import Points, RamLog, crossings, predict_fixes, record
+from estimators.face_line import fit_face_line
 from estimators.fault_detection import DetectorConfig
 from estimators.fine_alignment import fine_align
 from estimators.logformat import FLAG_SMOOTHED, NONORTH_AXES
@@ -165,10 +166,14 @@ class Config:
     (its strokes are not yet read reliably there: see the issue 7 note)."""
     rail_advance_sd: float = 0.0
     """Advance from the ram strokes [m] as the rail kinematics model uses it; 0 takes advance_sd."""
-    detector: DetectorConfig = field(default_factory=lambda: DetectorConfig(fading=0.6, t_on=12.0, t_off=5.0))
+    detector: DetectorConfig = field(default_factory=lambda: DetectorConfig(fading=0.6, t_on=12.0, t_off=5.0,
+                                                                            window=30, sd_floor=0.005))
     """Fault detectors on the rail kinematics model's fixes (004 section IV). The fixes come one per chute (one
-    every 10-20 s at cutting speed), not at 10 Hz: a fading factor of 0.6 per fix keeps about a minute of memory,
-    and t_on 12 gave no false alarm over the fault-free trials of benchmarks/bench_rail.py."""
+    every 10-20 s at cutting speed), not at 10 Hz: a fading factor of 0.6 per fix keeps about a minute of memory.
+    They test the innovation across the face, with the fix's effective noise estimated over the last 30 accepted
+    fixes (estimators.federated_kf._fix_update: the model's R is several times too large for fixes from the
+    filter's own previous pass), floored at 5 mm; with that estimate's noise, t_on 12 and t_off 5
+    (fault_detection.DetectorConfig)."""
     isolate_by: str | None = "fsprt"
     """The detector whose fault flag isolates the rail kinematics model (residual, dual_state, fsprt; None)."""
 
@@ -489,16 +494,22 @@ class _Forward:
 
 @dataclass
 class Fixes:
-    """Position fixes of a segment, in epoch order: epoch, lat/lon/h, ENU covariance, NIS gate."""
+    """Position fixes of a segment, in epoch order: epoch, lat/lon/h, ENU covariance, NIS gate, and the advance
+    direction in n (unit; zero for a surveyed face end), along which a push-ram stroke moved a predicted point."""
 
     epoch: np.ndarray
     llh: np.ndarray
     r: np.ndarray
     gate: np.ndarray
+    advance: np.ndarray
 
     @classmethod
     def empty(cls) -> Fixes:
-        return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0))
+        return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0), np.zeros((0, 3)))
+
+    def take(self, keep: np.ndarray) -> Fixes:
+        """The fixes selected by `keep` (a mask or indices)."""
+        return Fixes(self.epoch[keep], self.llh[keep], self.r[keep], self.gate[keep], self.advance[keep])
 
 
 def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Points | None,
@@ -510,6 +521,7 @@ def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Poi
     llh = [log.survey_llh[1 + k] for k in sel]
     r = [np.diag([log.survey_sd[1 + k, 0] ** 2] * 2 + [log.survey_sd[1 + k, 1] ** 2]) for k in sel]
     gate = [np.inf] * len(j)
+    advance = [np.zeros(3)] * len(j)
     if points is not None and points.u.size and prep.rams is not None:
         u = prep.odo - prep.odo[0]
         for first, last in prep.cuts:
@@ -517,34 +529,41 @@ def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Poi
                 continue
             lo, hi = max(first - 1, a), min(last, b)
             epochs, marks = crossings(u, cfg.cpoem_spacing_m, lo, hi)
-            fj, fllh, fr, skipped = predict_fixes(points, u, prep.t_kf, epochs, marks, prep.rams, cfg.advance_sd,
-                                                  cfg.path_sd, cfg.path_along_sd)
+            fj, fllh, fr, skipped, fadv = predict_fixes(points, u, prep.t_kf, epochs, marks, prep.rams,
+                                                        cfg.advance_sd, cfg.path_sd, cfg.path_along_sd)
             j += list(fj)
             llh += list(fllh)
             r += list(fr)
             gate += [cfg.fix_gate] * fj.size
+            advance += list(fadv)
             if skipped.size:
                 notes.append(f"CPOEM: no push-ram stroke at u = {', '.join(f'{v:.1f}' for v in skipped)} m "
                              f"(t {prep.t_kf[lo]:.0f}-{prep.t_kf[hi]:.0f} s): points skipped")
     if not j:
         return Fixes.empty()
     order = np.argsort(j, kind="stable")
-    return Fixes(np.array(j, np.int64)[order], np.array(llh)[order], np.array(r)[order], np.array(gate)[order])
+    return Fixes(np.array(j, np.int64), np.array(llh), np.array(r), np.array(gate), np.array(advance)).take(order)
 
 
-def face_survey_points(log: Log, prep: Prepared) -> Points:
-    """The installed face line (FACE_SURVEY) as CPOEM points of the first cut, with the survey's covariance. Its
-    face coordinate is a true distance, the filter's the odometer's: the two part by the odometer's scale error,
-    which the rail-model filter puts in the fix's measurement model (estimators.federated_kf._fix_update)."""
+def face_survey_points(log: Log, prep: Prepared) -> tuple[Points, np.ndarray]:
+    """The installed face line (FACE_SURVEY) as CPOEM points of the first cut, smoothed by a local quadratic fit
+    along the face (estimators.face_line: the survey's independent point errors averaged over +-9 m), with the
+    fit's covariance; and the line's direction d enu / d u (K, 3) at each point. Its face coordinate is a true
+    distance, the filter's the odometer's: the two part by the odometer's scale error, which the rail-model filter
+    puts in the fix's measurement model (estimators.federated_kf._fix_update)."""
     if log.face_u.size == 0 or not prep.cuts:
-        return Points.empty()
+        return Points.empty(), np.zeros((0, 3))
     first, last = prep.cuts[0]
     sign = 1.0 if prep.odo[last] >= prep.odo[first - 1] else -1.0  # the odometer counts the first cut this way
-    c_bn = np.broadcast_to(quat_to_mat(prep.nav0[kf.QUAT]), (log.face_u.size, 3, 3))
-    sd_h, sd_v = log.face_sd[:, 0], log.face_sd[:, 1]
-    cov = np.zeros((log.face_u.size, 3, 3))
-    cov[:, [0, 1, 2], [0, 1, 2]] = np.column_stack([sd_h ** 2, sd_h ** 2, sd_v ** 2])
-    return Points(sign * log.face_u, np.full(log.face_u.size, prep.t_kf[0]), log.face_llh.copy(), cov, c_bn.copy())
+    order = np.argsort(log.face_u, kind="stable")
+    u = sign * log.face_u[order]
+    line = fit_face_line(log.face_llh[order], log.face_u[order])
+    c_bn = np.broadcast_to(quat_to_mat(prep.nav0[kf.QUAT]), (u.size, 3, 3))
+    sd_h, sd_v = log.face_sd[order, 0], log.face_sd[order, 1]
+    cov = np.zeros((u.size, 3, 3))
+    cov[:, [0, 1, 2], [0, 1, 2]] = line.gain[:, None] * np.column_stack([sd_h ** 2, sd_h ** 2, sd_v ** 2])
+    points = Points(u, np.full(u.size, prep.t_kf[0]), line.llh(), cov, c_bn.copy())
+    return points, sign * line.direction
 
 
 def segment_points(prep: Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, cov_enu: np.ndarray) -> Points:

@@ -16,7 +16,7 @@ import numpy as np
 
 from estimators import metrics
 from estimators import shearer_positioning as sp
-from estimators.fault_detection import chi2_threshold
+from estimators.federated_positioning import detector_chi2
 from estimators.logformat import (
     ESTIMATE_DETECTORS,
     ESTIMATE_FUSION,
@@ -93,11 +93,12 @@ def true_states(scn: Scenario) -> dict[str, float]:
 
 
 def detector_thresholds(scn: Scenario) -> dict[str, float]:
-    """Thresholds of the rail model's detectors as the filter runs them: chi-square with 3 dof at the
-    false-alarm probability for the residual and dual-state tests, T1/T0 of the fading SPRT."""
+    """Thresholds of the rail model's detectors as the filter runs them: the residual and dual-state chi-square
+    tests at the false-alarm probability (estimators.federated_positioning.detector_chi2), T1/T0 of the fading
+    SPRT."""
     detector = positioning_config(scn).detector
-    chi2 = chi2_threshold(3, detector.p_false_alarm)
-    return {"residual": chi2, "dual_state": chi2, "t_on": detector.t_on, "t_off": detector.t_off}
+    residual, dual = detector_chi2(detector)
+    return {"residual": residual, "dual_state": dual, "t_on": detector.t_on, "t_off": detector.t_off}
 
 
 def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict:
