@@ -181,7 +181,7 @@ def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, trusted
     eqs. 15-24): residual chi-square, dual-state chi-square against the other sub-filter, fading SPRT (with its
     hysteresis in isolated[0]). stats[:] = the three statistics. Applied unless the isolating detector holds a
     fault; returns True when applied. A `trusted` fix (a surveyed face end) is applied without the detectors.
-    counters[1] counts the fixes tested, counters[2] the fixes in the ring buffer det_buf (W, 2).
+    counters[1] counts the fixes tested in this pass, counters[2] the fixes in the ring buffer det_buf (W, 2).
 
     The residual chi-square and the fading SPRT test the innovation's component v along the fix's `advance`
     direction (unit, n): the rail model's faults are in the push-ram strokes, and a stroke moves a predicted
@@ -215,8 +215,8 @@ def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, trusted
         kappa = np.sum(det_buf[:, 0]) / np.sum(det_buf[:, 1])
         s_a[0, 0] = max(kappa * s_model, det_params[D_SD_FLOOR] ** 2)
     stats[DET_RESIDUAL] = chi2_residual(v_a, s_a)
-    # The detectors are armed once the aiding sub-filter has taken its first fixes (before, the fading SPRT only
-    # shows what it would say, from a copy of its state).
+    # The detectors are armed once the aiding sub-filter has taken the pass's first fixes (before, the fading SPRT
+    # only shows what it would say, from a copy of its state; a fault flag raised earlier holds).
     counters[1] += 1
     armed = counters[1] > det_params[D_ARM]
     state = fsprt if armed else fsprt.copy()
@@ -234,9 +234,9 @@ def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, trusted
     joseph_update(x_try, p_try, z, h, fix_r)
     stats[DET_DUAL] = chi2_dual_state(x_try[DP], p_try[DP, DP].copy(), x_other[DP], p_other[DP, DP].copy())
     by = int(det_params[D_ISOLATE_BY])
-    reject = armed and ((by == DET_FSPRT and isolated[0])
-                        or (by == DET_RESIDUAL and stats[DET_RESIDUAL] > det_params[D_CHI2])
-                        or (by == DET_DUAL and stats[DET_DUAL] > det_params[D_CHI2_DUAL]))
+    reject = (by == DET_FSPRT and isolated[0]) or (armed and (
+        (by == DET_RESIDUAL and stats[DET_RESIDUAL] > det_params[D_CHI2])
+        or (by == DET_DUAL and stats[DET_DUAL] > det_params[D_CHI2_DUAL])))
     if reject:
         return False
     if armed and window > 0:
@@ -262,7 +262,7 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
     filter) through the detectors of det_params (D_*). params are estimators.shearer_kf's, mag_params the M_*
     vector. The state carried across calls, updated in place: nav, cal, p_sub (2, N_STATES, N_STATES) (initial_covariances),
     beta (2,), nominal (N_NOMINAL,) (zeros at the start), the yaw-noise window r_buf (W, 1, 1) with counters[0] its
-    count, counters[1] the rail fixes tested so far, counters[2] the rail-fix innovations in the detectors' ring
+    count, counters[1] the rail fixes tested so far in the pass, counters[2] the rail-fix innovations in the detectors' ring
     buffer det_buf (W, 2) (_fix_update), the FSPRT state fsprt and its fault flag isolated[0].
 
     Stores per epoch: navigation and calibration, one-sigma of the states, filter and magnetometer flags, beta

@@ -38,8 +38,10 @@ from estimators.magnetic import (
 )
 
 ARM_FIXES = 3
-"""The detectors judge the rail model from its fourth fix on: the first ones pull the filter from the start
-stand's solution onto the rail (a drift of a few decimetres over a long alignment stand) and are not faults."""
+"""The detectors judge the rail model from the fourth fix of each pass on: the first ones pull the filter onto the
+rail, from the start stand's solution (a drift of a few decimetres over a long alignment stand) and after the end
+zone and the return run (a few centimetres, several times the innovations' spread on the rail), and are not
+faults. A fault flag raised earlier holds over them."""
 CAP = 1.25
 """The fading SPRT's statistic is held at or below CAP * t_on: a fault of any size keeps the flag raised, and once
 it has gone the statistic falls to t_off in ln(CAP t_on / t_off) / ln(1 / fading) clean fixes (3 at 25, 10, 0.6)."""
@@ -155,6 +157,7 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
     points, direction = sp.face_survey_points(log, prep) if rail else (Points.empty(), np.zeros((0, 3)))
     mode = fk.FEDERATED if federated else fk.CENTRALIZED
     for a, b in prep.segments:
+        counters[1] = 0  # rail fixes tested in this pass (ARM_FIXES)
         fixes, scale_h = _rail_fixes(prep, rail_cfg, log, a, b, points, direction, notes) if rail \
             else (sp.Fixes.empty(), np.zeros((0, 3)))
         stats = np.full((fixes.epoch.size, 3), np.nan)
