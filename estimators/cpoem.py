@@ -39,6 +39,10 @@ class Points:
     def empty(cls) -> Points:
         return cls(np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3, 3)))
 
+    def take(self, keep: np.ndarray) -> Points:
+        """The points selected by `keep` (a mask or indices)."""
+        return Points(self.u[keep], self.t[keep], self.llh[keep], self.cov[keep], self.c_bn[keep])
+
 
 def crossings(u: np.ndarray, spacing: float, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
     """Epochs j in (lo, hi] where the face coordinate crosses a multiple of `spacing`: (j, crossed u_i).

@@ -171,6 +171,11 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
             cov = np.zeros((b - a + 1, 3, 3))
             cov[:, [0, 1, 2], [0, 1, 2]] = run.sd[a:b + 1, kf.DP] ** 2
             points = sp.segment_points(prep, rail_cfg, a, b, run.nav[a:b + 1], cov)
+            # Points recorded while the filter settles back onto the rail after the end zone (before the pass's
+            # detectors are armed) carry the drift it is shedding; the next pass takes no fix from them.
+            tested = fixes.epoch[np.isfinite(stats[:, fk.DET_FSPRT])]
+            if tested.size > ARM_FIXES:
+                points = points.take(points.t >= prep.t_kf[tested[ARM_FIXES]])
             direction = np.zeros((0, 3))
     run.sd[0] = np.sqrt(np.diag(p0))
     run.flags |= np.where(run.mag_flags & fk.MAG_USED, FLAG_MAG, 0).astype(np.int32)
