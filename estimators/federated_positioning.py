@@ -44,7 +44,7 @@ zone and the return run (a few centimetres, several times the innovations' sprea
 faults. A fault flag raised earlier holds over them."""
 CAP = 1.25
 """The fading SPRT's statistic is held at or below CAP * t_on: a fault of any size keeps the flag raised, and once
-it has gone the statistic falls to t_off in ln(CAP t_on / t_off) / ln(1 / fading) clean fixes (3 at 25, 10, 0.6)."""
+it has gone the statistic falls to t_off in ln(CAP t_on / t_off) / ln(1 / fading) clean fixes (3 at 12, 5, 0.6)."""
 DETECTORS = ("residual", "dual_state", "fsprt")
 """The detectors of 004 section IV in the order of federated_kf.DET_*: residual chi-square, dual-state
 chi-square, fading SPRT."""

@@ -170,9 +170,9 @@ class Config:
                                                                             window=30, sd_floor=0.005))
     """Fault detectors on the rail kinematics model's fixes (004 section IV). The fixes come one per chute (one
     every 10-20 s at cutting speed), not at 10 Hz: a fading factor of 0.6 per fix keeps about a minute of memory.
-    They test the innovation across the face, with the fix's effective noise estimated over the last 30 accepted
-    fixes (estimators.federated_kf._fix_update: the model's R is several times too large for fixes from the
-    filter's own previous pass), floored at 5 mm; with that estimate's noise, t_on 12 and t_off 5
+    They test the innovation across the face against the model's variance scaled by what the last 30 accepted
+    fixes' innovations show (estimators.federated_kf._fix_update: h P h' + R is several times too large for fixes
+    from the filter's own previous pass), floored at 5 mm; with that scale's noise, t_on 12 and t_off 5
     (fault_detection.DetectorConfig)."""
     isolate_by: str | None = "fsprt"
     """The detector whose fault flag isolates the rail kinematics model (residual, dual_state, fsprt; None)."""
