@@ -7,9 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from estimators import federated_kf as fk
 from estimators import federated_positioning as fp
 from estimators import metrics
+from estimators import shearer_kf as kf
 from estimators import shearer_positioning as sp
+from estimators.fault_detection import fsprt_state
 from estimators.logformat import (
     ESTIMATE_DETECTORS,
     FLAG_ISOLATED,
@@ -116,3 +119,39 @@ def test_unknown_detector_and_missing_rams_are_one_line(face):
                                ram_valid=np.zeros(0, int))
     with pytest.raises(sp.PositioningError, match="pushram"):
         fp.run_rail(bare, cfg, sp.prepare(bare, cfg))
+
+
+def test_a_shrinking_fault_is_readmitted_only_once_its_fix_passes_the_residual_test():
+    """The readmission rule of federated_kf._fix_update, fix by fix: a 1 m fault across the face is isolated; when it shrinks
+    to 0.15 m (15 sigma) the fading SPRT alone falls below T0 in one step, yet the fix stays out; a fix
+    within the noise readmits the model."""
+    cfg = sp.Config(imu=sp.ImuNoise(gyro_arw=1e-6, accel_vrw=1e-5, gyro_bias=1e-7, accel_bias=1e-5))
+    det = cfg.detector
+    params = fp.detector_params(det, "fsprt")
+    nav = np.zeros(kf.N_NAV)
+    nav[kf.LAT], nav[kf.QUAT] = 0.5, (1.0, 0.0, 0.0, 0.0)
+    r_m = 6.36e6  # metres per radian of latitude near 0.5 rad (the fix offsets are small)
+    p0 = np.eye(kf.N_STATES) * 1e-4
+    counters, det_buf = np.zeros(3, np.int64), np.zeros((det.window, 2))
+    fsprt, isolated, stats = fsprt_state(fk.DET_DOF), np.zeros(1, np.int8), np.zeros(3)
+    advance = np.array([0.0, 1.0, 0.0])
+    rng = np.random.default_rng(7)
+
+    def fix(offset_north: float) -> bool:
+        x, p = np.zeros(kf.N_STATES), p0.copy()  # the same prior at every fix: only the offsets differ
+        llh = np.array([nav[kf.LAT] - offset_north / r_m, 0.0, 0.0])
+        return fk._fix_update(x, p, nav, np.zeros(kf.N_CAL), np.zeros(3), llh, np.eye(3) * 1e-4, np.zeros(3),
+                                 advance, False, x.copy(), p0.copy(), params, fsprt, isolated, counters, det_buf,
+                                 stats)
+
+    assert all(fix(0.01 * rng.standard_normal()) for _ in range(det.window + 5))
+    assert not isolated[0]
+    for _ in range(3):
+        fix(1.0)
+    assert isolated[0] and stats[fk.DET_FSPRT] == pytest.approx(fp.CAP * det.t_on)
+    assert not fix(0.15)
+    assert stats[fk.DET_FSPRT] <= det.t_off  # the fading SPRT alone would readmit this fix
+    assert stats[fk.DET_RESIDUAL] > params[fk.D_CHI2]
+    assert isolated[0]
+    assert fix(0.005)
+    assert not isolated[0]
