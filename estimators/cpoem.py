@@ -10,19 +10,19 @@ position fix (001 eq. 6, with C of eq. 7 turning the ENU increment into latitude
 
 The advance comes from the push-ram stroke sensors of the supports on either side of the point (interpolated
 along the face): between two passes each pan is pushed once, so the ram of a support shows one stroke of the
-web, in one or several partial strokes, whatever the order of push and support advance (estimators.cpoem
-`ram_stroke`). A point without a valid stroke on both
-neighbouring supports (dropout, missing support) is skipped and reported, never guessed.
+web, in one or several partial strokes, whatever the order of push and support advance
+(`ram_stroke`). A point without a valid stroke on both neighbouring supports (dropout, missing support) is
+skipped and reported, never guessed.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba as nb
 import numpy as np
 
 from estimators import earth
+from estimators.ram_levels import drop_levels, side_level, swings
 
 
 @dataclass
@@ -77,72 +77,51 @@ def record(u: np.ndarray, t: np.ndarray, llh: np.ndarray, cov_enu: np.ndarray, c
 
 
 RAM_WINDOW = 3
-"""Readings in the running median that cleans a noisy push-ram record before its rises are summed (a precise
+"""Readings in the running median that cleans a noisy push-ram record before its drops are found (a precise
 sensor, below 1 mm of noise, is used as it reads: a fast end push may leave a single reading at the top)."""
-
-
-@nb.njit(cache=True)
-def _swings(x, threshold):
-    """(trough, peak) indices of the up-swings of x that a swing detector confirms: a swing ends when x turns back
-    by more than `threshold` from its extreme, so noise below the threshold makes no swing."""
-    lo_i = hi_i = 0
-    rising = True
-    out = []
-    for i in range(1, x.size):
-        if rising:
-            if x[i] > x[hi_i]:
-                hi_i = i
-            elif x[hi_i] - x[i] > threshold:
-                if x[hi_i] - x[lo_i] > threshold:
-                    out.append((lo_i, hi_i))
-                rising, lo_i = False, i
-        else:
-            if x[i] < x[lo_i]:
-                lo_i = i
-            elif x[i] - x[lo_i] > threshold:
-                rising, hi_i = True, i
-    if rising and x[hi_i] - x[lo_i] > threshold:
-        out.append((lo_i, hi_i))
-    return out
-
-
-def _level(raw: np.ndarray, smooth: np.ndarray, i: int, tol: float) -> float:
-    """The level at extreme i: the median of the raw readings of the run around i that stays within tol of it
-    (a plateau averages its noise away; a one-reading peak is that reading)."""
-    near = np.abs(smooth - smooth[i]) <= tol
-    a = i
-    while a > 0 and near[a - 1]:
-        a -= 1
-    b = i
-    while b + 1 < near.size and near[b + 1]:
-        b += 1
-    return float(np.median(raw[a:b + 1]))
+DROP_SIGMAS = 10.0
+"""Down-swing of the cleaned reading, in its noise sigmas, that is a drop: the noise over the thousands of
+readings of a pass spans about 8 sigma, a support's advance is a stroke."""
+RAMP_SIGMAS = 3.0
+"""A reading this many noise sigmas off the level on its side of a drop lies on the drop's ramp."""
+RAM_LEVEL_SAMPLES = 60
+"""Readings next to an event whose median is a level of the stroke measurement (a minute at 1 Hz; the
+level-change test cuts a shorter plateau)."""
 
 
 def ram_stroke(t: np.ndarray, ext: np.ndarray, valid: np.ndarray, t0: float, t1: float, noise_sd: float) -> float:
-    """The pan's advance at one support between t0 and t1: the sum of the rises of its push-ram reading (NaN
-    when fewer than RAM_WINDOW valid readings).
+    """The pan's advance at one support between t0 and t1: how far its ram extended (NaN when fewer than
+    RAM_WINDOW valid readings).
 
-    The ram extends while the support pushes the pan (possibly in several partial strokes as the snake forms,
-    or in one stroke followed at once by the support's advance at the face end) and retracts while the support
-    pulls itself up to the pan; only the rises move the pan. A swing detector finds the rises on the readings
-    (cleaned by a short running median when the sensor is noisy) with a threshold of 6 noise sigmas (at least
-    5 mm); each rise is measured between the medians of the readings at its two ends, so the extremes of the
-    noise do not add up over the partial strokes."""
+    The ram extends while the support pushes the pan (in one or several partial strokes as the snake forms, or
+    in one stroke followed at once by the support's advance at the face end) and drops by about a stroke while
+    the support pulls itself up to the pan; only the extensions move the pan. So the advance is the net change of
+    the reading plus every drop:
+
+        d = (level at t1 - level at t0) + sum over drops (level before - level after).
+
+    Each level is the plateau next to its event (estimators.ram_levels: readings within 6 sigma, at least 5 mm,
+    up to RAM_LEVEL_SAMPLES of them, cut at a level change), so the last partial step of a push counts in full
+    and the noise's extremes do not add up; a drop is a down-swing of DROP_SIGMAS sigmas (at least 5 mm) of the
+    reading cleaned by a running median. A drop that noise makes anyway splits one plateau and adds about
+    nothing."""
     sel = (t > t0) & (t <= t1) & (valid > 0) & np.isfinite(ext)
     r = ext[sel]
     if r.size < RAM_WINDOW:
         return np.nan
+    tol, sigma = max(6 * noise_sd, 0.005), max(noise_sd, 0.005 / 6)
     if noise_sd < 1e-3:
-        smooth, threshold = r, max(6 * noise_sd, 0.005)
+        clean, threshold = r, tol
     else:
         half = RAM_WINDOW // 2
         pad = np.concatenate([np.full(half, r[0]), r, np.full(half, r[-1])])
-        smooth = np.median(np.lib.stride_tricks.sliding_window_view(pad, RAM_WINDOW), axis=1)
-        threshold = 6 * 1.25 * noise_sd / np.sqrt(RAM_WINDOW)
-    tol = threshold
-    return float(sum(max(0.0, _level(r, smooth, hi, tol) - _level(r, smooth, lo, tol))
-                     for lo, hi in _swings(smooth, threshold)))
+        clean = np.median(np.lib.stride_tricks.sliding_window_view(pad, RAM_WINDOW), axis=1)
+        threshold = DROP_SIGMAS * 1.25 * noise_sd / np.sqrt(RAM_WINDOW)
+    start = side_level(r, 0, 1, tol, sigma, RAM_LEVEL_SAMPLES)[0]
+    end = side_level(r, r.size - 1, -1, tol, sigma, RAM_LEVEL_SAMPLES)[0]
+    drops = [drop_levels(r, lo, hi, tol, sigma, RAM_LEVEL_SAMPLES, RAMP_SIGMAS * sigma)
+             for lo, hi in swings(-clean, threshold)]
+    return float(end - start + sum(row[2] - row[3] for row in drops))
 
 
 @dataclass(frozen=True)

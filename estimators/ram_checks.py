@@ -29,8 +29,8 @@ The readings these flag are left out of the checks below.
 Support advances
 ----------------
 The ram only retracts when its support advances (lowered, pulled up to the pan by the ram, set), by the
-commanded stroke s_c, to its set length. A drop is a down-swing of a quarter stroke (estimators.cpoem
-`_swings`), split where the ram rests on the way down (two advances without a push between them, as at a face
+commanded stroke s_c, to its set length. A drop is a down-swing of a quarter stroke (estimators.ram_levels
+`swings`), split where the ram rests on the way down (two advances without a push between them, as at a face
 end); the level on each side is the median of up to LEVEL_SAMPLES readings next to it within the plateau
 tolerance (6 sigma, at least 5 mm, as the CPOEM stroke measurement), cut at the most significant level change
 (CHANGE_SIGMAS), so the short last step of a face-end push is not averaged with the pause before it. A drop of
@@ -124,7 +124,13 @@ import numpy as np
 from scipy.ndimage import median_filter
 from scipy.stats import norm
 
-from estimators.cpoem import _swings
+from estimators.ram_levels import (
+    CHANGE_SIGMAS,
+    LEVEL_SAMPLES,
+    drop_levels,
+    side_level,
+    swings,
+)
 
 KINDS = ("dropout", "noise_burst", "stuck", "offset", "drift", "scale", "rail_deviation")
 """Finding kinds (the twin's faults ram_dropout, ram_noise_burst, ram_stuck, ram_offset, ram_drift, ram_scale,
@@ -151,10 +157,6 @@ ADVANCE_BAND = (0.5, 1.5)
 REST_TOLERANCE = 0.1
 """Strokes (on top of the stroke check's tolerance) the levels around a sure advance may differ from whole
 strokes above the face's rest level."""
-LEVEL_SAMPLES = 15
-"""Readings next to an event whose median is the level on that side."""
-CHANGE_SIGMAS = 4.5
-"""Two-sample statistic of a level change inside the readings next to an event that shortens the plateau."""
 STROKE_TOLERANCE = 0.03
 """Share of the commanded stroke that a healthy stroke may differ by (ram line geometry)."""
 STROKE_SIGMAS = 5.0
@@ -404,34 +406,6 @@ def _self_checks(tg: np.ndarray, x: np.ndarray, layout: RamLayout) -> tuple[list
 # ----------------------------------------------------------------------------------- advances and strokes
 
 
-def _side_level(r: np.ndarray, i: int, step: int, tol: float, sigma: float) -> tuple[float, int, int]:
-    """Level of the plateau next to an event, from reading i away from it (step -1: backwards).
-
-    The run of readings within tol of each other (two passes: from reading i, then from the median of its
-    run) bounds the plateau; of its first LEVEL_SAMPLES readings those before the most significant level
-    change (a two-sample test of CHANGE_SIGMAS, repeated on the part next to the event) make the level, so a
-    short last step of a push next to a long pause is not averaged away. Returns (median level, readings
-    used, index of the last reading of the whole run)."""
-    seg = r[i:] if step > 0 else r[i::-1]
-    ref = seg[0]
-    for _ in range(2):  # from the reading next to the event, then from the median of its run
-        off = np.flatnonzero(np.abs(seg - ref) > tol)
-        end = max(int(off[0]) if off.size else seg.size, 1)
-        ref = float(np.median(seg[:min(end, LEVEL_SAMPLES)]))
-    w = seg[:min(end, LEVEL_SAMPLES)]
-    n = w.size
-    while n >= 2:
-        c = np.arange(1, n)
-        head = np.cumsum(w[:n])[:-1]
-        gap = np.abs(head / c - (w[:n].sum() - head) / (n - c))
-        stat = gap / (sigma * np.sqrt(1.0 / c + 1.0 / (n - c)))
-        k = int(np.argmax(stat))
-        if stat[k] < CHANGE_SIGMAS:
-            break
-        n = int(c[k])
-    return float(np.median(w[:n])), n, i + step * (end - 1)
-
-
 @dataclass
 class _Advances:
     """Drops of one support that may be advances; reading indices of its usable readings."""
@@ -450,11 +424,11 @@ class _Advances:
 
 
 def _drops(r: np.ndarray, stroke: float, tol: float) -> list[tuple[int, int]]:
-    """(peak, trough) of each drop of the reading: the down-swings of a quarter stroke (estimators.cpoem
-    `_swings` on -r), split where the ram rests on the way down (a level of at least three readings a quarter
+    """(peak, trough) of each drop of the reading: the down-swings of a quarter stroke (estimators.ram_levels
+    `swings` on -r), split where the ram rests on the way down (a level of at least three readings a quarter
     stroke from both ends: two advances without a push between them, as at a face end)."""
     out = []
-    for lo, hi in _swings(np.ascontiguousarray(-r), 0.25 * stroke):
+    for lo, hi in swings(np.ascontiguousarray(-r), 0.25 * stroke):
         seg = r[lo:hi + 1]
         step_ok = np.abs(np.diff(seg)) <= tol
         flat = np.zeros(seg.size, bool)
@@ -473,17 +447,9 @@ def _candidate_advances(r: np.ndarray, layout: RamLayout) -> _Advances:
     tol, stroke, sig = layout.level_tol_m, layout.stroke_m, layout.change_sigma_m
     rows = []
     for lo, hi in _drops(r, stroke, tol) if r.size > 2 else []:
-        mid = 0.5 * (r[lo] + r[hi])
-        j = lo + int(np.argmax(r[lo:hi + 1] < mid))  # first reading below half-way
-        b, a = j - 1, j  # widened over the readings of a ramp (each more than tol below the one before)
-        while b > lo and r[b - 1] - r[b] > tol:
-            b -= 1
-        while a < hi and r[a] - r[a + 1] > tol:
-            a += 1
-        top, n_top, top_start = _side_level(r, b, -1, tol, sig)
-        post, n_post, post_end = _side_level(r, a, 1, tol, sig)
-        if ADVANCE_BAND[0] * stroke <= top - post <= ADVANCE_BAND[1] * stroke:
-            rows.append((b, a, top, post, n_top, n_post, top_start, post_end))
+        row = drop_levels(r, lo, hi, tol, sig)
+        if ADVANCE_BAND[0] * stroke <= row[2] - row[3] <= ADVANCE_BAND[1] * stroke:
+            rows.append(row)
     cols = [np.array(c) for c in zip(*rows)] if rows else [np.zeros(0)] * 8
     return _Advances(*(c.astype(float) if k in (2, 3) else c.astype(np.int64) for k, c in enumerate(cols)))
 
@@ -701,7 +667,7 @@ def _stroke_checks(x: np.ndarray, idxs, advances: list[_Advances], layout: RamLa
         for m in np.flatnonzero(np.abs(err) > thr):
             out.append(_Stroke(j, idx[adv.top_end[m]], idx[adv.post_start[m]], idx[adv.post_start[m]],
                                float(err[m]), float(thr[m]), float(err[m] / stroke)))
-        start_level, n_start, start_run_end = _side_level(r, 0, 1, tol, layout.change_sigma_m)
+        start_level, n_start, start_run_end = side_level(r, 0, 1, tol, layout.change_sigma_m)
         starts = np.concatenate([[start_level], adv.post[:-1]])
         n_starts = np.concatenate([[n_start], adv.n_post[:-1]])
         run_ends = np.concatenate([[start_run_end], adv.post_run_end[:-1]])

@@ -49,3 +49,21 @@ def test_advance_interpolates_between_supports_and_propagates_a_missing_reading(
     rams = RamLog([t] * 3, ext, valid, np.array([0.0, 2.0, 4.0]), 1e-4)
     assert abs(rams.advance(0.5, 0.0, 300.0) - 0.95) < 0.003
     assert np.isnan(rams.advance(3.0, 0.0, 300.0))
+
+
+def test_stroke_of_a_noisy_sensor_over_a_snake_push_is_unbiased():
+    """004's 0.02 m ram sensor over the twin's snake push (eight partial steps of 1-24 cm, 37 s apart, the last one
+    56 s before the support advances in one reading): over 300 noise draws the stroke is off by 1.4 mm on average
+    and 7 mm rms. Levels taken within 6 sigma of a swing's extreme merged the last steps with the plateaus before
+    them and read the stroke 10 mm short (7-8 mm per cycle on seed004, which bent the rail model's fixes 1 cm a
+    cycle towards the goaf)."""
+    steps = [0.0125, 0.0721, 0.142, 0.2142, 0.2412, 0.1791, 0.1058, 0.0363]
+    t = np.arange(0.0, 1200.0, 1.0)
+    clean = np.full(t.size, 1.2)
+    for k, dx in enumerate(steps):
+        clean[t >= 300.0 + 37.0 * k] += dx
+    clean[t >= 300.0 + 37.0 * (len(steps) - 1) + 56.0] -= sum(steps)
+    rng = np.random.default_rng(3)
+    err = np.array([ram_stroke(t, clean + rng.normal(0.0, 0.02, t.size), np.ones(t.size), 0.0, 1200.0, 0.02)
+                    for _ in range(300)]) - sum(steps)
+    assert abs(err.mean()) < 0.003 and np.sqrt(np.mean(err ** 2)) < 0.010, (err.mean(), err.std())
