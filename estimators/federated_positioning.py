@@ -170,12 +170,9 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
         if rail:
             cov = np.zeros((b - a + 1, 3, 3))
             cov[:, [0, 1, 2], [0, 1, 2]] = run.sd[a:b + 1, kf.DP] ** 2
-            points = sp.segment_points(prep, rail_cfg, a, b, run.nav[a:b + 1], cov)
-            # Points recorded while the filter settles back onto the rail after the end zone (before the pass's
-            # detectors are armed) carry the drift it is shedding; the next pass takes no fix from them.
-            tested = fixes.epoch[np.isfinite(stats[:, fk.DET_FSPRT])]
-            if tested.size > ARM_FIXES:
-                points = points.take(points.t >= prep.t_kf[tested[ARM_FIXES]])
+            points = next_pass_points(sp.segment_points(prep, rail_cfg, a, b, run.nav[a:b + 1], cov),
+                                      prep.t_kf[a:b + 1], run.flags[a:b + 1],
+                                      prep.t_kf[fixes.epoch[np.isfinite(stats[:, fk.DET_FSPRT])]])
             direction = np.zeros((0, 3))
     run.sd[0] = np.sqrt(np.diag(p0))
     run.flags |= np.where(run.mag_flags & fk.MAG_USED, FLAG_MAG, 0).astype(np.int32)
@@ -185,6 +182,18 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
     if rail:
         sol.detectors = detector_columns(prep, run)
     return sol
+
+
+def next_pass_points(points: Points, t: np.ndarray, flags: np.ndarray, t_tested: np.ndarray) -> Points:
+    """The points of a pass (epochs at t, filter flags) that give the next pass its fixes, t_tested the times of
+    the pass's rail fixes the detectors tested. Left out: points recorded while the filter settles back onto the
+    rail after the end zone (before the pass's detectors are armed, at its ARM_FIXES-th tested fix), which carry
+    the drift it is shedding; and points recorded while the model was isolated, when the push-ram readings were
+    held faulty: the strokes to the next pass would start from them."""
+    if t_tested.size > ARM_FIXES:
+        points = points.take(points.t >= t_tested[ARM_FIXES])
+    held = (flags & FLAG_ISOLATED) > 0
+    return points.take(~held[np.clip(np.searchsorted(t, points.t), 0, t.size - 1)])
 
 
 def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Points, direction: np.ndarray,

@@ -44,14 +44,16 @@ def swings(x, threshold):
     return out
 
 
-def side_level(r: np.ndarray, i: int, step: int, tol: float, sigma: float,
-               samples: int = LEVEL_SAMPLES) -> tuple[float, int, int]:
+def side_level(r: np.ndarray, i: int, step: int, tol: float, sigma: float, samples: int = LEVEL_SAMPLES,
+               min_run: int = 1) -> tuple[float, int, int]:
     """Level of the plateau next to an event, from reading i away from it (step -1: backwards).
 
     The run of readings within tol of each other (two passes: from reading i, then from the median of its
     run) bounds the plateau; of its first `samples` readings those before the most significant level
     change (a two-sample test of CHANGE_SIGMAS with reading noise sigma, repeated on the part next to the event)
-    make the level. Returns (median level, readings used, index of the last reading of the whole run)."""
+    make the level, at least min_run of them (more than one where a reading's own noise may reach CHANGE_SIGMAS:
+    one reading cannot tell a last short step from an outlier). Returns (median level, readings used, index of
+    the last reading of the whole run)."""
     seg = r[i:] if step > 0 else r[i::-1]
     ref = seg[0]
     for _ in range(2):  # from the reading next to the event, then from the median of its run
@@ -60,9 +62,9 @@ def side_level(r: np.ndarray, i: int, step: int, tol: float, sigma: float,
         ref = float(np.median(seg[:min(end, samples)]))
     w = seg[:min(end, samples)]
     n = w.size
-    while n >= 2:
-        c = np.arange(1, n)
-        head = np.cumsum(w[:n])[:-1]
+    while n > min_run:
+        c = np.arange(min_run, n)
+        head = np.cumsum(w[:n])[min_run - 1:-1]
         gap = np.abs(head / c - (w[:n].sum() - head) / (n - c))
         stat = gap / (sigma * np.sqrt(1.0 / c + 1.0 / (n - c)))
         k = int(np.argmax(stat))
@@ -73,10 +75,11 @@ def side_level(r: np.ndarray, i: int, step: int, tol: float, sigma: float,
 
 
 def drop_levels(r: np.ndarray, lo: int, hi: int, tol: float, sigma: float, samples: int = LEVEL_SAMPLES,
-                ramp_band: float = 0.0) -> tuple[int, int, float, float, int, int, int, int]:
+                ramp_band: float = 0.0, min_run: int = 1) -> tuple[int, int, float, float, int, int, int, int]:
     """The plateaus around the drop of r from reading lo (its top) to reading hi (its bottom): the last reading
     before it and the first after it (b, a), the levels before and after (side_level), the readings each used,
-    the first reading of the plateau before and the last of the plateau after.
+    the first reading of the plateau before and the last of the plateau after (each level of at least min_run
+    readings, side_level).
 
     b and a bound the ramp between the plateaus: from the first reading below half-way, back up the ramp while each
     reading is more than tol below the one before, and on down it likewise. With ramp_band > 0 a reading more than
@@ -84,13 +87,13 @@ def drop_levels(r: np.ndarray, lo: int, hi: int, tol: float, sigma: float, sampl
     ramp step by less than its tol."""
     mid = 0.5 * (r[lo] + r[hi])
     j = lo + int(np.argmax(r[lo:hi + 1] < mid))
-    top0 = side_level(r, lo, -1, tol, sigma, samples)[0] - ramp_band if ramp_band > 0 else -np.inf
-    bottom0 = side_level(r, hi, 1, tol, sigma, samples)[0] + ramp_band if ramp_band > 0 else np.inf
+    top0 = side_level(r, lo, -1, tol, sigma, samples, min_run)[0] - ramp_band if ramp_band > 0 else -np.inf
+    bottom0 = side_level(r, hi, 1, tol, sigma, samples, min_run)[0] + ramp_band if ramp_band > 0 else np.inf
     b, a = j - 1, j
     while b > lo and (r[b] < top0 or r[b - 1] - r[b] > tol):
         b -= 1
     while a < hi and (r[a] > bottom0 or r[a] - r[a + 1] > tol):
         a += 1
-    top, n_top, top_start = side_level(r, b, -1, tol, sigma, samples)
-    post, n_post, post_end = side_level(r, a, 1, tol, sigma, samples)
+    top, n_top, top_start = side_level(r, b, -1, tol, sigma, samples, min_run)
+    post, n_post, post_end = side_level(r, a, 1, tol, sigma, samples, min_run)
     return b, a, top, post, n_top, n_post, top_start, post_end

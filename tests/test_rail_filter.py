@@ -12,6 +12,7 @@ from estimators import federated_positioning as fp
 from estimators import metrics
 from estimators import shearer_kf as kf
 from estimators import shearer_positioning as sp
+from estimators.cpoem import Points
 from estimators.fault_detection import fsprt_state
 from estimators.logformat import (
     ESTIMATE_DETECTORS,
@@ -155,3 +156,19 @@ def test_a_shrinking_fault_is_readmitted_only_once_its_fix_passes_the_residual_t
     assert isolated[0]
     assert fix(0.005)
     assert not isolated[0]
+
+
+def test_the_next_pass_takes_no_fix_from_points_recorded_while_settling_or_isolated():
+    """Of a pass's points, the next pass leaves out those before its detectors were armed (the ARM_FIXES-th tested
+    fix) and those recorded while the rail model was isolated (the push-ram readings were held faulty)."""
+    t = np.arange(0.0, 100.0, 1.0)
+    flags = np.zeros(t.size, np.int32)
+    flags[(t >= 50.0) & (t < 70.0)] = FLAG_ISOLATED
+    t_pts = np.arange(2.5, 100.0, 5.0)
+    n = t_pts.size
+    points = Points(t_pts * 0.1, t_pts, np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3)))
+    t_tested = np.arange(5.0, 100.0, 10.0)
+    kept = fp.next_pass_points(points, t, flags, t_tested)
+    assert np.all(kept.t >= t_tested[fp.ARM_FIXES])
+    assert not np.any((kept.t >= 50.0) & (kept.t < 70.0))
+    assert kept.t.size == np.sum((t_pts >= t_tested[fp.ARM_FIXES]) & ~((t_pts >= 50.0) & (t_pts < 70.0)))
