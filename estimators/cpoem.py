@@ -22,7 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators import earth
-from estimators.ram_levels import drop_levels, side_level, swings
+from estimators.ram_levels import (
+    change_sigma,
+    drop_levels,
+    level_tolerance,
+    side_level,
+    swings,
+)
 
 
 @dataclass
@@ -114,7 +120,7 @@ def ram_stroke(t: np.ndarray, ext: np.ndarray, valid: np.ndarray, t0: float, t1:
     r = ext[sel]
     if r.size < RAM_WINDOW:
         return np.nan
-    tol, sigma = max(6 * noise_sd, 0.005), max(noise_sd, 0.005 / 6)
+    tol, sigma = level_tolerance(noise_sd), change_sigma(noise_sd)
     min_run = 1
     if noise_sd < 1e-3:
         clean, threshold = r, tol

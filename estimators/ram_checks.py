@@ -127,7 +127,9 @@ from scipy.stats import norm
 from estimators.ram_levels import (
     CHANGE_SIGMAS,
     LEVEL_SAMPLES,
+    change_sigma,
     drop_levels,
+    level_tolerance,
     side_level,
     swings,
 )
@@ -242,14 +244,13 @@ class RamLayout:
 
     @property
     def change_sigma_m(self) -> float:
-        """Sigma of the level-change test: the reading noise, or a sixth of the 5 mm plateau tolerance of a
-        precise sensor (the twin's rams jitter by millimetres as the pans settle)."""
-        return max(self.sigma_m, 0.005 / 6.0)
+        """Sigma of the level-change test (estimators.ram_levels.change_sigma)."""
+        return change_sigma(self.sigma_m)
 
     @property
     def level_tol_m(self) -> float:
-        """Plateau tolerance: readings within this of a level belong to it (as estimators.cpoem.ram_stroke)."""
-        return max(6.0 * self.sigma_m, 0.005)
+        """Plateau tolerance (estimators.ram_levels.level_tolerance, as estimators.cpoem.ram_stroke)."""
+        return level_tolerance(self.sigma_m)
 
 
 @dataclass(frozen=True)

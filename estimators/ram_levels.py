@@ -19,6 +19,18 @@ CHANGE_SIGMAS = 4.5
 """Two-sample statistic of a level change inside the readings next to an event that shortens the plateau."""
 
 
+def level_tolerance(sigma_m: float) -> float:
+    """Plateau tolerance of a sensor with reading noise sigma_m: readings within this of a level belong to it
+    (6 sigma, at least 5 mm: the twin's rams jitter by millimetres as the pans settle)."""
+    return max(6.0 * sigma_m, 0.005)
+
+
+def change_sigma(sigma_m: float) -> float:
+    """Sigma of the level-change test: the reading noise, or a sixth of the 5 mm plateau tolerance of a precise
+    sensor."""
+    return max(sigma_m, 0.005 / 6.0)
+
+
 @nb.njit(cache=True)
 def swings(x, threshold):
     """(trough, peak) indices of the up-swings of x that a swing detector confirms: a swing ends when x turns back

@@ -552,9 +552,9 @@ def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Poi
 def face_survey_points(log: Log, prep: Prepared) -> tuple[Points, np.ndarray]:
     """The installed face line (FACE_SURVEY) as CPOEM points of the first cut, smoothed by a local quadratic fit
     along the face (estimators.face_line: the survey's independent point errors averaged over +-14.5 m with
-    tricube weights), with the fit's covariance; and the line's direction d enu / d u (K, 3) at each point. Its face coordinate is a true
-    distance, the filter's the odometer's: the two part by the odometer's scale error, which the rail-model filter
-    puts in the fix's measurement model (estimators.federated_kf._fix_update)."""
+    tricube weights), with the fit's covariance; and the line's direction d enu / d u (K, 3) at each point. Its
+    face coordinate is a true distance, the filter's the odometer's: the two part by the odometer's scale error,
+    which the rail-model filter puts in the fix's measurement model (estimators.federated_kf._fix_update)."""
     if log.face_u.size == 0 or not prep.cuts:
         return Points.empty(), np.zeros((0, 3))
     first, last = prep.cuts[0]
