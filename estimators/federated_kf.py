@@ -175,7 +175,8 @@ def initial_covariances(p0, federated):
 
 
 @nb.njit(cache=True)
-def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, trusted, x_other, p_other, det_params,
+def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, var_floor, trusted, x_other, p_other,
+                det_params,
                 fsprt, isolated, counters, det_buf, stats):
     """Position fix of the rail kinematics model (004 eq. 9) with the three detectors on its innovation (004
     eqs. 15-24): residual chi-square, dual-state chi-square against the other sub-filter, fading SPRT (with its
@@ -193,6 +194,11 @@ def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, trusted
     0.012 m against 0.07 m rms across the face; R - 2 cov(fix error, filter error) is negative, and a window
     estimate of it as 003's R is a small difference of large numbers). A fault would hide below the model's
     variance. With kappa the variance still follows P where it grows (a stretch without fixes).
+
+    var_floor: a further floor of sigma_k^2, for a fix whose error the filter does not share: the face survey's.
+    The smoothed survey's error (0.021 m) is correlated along the face over +-14.5 m (estimators.face_line), and
+    the filter, riding the INS, does not follow its swings; in a calm stretch of the survey kappa takes sigma_k
+    down to D_SD_FLOOR (5 mm), where a 4 cm swing over three chutes read as a fault (seed004 trials 9 and 10).
 
     scale_h (3,): for a point whose face coordinate is a true distance (the face survey), the along-face
     direction in n times the odometer travel u at the fix. Such a fix lies u k_true along the face from where the
@@ -213,7 +219,7 @@ def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, trusted
     window = int(det_params[D_WINDOW])
     if window > 0 and counters[2] >= window:
         kappa = np.sum(det_buf[:, 0]) / np.sum(det_buf[:, 1])
-        s_a[0, 0] = max(kappa * s_model, det_params[D_SD_FLOOR] ** 2)
+        s_a[0, 0] = max(kappa * s_model, det_params[D_SD_FLOOR] ** 2, var_floor)
     stats[DET_RESIDUAL] = chi2_residual(v_a, s_a)
     # The detectors are armed once the aiding sub-filter has taken the pass's first fixes (before, the fading SPRT
     # only shows what it would say, from a copy of its state; a fault flag raised earlier holds).
@@ -249,15 +255,15 @@ def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, trusted
 
 @nb.njit(cache=True)
 def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b, fix_epoch, fix_llh, fix_r,
-             fix_scale_h, fix_advance, fix_trusted, q_psd, params, mag_params, det_params, nav, cal, p_sub, beta, nominal, r_buf, counters, fsprt, isolated, det_buf,
+             fix_scale_h, fix_advance, fix_var_floor, fix_trusted, q_psd, params, mag_params, det_params, nav, cal, p_sub, beta, nominal, r_buf, counters, fsprt, isolated, det_buf,
              out_nav, out_cal, out_sd, flags, mag_flags, beta_out, r_yaw_out, yaw_innov, sub_delta, fix_stats,
              fix_applied):
     """Run the federated (mode FEDERATED) or centralized (CENTRALIZED) filter over epochs j0+1 .. j1.
 
     Inputs per epoch j: odometer distance and mode (estimators.shearer_kf.run_filter), mag_b (3,) the calibrated
     mean magnetometer reading over the epoch (NaN where none). Position fixes of the rail kinematics model
-    (fix_epoch sorted, fix_llh (F, 3), fix_r (F, 3, 3), fix_scale_h (F, 3), fix_advance (F, 3), fix_trusted (F,):
-    see _fix_update)
+    (fix_epoch sorted, fix_llh (F, 3), fix_r (F, 3, 3), fix_scale_h (F, 3), fix_advance (F, 3), fix_var_floor
+    (F,), fix_trusted (F,): see _fix_update)
     go to sub-filter 2 (in the centralized mode to the one
     filter) through the detectors of det_params (D_*). params are estimators.shearer_kf's, mag_params the M_*
     vector. The state carried across calls, updated in place: nav, cal, p_sub (2, N_STATES, N_STATES) (initial_covariances),
@@ -335,8 +341,8 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
                 continue
             was = isolated[0]
             if _fix_update(x2, p2, nav, cal, lever, fix_llh[k_fix], fix_r[k_fix], fix_scale_h[k_fix],
-                           fix_advance[k_fix], fix_trusted[k_fix], x_od, p_od, det_params, fsprt, isolated, counters, det_buf,
-                           fix_stats[k_fix]):
+                           fix_advance[k_fix], fix_var_floor[k_fix], fix_trusted[k_fix], x_od, p_od, det_params, fsprt,
+                           isolated, counters, det_buf, fix_stats[k_fix]):
                 fix_applied[k_fix] = 1
                 flag |= FLAG_POSITION
             else:

@@ -158,12 +158,12 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
     mode = fk.FEDERATED if federated else fk.CENTRALIZED
     for a, b in prep.segments:
         counters[1] = 0  # rail fixes tested in this pass (ARM_FIXES)
-        fixes, scale_h = _rail_fixes(prep, rail_cfg, log, a, b, points, direction, notes) if rail \
-            else (sp.Fixes.empty(), np.zeros((0, 3)))
+        fixes, scale_h, var_floor = _rail_fixes(prep, rail_cfg, log, a, b, points, direction, notes) if rail \
+            else (sp.Fixes.empty(), np.zeros((0, 3)), np.zeros(0))
         stats = np.full((fixes.epoch.size, 3), np.nan)
         applied = np.zeros(fixes.epoch.size, np.int8)
         fk.run_afkf(mode, a, b, prep.steps, prep.t_mech, prep.phi_b, prep.dv_b, prep.odo, prep.mode, mag_b,
-                    fixes.epoch, fixes.llh, fixes.r, scale_h, fixes.advance, ~np.isfinite(fixes.gate), q_psd, params, params_m, params_d, nav, cal, p_sub, beta,
+                    fixes.epoch, fixes.llh, fixes.r, scale_h, fixes.advance, var_floor, ~np.isfinite(fixes.gate), q_psd, params, params_m, params_d, nav, cal, p_sub, beta,
                     nominal, r_buf, counters, fsprt, isolated, det_buf, run.nav, run.cal, run.sd, run.flags, run.mag_flags,
                     run.beta, run.r_yaw, run.innov, run.delta, stats, applied)
         run.fixes.append((fixes.epoch, fixes.llh, stats, applied))
@@ -197,11 +197,12 @@ def next_pass_points(points: Points, t: np.ndarray, flags: np.ndarray, t_tested:
 
 
 def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Points, direction: np.ndarray,
-                notes: list[str]) -> tuple[sp.Fixes, np.ndarray]:
+                notes: list[str]) -> tuple[sp.Fixes, np.ndarray, np.ndarray]:
     """The rail kinematics model's fixes over epochs (a, b] (none within cfg.end_zone_m of a face end unless from
-    the face survey, before any push) with the surveyed face ends, and each fix's scale_h (federated_kf._fix_update):
-    for points of the face survey, which come with the line's `direction` d enu / d u at each point (K, 3; empty
-    for points of an earlier pass), that direction times the odometer travel."""
+    the face survey, before any push) with the surveyed face ends, and each fix's scale_h and var_floor
+    (federated_kf._fix_update): for points of the face survey, which come with the line's `direction` d enu / d u
+    at each point (K, 3; empty for points of an earlier pass), that direction times the odometer travel, and the
+    variance of the smoothed survey point along the advance direction; zero for the others."""
     surveyed = direction.shape[0] > 0
     fixes = sp.fixes_for(prep, cfg, log, a, b, points, notes)
     u = prep.odo - prep.odo[0]
@@ -209,6 +210,7 @@ def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Point
     keep = ((u[fixes.epoch] >= lo) & (u[fixes.epoch] <= hi)) | ~np.isfinite(fixes.gate) | surveyed
     fixes = fixes.take(keep)
     scale_h = np.zeros((fixes.epoch.size, 3))
+    var_floor = np.zeros(fixes.epoch.size)
     rail = np.isfinite(fixes.gate)
     if surveyed and points.u.size >= 2 and rail.any():
         # The direction comes from the survey itself: the fixes carry the ram strokes, and a faulty one bends them.
@@ -216,7 +218,10 @@ def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Point
         u_fix = u[fixes.epoch[rail]]
         along = np.column_stack([np.interp(u_fix, points.u[order], direction[order, i]) for i in range(3)])
         scale_h[rail] = along * u_fix[:, None]
-    return fixes, scale_h
+        across = points.c_bn[order, :, 0]  # the advance direction at each point (cpoem.predict_fixes)
+        var_point = np.einsum("ki,kij,kj->k", across, points.cov[order], across)
+        var_floor[rail] = np.interp(u_fix, points.u[order], var_point)
+    return fixes, scale_h, var_floor
 
 
 def _notes(prep, cfg: sp.Config, run: _Run) -> list[str]:

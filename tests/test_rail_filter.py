@@ -142,7 +142,7 @@ def test_a_shrinking_fault_is_readmitted_only_once_its_fix_passes_the_residual_t
         x, p = np.zeros(kf.N_STATES), p0.copy()  # the same prior at every fix: only the offsets differ
         llh = np.array([nav[kf.LAT] - offset_north / r_m, 0.0, 0.0])
         return fk._fix_update(x, p, nav, np.zeros(kf.N_CAL), np.zeros(3), llh, np.eye(3) * 1e-4, np.zeros(3),
-                                 advance, False, x.copy(), p0.copy(), params, fsprt, isolated, counters, det_buf,
+                                 advance, 0.0, False, x.copy(), p0.copy(), params, fsprt, isolated, counters, det_buf,
                                  stats)
 
     assert all(fix(0.01 * rng.standard_normal()) for _ in range(det.window + 5))
@@ -172,3 +172,37 @@ def test_the_next_pass_takes_no_fix_from_points_recorded_while_settling_or_isola
     assert np.all(kept.t >= t_tested[fp.ARM_FIXES])
     assert not np.any((kept.t >= 50.0) & (kept.t < 70.0))
     assert kept.t.size == np.sum((t_pts >= t_tested[fp.ARM_FIXES]) & ~((t_pts >= 50.0) & (t_pts < 70.0)))
+
+
+@pytest.mark.parametrize("var_floor, offsets, flagged", [
+    (0.021 ** 2, [0.0, -0.016, -0.03, -0.05, -0.06, -0.065], False),  # seed004 trial 10's swing of the survey
+    (0.0, [0.0, -0.016, -0.03, -0.05, -0.06, -0.065], True),
+    (0.021 ** 2, [-0.05, -0.09, -0.135], True),  # the first fixes of 004's rail deviation (seed004_fault)
+])
+def test_a_face_survey_fix_is_judged_against_the_survey_points_own_variance(var_floor, offsets, flagged):
+    """After a calm stretch the window's kappa takes the fading SPRT's sigma down to the 5 mm floor; a face-survey
+    fix is judged against at least its smoothed point's variance (0.021 m): the survey's own swing of a few
+    centimetres over three chutes is not a fault, 004's rail deviation still is, by its third fix."""
+    det = sp.Config(imu=sp.ImuNoise(gyro_arw=1e-6, accel_vrw=1e-5, gyro_bias=1e-7, accel_bias=1e-5)).detector
+    params = fp.detector_params(det, "fsprt")
+    nav = np.zeros(kf.N_NAV)
+    nav[kf.LAT], nav[kf.QUAT] = 0.5, (1.0, 0.0, 0.0, 0.0)
+    r_m = 6.36e6
+    p0, r_fix = np.eye(kf.N_STATES) * 1e-6, np.eye(3) * 0.047 ** 2  # the fix's R as cpoem.predict_fixes makes it
+    counters, det_buf = np.zeros(3, np.int64), np.zeros((det.window, 2))
+    fsprt, isolated, stats = fsprt_state(fk.DET_DOF), np.zeros(1, np.int8), np.zeros(3)
+    rng = np.random.default_rng(3)
+
+    def fix(offset_north: float, floor: float) -> None:
+        x, p = np.zeros(kf.N_STATES), p0.copy()
+        llh = np.array([nav[kf.LAT] - offset_north / r_m, 0.0, 0.0])
+        fk._fix_update(x, p, nav, np.zeros(kf.N_CAL), np.zeros(3), llh, r_fix, np.zeros(3), np.array([0.0, 1.0, 0.0]),
+                       floor, False, x.copy(), p0.copy(), params, fsprt, isolated, counters, det_buf, stats)
+
+    for _ in range(det.window + 5):
+        fix(0.002 * rng.standard_normal(), var_floor)
+    fix(0.01, var_floor)
+    assert stats[fk.DET_RESIDUAL] == pytest.approx(0.01 ** 2 / max(var_floor, det.sd_floor ** 2), rel=0.02)
+    for offset in offsets:
+        fix(offset, var_floor)
+    assert bool(isolated[0]) == flagged
