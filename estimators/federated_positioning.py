@@ -45,6 +45,12 @@ faults. A fault flag raised earlier holds over them."""
 CAP = 1.25
 """The fading SPRT's statistic is held at or below CAP * t_on: a fault of any size keeps the flag raised, and once
 it has gone the statistic falls to t_off in ln(CAP t_on / t_off) / ln(1 / fading) clean fixes (3 at 12, 5, 0.6)."""
+ALONG_FACE_SD = 1e3
+"""One-sigma [m] along the face of a rail-model fix from an earlier pass's point: none of its information is along
+the face. The point's along-face position is the filter's own of that pass, from the same odometer; taken at
+cpoem's path_along_sd (0.05 m) it held each pass to the last one's along-face error, which the first cut makes
+(seed004 trial 5: 0.2-0.3 m east rms in cycles 2-5 from a first cut's 1.3 m; 0.03-0.06 m without). Along the face
+the shearer is placed by the odometer, its scale calibrated by the face-end fixes of every cut."""
 DETECTORS = ("residual", "dual_state", "fsprt")
 """The detectors of 004 section IV in the order of federated_kf.DET_*: residual chi-square, dual-state
 chi-square, fading SPRT."""
@@ -199,11 +205,14 @@ def next_pass_points(points: Points, t: np.ndarray, flags: np.ndarray, t_tested:
 def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Points, direction: np.ndarray,
                 notes: list[str]) -> tuple[sp.Fixes, np.ndarray, np.ndarray]:
     """The rail kinematics model's fixes over epochs (a, b] (none within cfg.end_zone_m of a face end unless from
-    the face survey, before any push) with the surveyed face ends, and each fix's scale_h and var_floor
+    the face survey, before any push; along the face at ALONG_FACE_SD unless from the face survey) with the
+    surveyed face ends, and each fix's scale_h and var_floor
     (federated_kf._fix_update): for points of the face survey, which come with the line's `direction` d enu / d u
     at each point (K, 3; empty for points of an earlier pass), that direction times the odometer travel, and the
     variance of the smoothed survey point along the advance direction; zero for the others."""
     surveyed = direction.shape[0] > 0
+    if not surveyed:
+        cfg = dataclasses.replace(cfg, path_along_sd=ALONG_FACE_SD)
     fixes = sp.fixes_for(prep, cfg, log, a, b, points, notes)
     u = prep.odo - prep.odo[0]
     lo, hi = u.min() + cfg.end_zone_m, u.max() - cfg.end_zone_m

@@ -206,3 +206,26 @@ def test_a_face_survey_fix_is_judged_against_the_survey_points_own_variance(var_
     for offset in offsets:
         fix(offset, var_floor)
     assert bool(isolated[0]) == flagged
+
+
+def test_a_fix_from_an_earlier_pass_says_nothing_along_the_face(face):
+    """A point of an earlier pass was placed along the face by the filter's own odometer: its fix constrains the
+    shearer across the face and vertically only. A face-survey point lies at a true distance: its fix keeps its
+    along-face information (the odometer's scale, through scale_h)."""
+    _, _, log, cfg, prep = face
+    cfg = dataclasses.replace(cfg, end_zone_m=0.0, cpoem_spacing_m=cfg.chute_length_m)  # as run_rail; 68 m face
+    points, direction = sp.face_survey_points(log, prep)
+    a, b = prep.segments[0]
+    surveyed, _, _ = fp._rail_fixes(prep, cfg, log, a, b, points, direction, [])
+    earlier, _, floor = fp._rail_fixes(prep, cfg, log, a, b, points, np.zeros((0, 3)), [])
+    rail = np.isfinite(earlier.gate)
+    assert rail.sum() > 10 and not floor.any()
+    body = points.c_bn[0]  # x across the face (the advance), y along it
+
+    def information(fixes, axis):
+        r = fixes.r[np.isfinite(fixes.gate)]
+        return np.einsum("i,kij,j->k", body[:, axis], np.linalg.inv(r), body[:, axis])
+
+    assert np.all(information(earlier, 1) * fp.ALONG_FACE_SD ** 2 < 1.01)
+    assert np.all(information(surveyed, 1) > 100.0)  # sd < 0.1 m along the face
+    np.testing.assert_allclose(information(earlier, 0), information(surveyed, 0))
