@@ -161,6 +161,10 @@ def figures(trials: int = 20) -> dict:
     print(f"\nfault-free Monte Carlo, {trials} trials of seed004 ({trials * hours:.0f} h): FSPRT false alarms "
           f"{sum(alarms)} (target 0; per trial {alarms}); worst cycle RMSE E {worst[:, 0].mean():.3f} +- "
           f"{worst[:, 0].std():.3f}, N {worst[:, 1].mean():.3f} +- {worst[:, 1].std():.3f} m")
+    mean = figs["mc_rmse"].mean(axis=0)
+    print("mean RMSE per cycle E " + " ".join(f"{v:.3f}" for v in mean[:, 0]) + ", N "
+          + " ".join(f"{v:.3f}" for v in mean[:, 1]) + f" m; trial-cycles at or under 0.10 m: E "
+          f"{np.mean(figs['mc_rmse'][:, :, 0] <= 0.10):.0%}, N {np.mean(figs['mc_rmse'][:, :, 1] <= 0.10):.0%}")
     print(f"\ntotal {time.perf_counter() - t_start:.0f} s")
     return figs
 
