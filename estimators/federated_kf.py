@@ -176,8 +176,7 @@ def initial_covariances(p0, federated):
 
 @nb.njit(cache=True)
 def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, var_floor, trusted, x_other, p_other,
-                det_params,
-                fsprt, isolated, counters, det_buf, stats):
+                det_params, fsprt, isolated, counters, det_buf, stats):
     """Position fix of the rail kinematics model (004 eq. 9) with the three detectors on its innovation (004
     eqs. 15-24): residual chi-square, dual-state chi-square against the other sub-filter, fading SPRT (with its
     hysteresis in isolated[0]). stats[:] = the three statistics. Applied unless the isolating detector holds a

@@ -206,10 +206,10 @@ def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Point
                 notes: list[str]) -> tuple[sp.Fixes, np.ndarray, np.ndarray]:
     """The rail kinematics model's fixes over epochs (a, b] (none within cfg.end_zone_m of a face end unless from
     the face survey, before any push; along the face at ALONG_FACE_SD unless from the face survey) with the
-    surveyed face ends, and each fix's scale_h and var_floor
-    (federated_kf._fix_update): for points of the face survey, which come with the line's `direction` d enu / d u
-    at each point (K, 3; empty for points of an earlier pass), that direction times the odometer travel, and the
-    variance of the smoothed survey point along the advance direction; zero for the others."""
+    surveyed face ends, and each fix's scale_h and var_floor (federated_kf._fix_update): for points of the face
+    survey, which come with the line's `direction` d enu / d u at each point (K, 3; empty for points of an earlier
+    pass), that direction times the odometer travel, and the variance of the smoothed survey point along the
+    advance direction; zero for the others."""
     surveyed = direction.shape[0] > 0
     if not surveyed:
         cfg = dataclasses.replace(cfg, path_along_sd=ALONG_FACE_SD)
