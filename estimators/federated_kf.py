@@ -254,9 +254,9 @@ def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, var_flo
 
 @nb.njit(cache=True)
 def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b, fix_epoch, fix_llh, fix_r,
-             fix_scale_h, fix_advance, fix_var_floor, fix_trusted, q_psd, params, mag_params, det_params, nav, cal, p_sub, beta, nominal, r_buf, counters, fsprt, isolated, det_buf,
-             out_nav, out_cal, out_sd, flags, mag_flags, beta_out, r_yaw_out, yaw_innov, sub_delta, fix_stats,
-             fix_applied):
+             fix_scale_h, fix_advance, fix_var_floor, fix_trusted, q_psd, params, mag_params, det_params, nav, cal,
+             p_sub, beta, nominal, r_buf, counters, fsprt, isolated, det_buf, out_nav, out_cal, out_sd, flags,
+             mag_flags, beta_out, r_yaw_out, yaw_innov, sub_delta, fix_stats, fix_applied):
     """Run the federated (mode FEDERATED) or centralized (CENTRALIZED) filter over epochs j0+1 .. j1.
 
     Inputs per epoch j: odometer distance and mode (estimators.shearer_kf.run_filter), mag_b (3,) the calibrated

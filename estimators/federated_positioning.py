@@ -169,9 +169,10 @@ def _run(log: sp.Log, cfg: sp.Config, prep, federated: bool, use_mag: bool, rail
         stats = np.full((fixes.epoch.size, 3), np.nan)
         applied = np.zeros(fixes.epoch.size, np.int8)
         fk.run_afkf(mode, a, b, prep.steps, prep.t_mech, prep.phi_b, prep.dv_b, prep.odo, prep.mode, mag_b,
-                    fixes.epoch, fixes.llh, fixes.r, scale_h, fixes.advance, var_floor, ~np.isfinite(fixes.gate), q_psd, params, params_m, params_d, nav, cal, p_sub, beta,
-                    nominal, r_buf, counters, fsprt, isolated, det_buf, run.nav, run.cal, run.sd, run.flags, run.mag_flags,
-                    run.beta, run.r_yaw, run.innov, run.delta, stats, applied)
+                    fixes.epoch, fixes.llh, fixes.r, scale_h, fixes.advance, var_floor, ~np.isfinite(fixes.gate),
+                    q_psd, params, params_m, params_d, nav, cal, p_sub, beta, nominal, r_buf, counters, fsprt,
+                    isolated, det_buf, run.nav, run.cal, run.sd, run.flags, run.mag_flags, run.beta, run.r_yaw,
+                    run.innov, run.delta, stats, applied)
         run.fixes.append((fixes.epoch, fixes.llh, stats, applied))
         if rail:
             cov = np.zeros((b - a + 1, 3, 3))
