@@ -286,7 +286,8 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
     k_fix = np.searchsorted(fix_epoch, j0 + 1)
     # Snapshots of the state at the start of the last N_BACK epochs with a rail fix: when the fading SPRT raises a
     # fault, the fixes of the rise that led to it were already applied and have bent the estimate (a soft fault is
-    # partly absorbed); the filter goes back to before them and goes on without them.
+    # partly absorbed); the filter goes back to before them and goes on without them, and with the trusted fixes
+    # (surveyed face ends) among them again.
     snap_j = np.full(N_BACK, -1, np.int64)
     snap_k = np.full(N_BACK, -1, np.int64)
     snap_nav, snap_cal = np.zeros((N_BACK, nav.size)), np.zeros((N_BACK, cal.size))
@@ -333,7 +334,7 @@ def run_afkf(mode, j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b
                                                              counters[0], check)
         back = -1
         while k_fix < fix_epoch.size and fix_epoch[k_fix] == j:
-            if k_fix <= rejected_until:  # rolled back: already tested, left out
+            if k_fix <= rejected_until and not fix_trusted[k_fix]:  # rolled back: already tested, left out
                 fix_applied[k_fix] = 0
                 flag |= FLAG_SKIPPED
                 k_fix += 1

@@ -82,14 +82,22 @@ def test_the_detectors_judge_a_fix_by_what_its_innovations_show(face):
     assert 0.5 < nis[0] < 2.0 and nis[1] < 0.2, nis
 
 
-def test_a_rail_deviation_is_isolated_and_the_filter_readmits_the_model(face):
+@pytest.fixture(scope="module")
+def deviation(face):
+    """The default face with a rail deviation over the first cut: (t0, t1, log, prep, solution)."""
     scn, result, _, cfg, _ = face
     cut_end = float(result.tables["truth_cycles"]["t_cut_end"][0])
     t0, t1 = 0.35 * cut_end, 0.6 * cut_end
     faulted = parse_scenario({**scn.model_dump(), "faults": [
         {"kind": "rail_deviation", "t_start_s": t0, "t_end_s": t1, "value": 2.0}]}, "default-rail-fault")
     f_log = _log(faulted, result)
-    sol = fp.run_rail(f_log, cfg, sp.prepare(f_log, cfg))
+    f_prep = sp.prepare(f_log, cfg)
+    return t0, t1, f_log, f_prep, fp.run_rail(f_log, cfg, f_prep)
+
+
+def test_a_rail_deviation_is_isolated_and_the_filter_readmits_the_model(face, deviation):
+    _, result, _, cfg, _ = face
+    t0, t1, f_log, _, sol = deviation
     isolated = (sol.flags & FLAG_ISOLATED) > 0
     assert isolated[(sol.t > t0) & (sol.t < t1 + 60.0)].any()
     assert not isolated[sol.t > t1 + 120.0].any()
@@ -110,6 +118,39 @@ def test_a_rail_deviation_is_isolated_and_the_filter_readmits_the_model(face):
         _, err = metrics.position_errors(sp.estimate_columns(s), result.tables["truth_shearer"])
         errs.append(np.hypot(err[:, 0], err[:, 1]).max())
     assert errs[0] < errs[1]
+
+
+def test_a_surveyed_fix_inside_the_rolled_back_fixes_is_applied_again(face, deviation, monkeypatch):
+    """When the fading SPRT raises the fault the filter goes back to where the fault began and leaves out the
+    rail-model fixes it had taken since; a surveyed (trusted) fix among them is taken again, not dropped."""
+    _, result, _, cfg, _ = face
+    _, _, f_log, f_prep, sol = deviation
+    d = sol.detectors
+    alarm = d["t"][np.argmax(d["fsprt"] > cfg.detector.t_on)]
+    first_out = sol.t[np.argmax((sol.flags & FLAG_ISOLATED) > 0)]
+    rolled = d["t"][(d["t"] >= first_out) & (d["t"] < alarm)]
+    assert rolled.size >= 2
+    j_fix = int(np.searchsorted(f_prep.t_kf, 0.5 * (rolled[0] + rolled[1])))
+    true = metrics.truth_at(result.tables["truth_shearer"], f_prep.t_kf[[j_fix]])
+    rail_fixes = fp._rail_fixes
+
+    def with_surveyed_fix(prep, cfg_, log, a, b, *rest):
+        fixes, scale_h, var_floor = rail_fixes(prep, cfg_, log, a, b, *rest)
+        if not a < j_fix <= b:
+            return fixes, scale_h, var_floor
+        order = np.argsort(np.append(fixes.epoch, j_fix), kind="stable")
+        llh = np.column_stack([true["lat"], true["lon"], true["h"]])
+        fixes = sp.Fixes(np.append(fixes.epoch, j_fix), np.vstack([fixes.llh, llh]),
+                         np.vstack([fixes.r, np.diag([0.01 ** 2] * 3)[None]]), np.append(fixes.gate, np.inf),
+                         np.vstack([fixes.advance, np.zeros((1, 3))])).take(order)
+        return fixes, np.vstack([scale_h, np.zeros((1, 3))])[order], np.append(var_floor, 0.0)[order]
+
+    monkeypatch.setattr(fp, "_rail_fixes", with_surveyed_fix)
+    again = fp.run_rail(f_log, cfg, f_prep).detectors
+    row = np.flatnonzero(np.isclose(again["t"], f_prep.t_kf[j_fix]) & np.isnan(again["fsprt"]))
+    assert row.size == 1
+    assert again["isolated"][row[0]] == 1  # inside the rolled-back stretch
+    assert again["applied"][row[0]] == 1
 
 
 def test_unknown_detector_and_missing_rams_are_one_line(face):
