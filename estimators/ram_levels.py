@@ -87,11 +87,12 @@ def side_level(r: np.ndarray, i: int, step: int, tol: float, sigma: float, sampl
 
 
 def drop_levels(r: np.ndarray, lo: int, hi: int, tol: float, sigma: float, samples: int = LEVEL_SAMPLES,
-                ramp_band: float = 0.0, min_run: int = 1) -> tuple[int, int, float, float, int, int, int, int]:
+                ramp_band: float = 0.0, min_run: int = 1,
+                top_samples: int = 0) -> tuple[int, int, float, float, int, int, int, int]:
     """The plateaus around the drop of r from reading lo (its top) to reading hi (its bottom): the last reading
     before it and the first after it (b, a), the levels before and after (side_level), the readings each used,
     the first reading of the plateau before and the last of the plateau after (each level of at least min_run
-    readings, side_level).
+    readings, side_level; the level before from at most top_samples readings when given, else `samples`).
 
     b and a bound the ramp between the plateaus: from the first reading below half-way, back up the ramp while each
     reading is more than tol below the one before, and on down it likewise. With ramp_band > 0 a reading more than
@@ -106,6 +107,6 @@ def drop_levels(r: np.ndarray, lo: int, hi: int, tol: float, sigma: float, sampl
         b -= 1
     while a < hi and (r[a] > bottom0 or r[a] - r[a + 1] > tol):
         a += 1
-    top, n_top, top_start = side_level(r, b, -1, tol, sigma, samples, min_run)
+    top, n_top, top_start = side_level(r, b, -1, tol, sigma, top_samples or samples, min_run)
     post, n_post, post_end = side_level(r, a, 1, tol, sigma, samples, min_run)
     return b, a, top, post, n_top, n_post, top_start, post_end

@@ -1,6 +1,7 @@
 """CPOEM pieces: point crossings along the face and the pan advance from push-ram strokes."""
 
 import numpy as np
+import pytest
 
 from estimators.cpoem import RamLog, crossings, ram_stroke
 
@@ -51,19 +52,25 @@ def test_advance_interpolates_between_supports_and_propagates_a_missing_reading(
     assert np.isnan(rams.advance(3.0, 0.0, 300.0))
 
 
-def test_stroke_of_a_noisy_sensor_over_a_snake_push_is_unbiased():
-    """004's 0.02 m ram sensor over the twin's snake push (eight partial steps of 1-24 cm, 37 s apart, the last one
-    56 s before the support advances in one reading): over 300 noise draws the stroke is off by 1.4 mm on average
-    and 7 mm rms. Levels taken within 6 sigma of a swing's extreme merged the last steps with the plateaus before
-    them and read the stroke 10 mm short (7-8 mm per cycle on seed004, which bent the rail model's fixes 1 cm a
-    cycle towards the goaf)."""
-    steps = [0.0125, 0.0721, 0.142, 0.2142, 0.2412, 0.1791, 0.1058, 0.0363]
+@pytest.mark.parametrize("steps, advance_after_s", [
+    ([0.0125, 0.0721, 0.142, 0.2142, 0.2412, 0.1791, 0.1058, 0.0363], 56.0),  # an odd support of seed004
+    ([0.0356, 0.1069, 0.1784, 0.2416, 0.2133, 0.1407, 0.0706, 0.0078], 37.0),  # an even one: a last step of 8 mm
+])
+def test_stroke_of_a_noisy_sensor_over_a_snake_push_is_unbiased(steps, advance_after_s):
+    """004's 0.02 m ram sensor over the twin's snake push (eight partial steps of 1-24 cm, 37 s apart, the support
+    advancing in one reading 37-56 s after the last): over 300 noise draws the stroke is off by at most 0.3 mm on
+    average and 8 mm rms.
+
+    Levels taken within 6 sigma of a swing's extreme merged the last steps with the plateaus before them and read
+    the stroke 10 mm short (7-8 mm per cycle on seed004, which bent the rail model's fixes 1 cm a cycle towards the
+    goaf). The level before the advance taken from a minute of readings mixed an 8 mm last step, which the
+    level-change test cannot resolve, with the plateau before it: 3.2 mm short (cpoem.RAM_TOP_SAMPLES)."""
     t = np.arange(0.0, 1200.0, 1.0)
     clean = np.full(t.size, 1.2)
     for k, dx in enumerate(steps):
         clean[t >= 300.0 + 37.0 * k] += dx
-    clean[t >= 300.0 + 37.0 * (len(steps) - 1) + 56.0] -= sum(steps)
+    clean[t >= 300.0 + 37.0 * (len(steps) - 1) + advance_after_s] -= sum(steps)
     rng = np.random.default_rng(3)
     err = np.array([ram_stroke(t, clean + rng.normal(0.0, 0.02, t.size), np.ones(t.size), 0.0, 1200.0, 0.02)
                     for _ in range(300)]) - sum(steps)
-    assert abs(err.mean()) < 0.003 and np.sqrt(np.mean(err ** 2)) < 0.010, (err.mean(), err.std())
+    assert abs(err.mean()) < 0.0015 and np.sqrt(np.mean(err ** 2)) < 0.008, (err.mean(), err.std())
