@@ -194,10 +194,11 @@ def _fix_update(x, p, nav, cal, lever, fix_llh, fix_r, scale_h, advance, var_flo
     estimate of it as 003's R is a small difference of large numbers). A fault would hide below the model's
     variance. With kappa the variance still follows P where it grows (a stretch without fixes).
 
-    var_floor: a further floor of sigma_k^2, for a fix whose error the filter does not share: the face survey's.
-    The smoothed survey's error (0.021 m) is correlated along the face over +-14.5 m (estimators.face_line), and
-    the filter, riding the INS, does not follow its swings; in a calm stretch of the survey kappa takes sigma_k
-    down to D_SD_FLOOR (5 mm), where a 4 cm swing over three chutes read as a fault (seed004 trials 9 and 10).
+    var_floor: a further floor of sigma_k^2, for the part of a fix's error the filter does not share: the ram
+    stroke's, measured anew at each pass, and the face survey's. The smoothed survey's error (0.021 m) is correlated
+    along the face over +-14.5 m (estimators.face_line), and the filter, riding the INS, does not follow its swings;
+    in a calm stretch of the survey kappa takes sigma_k down to D_SD_FLOOR (5 mm), where a 4 cm swing over three
+    chutes read as a fault (seed004 trials 9 and 10).
 
     scale_h (3,): for a point whose face coordinate is a true distance (the face survey), the along-face
     direction in n times the odometer travel u at the fix. Such a fix lies u k_true along the face from where the

@@ -51,6 +51,12 @@ the face. The point's along-face position is the filter's own of that pass, from
 cpoem's path_along_sd (0.05 m) it held each pass to the last one's along-face error, which the first cut makes
 (seed004 trial 5: 0.2-0.3 m east rms in cycles 2-5 from a first cut's 1.3 m; 0.03-0.06 m without). Along the face
 the shearer is placed by the odometer, its scale calibrated by the face-end fixes of every cut."""
+STROKE_SD_PER_NOISE = 0.5
+"""One-sigma of a measured stroke per unit of the ram reading noise (cfg.ram_noise_sd): each level of a stroke is
+the median of 30-60 readings (estimators.cpoem.ram_stroke), 7.2 mm for 0.02 m readings; against the truth seed004's
+strokes spread by 10.4-10.8 mm. Each pass measures its strokes anew, so the filter cannot share this error: it
+floors the detectors' variance of every rail fix (at a 5 mm floor a lone 31 mm stroke error read as 5.6 sigma and
+raised a fault-free alarm, seed004 trial 21)."""
 DETECTORS = ("residual", "dual_state", "fsprt")
 """The detectors of 004 section IV in the order of federated_kf.DET_*: residual chi-square, dual-state
 chi-square, fading SPRT."""
@@ -209,8 +215,9 @@ def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Point
     the face survey, before any push; along the face at ALONG_FACE_SD unless from the face survey) with the
     surveyed face ends, and each fix's scale_h and var_floor (federated_kf._fix_update): for points of the face
     survey, which come with the line's `direction` d enu / d u at each point (K, 3; empty for points of an earlier
-    pass), that direction times the odometer travel, and the variance of the smoothed survey point along the
-    advance direction; zero for the others."""
+    pass), that direction times the odometer travel (zero for the others); var_floor, the error the filter does not
+    share: the stroke's (STROKE_SD_PER_NOISE), or the smoothed survey point's variance along the advance direction
+    where that is larger; zero for the surveyed face ends."""
     surveyed = direction.shape[0] > 0
     if not surveyed:
         cfg = dataclasses.replace(cfg, path_along_sd=ALONG_FACE_SD)
@@ -220,8 +227,8 @@ def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Point
     keep = ((u[fixes.epoch] >= lo) & (u[fixes.epoch] <= hi)) | ~np.isfinite(fixes.gate) | surveyed
     fixes = fixes.take(keep)
     scale_h = np.zeros((fixes.epoch.size, 3))
-    var_floor = np.zeros(fixes.epoch.size)
     rail = np.isfinite(fixes.gate)
+    var_floor = np.where(rail, (STROKE_SD_PER_NOISE * cfg.ram_noise_sd) ** 2, 0.0)
     if surveyed and points.u.size >= 2 and rail.any():
         # The direction comes from the survey itself: the fixes carry the ram strokes, and a faulty one bends them.
         order = np.argsort(points.u)
@@ -230,7 +237,7 @@ def _rail_fixes(prep, cfg: sp.Config, log: sp.Log, a: int, b: int, points: Point
         scale_h[rail] = along * u_fix[:, None]
         across = points.c_bn[order, :, 0]  # the advance direction at each point (cpoem.predict_fixes)
         var_point = np.einsum("ki,kij,kj->k", across, points.cov[order], across)
-        var_floor[rail] = np.interp(u_fix, points.u[order], var_point)
+        var_floor[rail] = np.maximum(var_floor[rail], np.interp(u_fix, points.u[order], var_point))
     return fixes, scale_h, var_floor
 
 

@@ -104,15 +104,6 @@ class MagSettings:
     """Information-sharing rule (estimators.federated): "trace" (003 section 4.3) or "inverse_trace"."""
 
 
-RAIL_DETECTOR = DetectorConfig(fading=0.6, t_on=12.0, t_off=5.0, window=30, sd_floor=0.005)
-"""Fault detectors on the rail kinematics model's fixes (004 section IV). The fixes come one per chute (one every
-10-20 s at cutting speed), not at 10 Hz: a fading factor of 0.6 per fix keeps about a minute of memory. They test
-the innovation across the face against the model's variance scaled by what the last 30 accepted fixes'
-innovations show (estimators.federated_kf._fix_update: h P h' + R is several times too large for fixes from the
-filter's own previous pass), floored at sd_floor (5 mm here; a noisy ram sensor's stroke spread, see
-twin.estimate.positioning_config); with that scale's noise, t_on 12 and t_off 5 (fault_detection.DetectorConfig)."""
-
-
 @dataclass(frozen=True)
 class Config:
     """Everything the filter needs besides the log. Units SI."""
@@ -179,8 +170,14 @@ class Config:
     (its strokes are not yet read reliably there: see the issue 7 note)."""
     rail_advance_sd: float = 0.0
     """Advance from the ram strokes [m] as the rail kinematics model uses it; 0 takes advance_sd."""
-    detector: DetectorConfig = RAIL_DETECTOR
-    """Fault detectors on the rail kinematics model's fixes (004 section IV); RAIL_DETECTOR."""
+    detector: DetectorConfig = field(default_factory=lambda: DetectorConfig(fading=0.6, t_on=12.0, t_off=5.0,
+                                                                            window=30, sd_floor=0.005))
+    """Fault detectors on the rail kinematics model's fixes (004 section IV). The fixes come one per chute (one
+    every 10-20 s at cutting speed), not at 10 Hz: a fading factor of 0.6 per fix keeps about a minute of memory.
+    They test the innovation across the face against the model's variance scaled by what the last 30 accepted
+    fixes' innovations show (estimators.federated_kf._fix_update: h P h' + R is several times too large for fixes
+    from the filter's own previous pass), floored at 5 mm; with that scale's noise, t_on 12 and t_off 5
+    (fault_detection.DetectorConfig)."""
     isolate_by: str | None = "fsprt"
     """The detector whose fault flag isolates the rail kinematics model (residual, dual_state, fsprt; None)."""
 

@@ -21,9 +21,8 @@ from estimators.logformat import (
     read_estimate,
     write_estimate,
 )
-from twin.cli import default_scenario
 from twin.estimate import positioning_config, true_states
-from twin.scenario import load_scenario, parse_scenario
+from twin.scenario import parse_scenario
 from twin.sensors import imu_truth, sensor_streams
 
 from .conftest import simulated
@@ -216,33 +215,39 @@ def test_the_next_pass_takes_no_fix_from_points_recorded_while_settling_or_isola
     assert kept.t.size == np.sum((t_pts >= t_tested[fp.ARM_FIXES]) & ~((t_pts >= 50.0) & (t_pts < 70.0)))
 
 
-SEED004_FLOOR = 0.01
-"""The detectors' floor twin.estimate.positioning_config gives seed004's 0.02 m ram sensors."""
+STROKE_VAR_SEED004 = (fp.STROKE_SD_PER_NOISE * 0.02) ** 2
+"""The variance floor of a rail fix from seed004's 0.02 m ram readings: the stroke's own spread."""
 
 
-def test_the_detectors_floor_is_a_strokes_own_spread(face):
-    """Half the ram reading noise (seed004: 0.02 m readings, strokes spread by 10.4-10.8 mm), at least RAIL_DETECTOR's
-    5 mm (the default face's 0.1 mm sensors)."""
-    scn = load_scenario(default_scenario().parent / "seed004.toml")
-    assert positioning_config(scn).detector.sd_floor == pytest.approx(SEED004_FLOOR)
-    assert face[3].detector.sd_floor == sp.RAIL_DETECTOR.sd_floor
+def test_a_rail_fix_is_floored_at_its_strokes_own_spread(face):
+    """Every rail fix's detector variance is at least its stroke's (the filter cannot share an error each pass
+    measures anew), a face-survey fix's also at least its smoothed point's; a surveyed face end has none."""
+    _, _, log, cfg, prep = face
+    cfg = dataclasses.replace(cfg, end_zone_m=0.0, cpoem_spacing_m=cfg.chute_length_m, ram_noise_sd=0.02)
+    points, direction = sp.face_survey_points(log, prep)
+    a, b = prep.segments[0]
+    earlier, _, floor = fp._rail_fixes(prep, cfg, log, a, b, points, np.zeros((0, 3)), [])
+    rail = np.isfinite(earlier.gate)
+    assert rail.any() and (~rail).any()
+    assert np.allclose(floor[rail], STROKE_VAR_SEED004) and np.all(floor[~rail] == 0.0)
+    surveyed, _, floor = fp._rail_fixes(prep, cfg, log, a, b, points, direction, [])
+    rail = np.isfinite(surveyed.gate)
+    assert np.all(floor[rail] >= STROKE_VAR_SEED004) and np.any(floor[rail] > STROKE_VAR_SEED004)
 
 
-@pytest.mark.parametrize("var_floor, sd_floor, offsets, flagged", [
-    (0.021 ** 2, 0.005, [0.0, -0.016, -0.03, -0.05, -0.06, -0.065], False),  # seed004 trial 10's survey swing
-    (0.0, 0.005, [0.0, -0.016, -0.03, -0.05, -0.06, -0.065], True),
-    (0.021 ** 2, 0.005, [-0.05, -0.09, -0.135], True),  # the first fixes of 004's rail deviation (seed004_fault)
-    (0.0, SEED004_FLOOR, [0.031], False),  # seed004 trial 21: one stroke 31 mm off, on an earlier pass's point
-    (0.0, 0.005, [0.031], True),
+@pytest.mark.parametrize("var_floor, offsets, flagged", [
+    (0.021 ** 2, [0.0, -0.016, -0.03, -0.05, -0.06, -0.065], False),  # seed004 trial 10's swing of the survey
+    (0.0, [0.0, -0.016, -0.03, -0.05, -0.06, -0.065], True),
+    (0.021 ** 2, [-0.05, -0.09, -0.135], True),  # the first fixes of 004's rail deviation (seed004_fault)
+    (STROKE_VAR_SEED004, [0.031], False),  # seed004 trial 21: one stroke 31 mm off, on an earlier pass's point
+    (0.0, [0.031], True),
 ])
-def test_a_fix_is_judged_against_at_least_the_error_the_filter_cannot_share(var_floor, sd_floor, offsets, flagged):
-    """After a calm stretch the window's kappa takes the fading SPRT's sigma down to its floor. A face-survey fix is
-    judged against at least its smoothed point's variance (0.021 m): the survey's own swing of a few centimetres
-    over three chutes is not a fault, 004's rail deviation still is, by its third fix. Any fix is judged against
-    at least the floor, a stroke's own spread (twin.estimate.positioning_config): one stroke a few centimetres
-    off is not a fault."""
-    cfg = sp.Config(imu=sp.ImuNoise(gyro_arw=1e-6, accel_vrw=1e-5, gyro_bias=1e-7, accel_bias=1e-5))
-    det = dataclasses.replace(cfg.detector, sd_floor=sd_floor)
+def test_a_fix_is_judged_against_at_least_the_error_the_filter_cannot_share(var_floor, offsets, flagged):
+    """After a calm stretch the window's kappa takes the fading SPRT's sigma down to the 5 mm floor. A face-survey
+    fix is judged against at least its smoothed point's variance (0.021 m): the survey's own swing of a few
+    centimetres over three chutes is not a fault, 004's rail deviation still is, by its third fix. A rail fix is
+    judged against at least its stroke's spread: one stroke a few centimetres off is not a fault."""
+    det = sp.Config(imu=sp.ImuNoise(gyro_arw=1e-6, accel_vrw=1e-5, gyro_bias=1e-7, accel_bias=1e-5)).detector
     params = fp.detector_params(det, "fsprt")
     nav = np.zeros(kf.N_NAV)
     nav[kf.LAT], nav[kf.QUAT] = 0.5, (1.0, 0.0, 0.0, 0.0)
@@ -278,7 +283,7 @@ def test_a_fix_from_an_earlier_pass_says_nothing_along_the_face(face):
     surveyed, _, _ = fp._rail_fixes(prep, cfg, log, a, b, points, direction, [])
     earlier, _, floor = fp._rail_fixes(prep, cfg, log, a, b, points, np.zeros((0, 3)), [])
     rail = np.isfinite(earlier.gate)
-    assert rail.sum() > 10 and not floor.any()
+    assert rail.sum() > 10 and np.allclose(floor, np.where(rail, (fp.STROKE_SD_PER_NOISE * cfg.ram_noise_sd) ** 2, 0.0))
     body = points.c_bn[0]  # x across the face (the advance), y along it
 
     def information(fixes, axis):

@@ -8,7 +8,6 @@ score the result (estimators.metrics) and to give the true sensor states beside 
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import math
 from pathlib import Path
@@ -52,11 +51,6 @@ def positioning_config(scn: Scenario) -> sp.Config:
           "n_samples": est.n_samples, "filter_rate_hz": est.filter_rate_hz, "cpoem_spacing_m": est.cpoem_spacing_m,
           "ram_noise_sd": max(ram.noise_m, ram.resolution_m), "advance_sd": max(5 * ram.noise_m, 0.003),
           "rail_advance_sd": max(1.5 * ram.noise_m, 0.003),
-          # The detectors' floor: a stroke's own spread, which the filter cannot share (each pass measures it
-          # anew), half the reading noise: seed004's strokes from 0.02 m readings spread by 10.4-10.8 mm (sd),
-          # 7.2 mm of it from the medians of their levels. At the 5 mm floor a lone 31 mm stroke error read as 5.6
-          # sigma and raised a fault-free alarm (seed004 trial 21).
-          "detector": dataclasses.replace(sp.RAIL_DETECTOR, sd_floor=max(0.5 * ram.noise_m, sp.RAIL_DETECTOR.sd_floor)),
           "chute_length_m": scn.face.pan_length_m,
           "end_zone_m": scn.shearer.length_m + (scn.pattern.push_lag_pans + scn.pattern.snake_length_pans + 2)
           * scn.face.pan_length_m,
