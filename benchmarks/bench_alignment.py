@@ -10,7 +10,7 @@ alignment time, so both grades the project has for the shearer are run, each for
 * nav-004 (1800 s): the navigation-grade INS of 004 Table 1 (heading floor ~0.005 deg, reached by averaging the
   gyro ARW down).
 
-Floors of the draw (estimators.fine_alignment `alignment_floors`, signed, per axis, the tilt about the axes of
+Floors of the draw (estimators.sins.fine_alignment `alignment_floors`, signed, per axis, the tilt about the axes of
 the estimate once its heading error is taken out): the errors no stationary
 alignment can beat for the biases actually drawn (turn-on bias plus non-orthogonality times gravity). "classical"
 is -nabla_N / g, nabla_E / g and the gyrocompassing floor; the level floor of phi_E also weighs the north and up
@@ -36,9 +36,8 @@ import time
 
 import numpy as np
 
-from estimators import earth
-from estimators.fine_alignment import METHODS, alignment_floors, fine_align
-from estimators.rotations import (
+from estimators.nav import earth
+from estimators.nav.rotations import (
     euler_to_quat,
     mat_to_euler,
     quat_conj,
@@ -47,8 +46,9 @@ from estimators.rotations import (
     quat_to_mat,
     rotvec_to_quat,
 )
-from twin.imu_errors import apply_imu_errors
-from twin.imu_grades import grade
+from estimators.sins.fine_alignment import METHODS, alignment_floors, fine_align
+from twin.config.imu_grades import grade
+from twin.sensors.imu_errors import apply_imu_errors
 
 LAT = np.radians(34.27)
 H = 36.0

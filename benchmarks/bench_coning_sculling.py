@@ -1,7 +1,7 @@
 """Reproduction of 000 sections 7.2 (coning) and 7.4 (sculling) beside the paper's figures.
 
 The experiments are the scenario files scenarios/seed000_coning.toml and seed000_sculling.toml (every
-parameter there); twin.experiment runs them (`longwall run scenarios/seed000_coning.toml` also writes the error
+parameter there); twin.papers.sins_experiments runs them (`longwall run scenarios/seed000_coning.toml` also writes the error
 time series and a Rerun recording).
 Coning: alpha = 1 deg, omega = 2 pi rad/s, h = 10 ms, 40 s, 3 sub-samples (the paper's n = 3). The coning error of
 an update is the algorithm's rotation vector minus the exact equivalent rotation vector over the interval; the
@@ -12,7 +12,7 @@ velocity error against the true motion, uncompensated and compensated.
 Run: python benchmarks/bench_coning_sculling.py
 """
 
-from twin.experiment import benchmark
+from twin.papers.sins_experiments import benchmark
 
 if __name__ == "__main__":
     benchmark(["seed000_coning", "seed000_sculling"])

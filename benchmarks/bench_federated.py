@@ -15,14 +15,14 @@ import time
 
 import numpy as np
 
-from estimators import federated_positioning as fp
-from estimators import metrics
-from estimators import shearer_positioning as sp
+from estimators.io import metrics
+from estimators.shearer import federated as fp
+from estimators.shearer import positioning as sp
 from twin.cli import default_scenario
-from twin.estimate import positioning_config
-from twin.scenario import load_scenario
-from twin.sensors import imu_truth, sensor_streams
-from twin.simulate import simulate
+from twin.config.scenario import load_scenario
+from twin.pipeline.estimate import positioning_config
+from twin.pipeline.simulate import simulate
+from twin.sensors.streams import imu_truth, sensor_streams
 
 METHODS = ("kf", "ckf_mag", "afkf")
 LABELS = {"kf": "SINS/OD", "ckf_mag": "SINS/OD/MAG CKF", "afkf": "SINS/OD/MAG AFKF"}

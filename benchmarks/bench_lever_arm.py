@@ -1,13 +1,13 @@
 """Benchmark: lever-arm compensation on the sway of 000 eq. 54 (reproduction of the paper's Tables 2-3).
 
-The experiment is the scenario file scenarios/seed000_lever_arm.toml (every parameter there); twin.experiment
+The experiment is the scenario file scenarios/seed000_lever_arm.toml (every parameter there); twin.papers.sins_experiments
 runs it (`longwall run scenarios/seed000_lever_arm.toml` also writes the error time series and a Rerun recording).
 
 The body's reference point rests at the paper's site (34.27 N, 117.18 E, 36 m) while it sways in pitch, roll
-and yaw with 10 deg amplitudes and periods 6, 8, 10 s; an error-free IMU at the lever arm r_p (twin.imu's exact
-increments at 200 Hz) is mechanized for 400 s (estimators.strapdown.mechanize, two-sample updates, height
+and yaw with 10 deg amplitudes and periods 6, 8, 10 s; an error-free IMU at the lever arm r_p (twin.sensors.imu's exact
+increments at 200 Hz) is mechanized for 400 s (estimators.sins.strapdown.mechanize, two-sample updates, height
 held) once with its raw increments and once with the lever arm removed by the two-sample compensation
-(estimators.installation.compensate_lever_arm, eqs. 48-53). The metric is the paper's: the maximum attitude
+(estimators.sins.installation.compensate_lever_arm, eqs. 48-53). The metric is the paper's: the maximum attitude
 error (E, N, U; at yaw near 0 these are the pitch, roll and yaw errors) over the run.
 
 The paper's numbers come from its fine-alignment filter (sensor biases, initial attitude errors, velocity
@@ -16,7 +16,7 @@ attitude errors are those of the lever arm alone (through the velocity error and
 their absolute size is not comparable with the paper's -- the reductions are.
 
 The closed-loop rows run the paper's own setting as far as it is specified: a closed-loop fine alignment of 400 s
-(15-state error-state Kalman filter on estimators.error_model: attitude, velocity, position, gyro drift,
+(15-state error-state Kalman filter on estimators.sins.error_model: attitude, velocity, position, gyro drift,
 accelerometer bias; zero-velocity observations of the resting reference point at 10 Hz), the paper's sensor
 errors (gyro bias 0.01 deg/h and random drift 0.005 deg/h, accelerometer bias 1e-4 g and random 1e-5 g) and
 initial attitude error [0.1, 0.1, 0.5] deg. Uncompensated, the sensor's lever-arm velocity enters the
@@ -27,7 +27,7 @@ maximum error over the second half (200-400 s, the steady state the paper descri
 Run: python benchmarks/bench_lever_arm.py
 """
 
-from twin.experiment import benchmark
+from twin.papers.sins_experiments import benchmark
 
 if __name__ == "__main__":
     benchmark(["seed000_lever_arm"])

@@ -20,20 +20,20 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators.adaptive import InnovationNoiseEstimator
-from estimators.magnetic import (
+from estimators.kalman.adaptive_noise import InnovationNoiseEstimator
+from estimators.nav.geomagnetic import (
     field_check,
     geomagnetic_reference,
     tilt_compensated_yaw,
     wrap_angle,
     yaw_noise_variance,
 )
-from estimators.rotations import quat_to_euler
-from twin.haulage import CUTTING, STOPPED
-from twin.magnetometer import shearer_attitude_at
-from twin.scenario import load_scenario
-from twin.sensors import imu_truth, sensor_streams
-from twin.simulate import simulate
+from estimators.nav.rotations import quat_to_euler
+from twin.config.scenario import load_scenario
+from twin.face.haulage import CUTTING, STOPPED
+from twin.pipeline.simulate import simulate
+from twin.sensors.magnetometer import shearer_attitude_at
+from twin.sensors.streams import imu_truth, sensor_streams
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 WINDOW_S = 5.0

@@ -15,13 +15,13 @@ import time
 
 import numpy as np
 
-from estimators import metrics
-from estimators import shearer_positioning as sp
+from estimators.io import metrics
+from estimators.shearer import positioning as sp
 from twin.cli import default_scenario
-from twin.estimate import positioning_config, true_states
-from twin.scenario import load_scenario, parse_scenario
-from twin.sensors import imu_truth, sensor_streams
-from twin.simulate import simulate
+from twin.config.scenario import load_scenario, parse_scenario
+from twin.pipeline.estimate import positioning_config, true_states
+from twin.pipeline.simulate import simulate
+from twin.sensors.streams import imu_truth, sensor_streams
 
 TABLE3 = {"traditional without compensation": (1.75, 1.99, 2.28, 2.31),
           "traditional with compensation": (0.21, 0.29, 0.33, 0.17), "proposed (KF + CPOEM + RTS)": (0.50, 0.32, 0.13, 0.17)}

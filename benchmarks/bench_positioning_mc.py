@@ -22,14 +22,14 @@ import time
 
 import numpy as np
 
-from estimators import metrics
-from estimators import shearer_positioning as sp
-from twin import imu_grades
+from estimators.io import metrics
+from estimators.shearer import positioning as sp
 from twin.cli import default_scenario
-from twin.estimate import positioning_config, true_states
-from twin.scenario import load_scenario
-from twin.sensors import imu_truth, sensor_streams
-from twin.simulate import simulate
+from twin.config import imu_grades
+from twin.config.scenario import load_scenario
+from twin.pipeline.estimate import positioning_config, true_states
+from twin.pipeline.simulate import simulate
+from twin.sensors.streams import imu_truth, sensor_streams
 
 GRADE_OFF = {"nonorth": ("gyro_nonorth", "accel_nonorth"), "gm": ("gyro_bias_instability", "accel_bias_instability"),
              "turnon": ("gyro_bias", "accel_bias"), "noise": ("gyro_arw", "accel_vrw"),

@@ -15,15 +15,15 @@ import time
 
 import numpy as np
 
-from estimators import federated_positioning as fp
-from estimators import metrics
-from estimators import shearer_positioning as sp
-from estimators.logformat import FLAG_ISOLATED
+from estimators.io import metrics
+from estimators.io.logformat import FLAG_ISOLATED
+from estimators.shearer import federated as fp
+from estimators.shearer import positioning as sp
 from twin.cli import default_scenario
-from twin.estimate import positioning_config
-from twin.scenario import load_scenario
-from twin.sensors import imu_truth, sensor_streams
-from twin.simulate import simulate
+from twin.config.scenario import load_scenario
+from twin.pipeline.estimate import positioning_config
+from twin.pipeline.simulate import simulate
+from twin.sensors.streams import imu_truth, sensor_streams
 
 TABLE2 = {  # 004 Table 2, RMSE per cycle [m]: INS/ODO east, north; assisted by model east, north
     "kf": ([0.886, 0.964, 0.939, 0.981, 1.041], [0.853, 1.002, 0.851, 0.923, 0.970]),

@@ -1,4 +1,4 @@
-"""Per-support push-ram checks (estimators.ram_checks) on seed004: detection, delay and attribution per fault
+"""Per-support push-ram checks (estimators.faults.ram_checks) on seed004: detection, delay and attribution per fault
 type, and false alarms over redrawn fault-free trials.
 
 Physics once: seed004 (200 supports, 1 m web, push-ram sensors of 0.02 m, five cycles in 6.4 h) is simulated once;
@@ -25,12 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators import ram_checks as rc
-from twin.estimate import ram_layout
-from twin.layout import support_stations
-from twin.scenario import load_scenario, parse_scenario
-from twin.sensors import imu_truth, sensor_streams
-from twin.simulate import simulate
+from estimators.faults import ram_checks as rc
+from twin.config.scenario import load_scenario, parse_scenario
+from twin.face.layout import support_stations
+from twin.pipeline.estimate import ram_layout
+from twin.pipeline.simulate import simulate
+from twin.sensors.streams import imu_truth, sensor_streams
 
 SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "seed004.toml"
 TARGET = 100

@@ -11,9 +11,9 @@ import sys
 import time
 from pathlib import Path
 
-from twin.scenario import load_scenario
-from twin.sensors import imu_truth, sensor_streams
-from twin.simulate import simulate
+from twin.config.scenario import load_scenario
+from twin.pipeline.simulate import simulate
+from twin.sensors.streams import imu_truth, sensor_streams
 
 
 def main() -> None:

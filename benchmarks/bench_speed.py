@@ -2,10 +2,10 @@
 
 Rows (seed004 is simulated once; rows 1, 2, 3 and 4 use that one simulation):
 
-1. twin real-time factor: simulated seconds / wall seconds of twin.simulate.simulate (no Parquet, no Rerun;
+1. twin real-time factor: simulated seconds / wall seconds of twin.pipeline.simulate.simulate (no Parquet, no Rerun;
    benchmarks/bench_twin.py times the whole `longwall run --twin-only`);            target >= 400x (issue 2)
 2. sensor streams: IMU samples generated per wall second, the ideal increments plus every stream of one trial
-   (twin.sensors.imu_truth + sensor_streams, as benchmarks/bench_sensors.py's headline);   target >= 500,000/s (issue 3)
+   (twin.sensors.streams.imu_truth + sensor_streams, as benchmarks/bench_sensors.py's headline);   target >= 500,000/s (issue 3)
 3. strapdown mechanization, 4-sample coning/sculling, on seed004's IMU increments (benchmarks/bench_strapdown.py's
    ours and pyins_time) against pyins's compute_increments_from_imu + Integrator;   target >= 1,000,000/s (issue 4)
 4. filter plus smoother: KF + CPOEM + online RTS (shearer_positioning, as benchmarks/bench_positioning.py
@@ -212,8 +212,8 @@ class Memory:
 
 def stage_twin(scn) -> tuple[object, float, float]:
     """Simulate once: (result, simulated seconds, wall seconds)."""
-    from twin.report import twin_summary
-    from twin.simulate import simulate
+    from twin.pipeline.simulate import simulate
+    from twin.view.summary import twin_summary
 
     start = time.perf_counter()
     result = simulate(scn)
@@ -223,7 +223,7 @@ def stage_twin(scn) -> tuple[object, float, float]:
 
 def stage_sensors(scn, tables) -> tuple[dict, int, float]:
     """Ideal IMU increments and every stream of trial 0: (streams, IMU samples, wall seconds)."""
-    from twin.sensors import imu_truth, sensor_streams
+    from twin.sensors.streams import imu_truth, sensor_streams
 
     start = time.perf_counter()
     ideal = imu_truth(scn, tables["truth_shearer"])
@@ -293,8 +293,8 @@ def pyins_feedback_time(log, cfg, seconds: float) -> tuple[int, float]:
 def stage_filter(scn, streams, pyins_seconds: float, have_pyins: bool) -> dict:
     from bench_positioning import log_of
 
-    from estimators import shearer_positioning as sp
-    from twin.estimate import positioning_config
+    from estimators.shearer import positioning as sp
+    from twin.pipeline.estimate import positioning_config
 
     log = log_of(streams)
     cfg = positioning_config(scn)
@@ -343,9 +343,9 @@ def stage_support(seconds: float, ahrs_supports: int, ahrs_seconds: float, have_
     import numba
     from bench_support_attitude import RATE_HZ, SUPPORTS, face_readings
 
-    from estimators.support_attitude import ukf
-    from estimators.support_attitude_ours import ours
-    from twin.support_estimate import UNTUNED_VAR_DEG2_S2
+    from estimators.support.attitude_002 import ukf
+    from estimators.support.error_state import ours
+    from twin.pipeline.support_estimate import UNTUNED_VAR_DEG2_S2
 
     w, f, m, model, settings = face_readings(seconds, np.random.default_rng(0))
     dt = 1.0 / RATE_HZ
@@ -394,7 +394,7 @@ def main(argv: Sequence[str] | None = None) -> list[Row]:
     parser.add_argument("--ahrs-seconds", type=float, default=10.0, help="readings per support for the ahrs UKF [s]")
     args = parser.parse_args(argv)
 
-    from twin.scenario import load_scenario
+    from twin.config.scenario import load_scenario
 
     path = args.scenario or ROOT / "scenarios" / ("default.toml" if args.quick else "seed004.toml")
     scn = load_scenario(path)
@@ -414,7 +414,7 @@ def main(argv: Sequence[str] | None = None) -> list[Row]:
     say(f"simulating {path.name} ...")
     result, sim_s, wall = mem.measure("twin", stage_twin, scn)
     rows.append(Row("twin real-time factor", "x", sim_s / wall, target=">= 400x (issue 2)", target_min=400.0,
-                    note=f"{path.name}: {sim_s / 3600:.2f} h simulated in {wall:.1f} s (twin.simulate.simulate; "
+                    note=f"{path.name}: {sim_s / 3600:.2f} h simulated in {wall:.1f} s (twin.pipeline.simulate.simulate; "
                          "bench_twin.py adds the Parquet and Rerun writing)"))
 
     say("sensor streams ...")
@@ -430,7 +430,7 @@ def main(argv: Sequence[str] | None = None) -> list[Row]:
                     n / sd["pyins"] if "pyins" in sd else None,
                     sd.get("pyins_error", "") if pyins_v else missing("python-ins"),
                     ">= 1,000,000/s (issue 4)", TARGET_STRAPDOWN,
-                    note=f"{n:,} increments of {scn.name}'s IMU stream; ours: estimators.strapdown.mechanize, "
+                    note=f"{n:,} increments of {scn.name}'s IMU stream; ours: estimators.sins.strapdown.mechanize, "
                          "4-sample coning/sculling; pyins: compute_increments_from_imu (2-sample) + Integrator"))
 
     say("filter + smoother ...")

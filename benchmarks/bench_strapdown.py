@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from estimators.strapdown import mechanize
+from estimators.sins.strapdown import mechanize
 
 RATE_HZ = 200.0
 HOURS = 6.4
@@ -54,10 +54,10 @@ def pyins_time(t, dtheta, dv) -> float | None:
 
 
 def schuler() -> dict:
-    """Largest deviation of the mechanization from the linear error model (estimators.error_model.stationary_day),
+    """Largest deviation of the mechanization from the linear error model (estimators.sins.error_model.stationary_day),
     north, east position and attitude, in % of the linear model's largest error (`north_pct`, `east_pct`,
     `attitude_pct`), and that largest east error [m]."""
-    from estimators.error_model import stationary_day
+    from estimators.sins.error_model import stationary_day
 
     d = stationary_day()
 

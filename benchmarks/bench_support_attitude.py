@@ -1,15 +1,15 @@
 """Benchmark: support canopy attitude after 002 (turntable of section 4.1) and the throughput for a whole face.
 
-Part 1 runs scenarios/seed002_turntable.toml (every parameter there; twin.support_turntable): 002's KF, UKF
+Part 1 runs scenarios/seed002_turntable.toml (every parameter there; twin.papers.turntable): 002's KF, UKF
 and GD-UKF and ours on the ICM-42605 unit with the shearer's field passing twice, and prints the RMSE of pitch,
 roll and yaw over each angle's dynamic (ramp) and static (held) segment beside 002's figures (static < 0.5 deg,
 dynamic < 1 deg pitch and roll; yaw < 2 deg under the face's disturbance) and the targets of issue 8
 (<= 0.1 static, <= 0.3 dynamic, yaw <= 1 deg). The GD-UKF's Q is tuned on an independent, undisturbed reference
 run (002 tuned in the lab) and evaluated on the test run (held out). Optionally over several seeds.
 
-Part 2: the throughput of ours (estimators.support_attitude_ours), 002's UKF and KF (estimators.support_attitude)
+Part 2: the throughput of ours (estimators.support.error_state), 002's UKF and KF (estimators.support.attitude_002)
 for 200 supports at 100 Hz, each one batched kernel call over all supports with seed002_face's settings
-(twin.support_estimate.unit_model, ours_settings), as a multiple of real time (target >= 100x for ours): the best of
+(twin.pipeline.support_estimate.unit_model, ours_settings), as a multiple of real time (target >= 100x for ours): the best of
 three wall-clock runs on all the cores numba uses, and per core from the process's CPU time (the figure that does
 not depend on what else runs on a shared machine). On the 2-core development machine before the kernels were
 made allocation-free (one exp per sample, sequential scalar updates, the UKF's linear prediction without sigma
@@ -30,12 +30,16 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from estimators.rotations import euler_to_quat, quat_conj, quat_rotate
-from estimators.support_attitude import kf, ukf
-from estimators.support_attitude_ours import ours
-from twin.scenario import load_scenario
-from twin.support_estimate import UNTUNED_VAR_DEG2_S2, ours_settings, unit_model
-from twin.support_turntable import FILTERS, load_turntable, run_turntable
+from estimators.nav.rotations import euler_to_quat, quat_conj, quat_rotate
+from estimators.support.attitude_002 import kf, ukf
+from estimators.support.error_state import ours
+from twin.config.scenario import load_scenario
+from twin.papers.turntable import FILTERS, load_turntable, run_turntable
+from twin.pipeline.support_estimate import (
+    UNTUNED_VAR_DEG2_S2,
+    ours_settings,
+    unit_model,
+)
 
 RATE_HZ = 100.0
 SUPPORTS = 200

@@ -12,7 +12,7 @@ detectors and INS/odometer column are trial 0). "met" compares the mean with the
 the issue sets none. A benchmark that fails gives its rows with "failed: <reason>" and the table goes on.
 
 Sources (benchmark: rows):
-  000  twin.experiment.run_shipped (bench_coning_sculling.py, bench_lever_arm.py): sections 7.2, 7.4, Tables 2-3
+  000  twin.papers.sins_experiments.run_shipped (bench_coning_sculling.py, bench_lever_arm.py): sections 7.2, 7.4, Tables 2-3
        bench_alignment.main: Table 1, both IMU grades, seeds 0..N-1
        bench_strapdown.schuler: 24 h stationary against the linear error model (Schuler, issue 4; no paper figure)
   001  bench_positioning_mc.main: Table 3 SEP per cycle (KF + CPOEM + RTS), N trials
@@ -171,7 +171,7 @@ def format_text(rows: Sequence[Row]) -> str:
 
 
 def src_000_experiments(trials: int) -> dict:
-    from twin.experiment import run_shipped
+    from twin.papers.sins_experiments import run_shipped
 
     return {name: run_shipped(name).ours for name in ("seed000_coning", "seed000_sculling", "seed000_lever_arm")}
 
@@ -236,7 +236,7 @@ SOURCES: dict[str, tuple[str, Callable[[int], object]]] = {
 
 
 def _rows_000() -> list[RowSpec]:
-    from twin import experiment
+    from twin.papers import sins_experiments as experiment
 
     PAPER_CONING, PAPER_SCULLING = experiment.PAPER_CONING, experiment.PAPER_SCULLING
     PAPER_LEVER_ARM, PAPER_TABLE1 = experiment.PAPER_LEVER_ARM, experiment.PAPER_TABLE1
@@ -303,7 +303,7 @@ def _rows_001() -> list[RowSpec]:
 
 
 def _rows_002() -> list[RowSpec]:
-    from twin.support_turntable import PAPER, TARGETS
+    from twin.papers.turntable import PAPER, TARGETS
 
     rows = []
     for name, label in (("gd_ukf", "002 GD-UKF"), ("ours", "ours")):

@@ -1,1 +1,1 @@
-"""MJCF pieces (pan, support, shearer) that twin.model assembles with mujoco.MjSpec."""
+"""MJCF pieces (pan, support, shearer) that twin.face.model assembles with mujoco.MjSpec."""

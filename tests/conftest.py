@@ -14,18 +14,18 @@ from types import ModuleType
 
 import pytest
 
-from twin.experiment import is_experiment
-from twin.scenario import Scenario, load_scenario, parse_scenario
-from twin.simulate import SimResult, simulate
-from twin.support_turntable import is_turntable
+from twin.config.scenario import Scenario, load_scenario, parse_scenario
+from twin.papers.sins_experiments import is_experiment
+from twin.papers.turntable import is_turntable
+from twin.pipeline.simulate import SimResult, simulate
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 SEED004_VARIANTS = ("seed004_fault", "seed004_20cycles")
-"""seed004 with a fault or more cycles: the same face, checked against seed004 in tests/test_scenario.py and run by
+"""seed004 with a fault or more cycles: the same face, checked against seed004 in tests/twin/config/test_scenario.py and run by
 benchmarks/bench_rail.py (simulating them again here would only repeat seed004)."""
 SCENARIOS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")
                    if not (is_experiment(p) or is_turntable(p) or p.stem in SEED004_VARIANTS))
-"""The shipped face scenarios; the SINS experiment files (kind = "sins_experiment") are tests/test_experiment.py's."""
+"""The shipped face scenarios; the SINS experiment files (kind = "sins_experiment") are tests/twin/papers/test_sins_experiments.py's."""
 EXPERIMENTS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml") if is_experiment(p))
 TEST_CYCLES = 2
 VARIANTS = {"default-before-push": ("default", {"supports": {"sequence": "before_push"}})}

@@ -14,13 +14,13 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from estimators.csvio import export_csv, import_csv
-from estimators.logformat import STREAMS, LogError, make_table, write_stream
-from estimators.shearer_positioning import PositioningError
-from twin.estimate import format_estimators, run_estimators, write_metrics
-from twin.montecarlo import MonteCarloError
-from twin.rundir import RunDirError, atomic_run_dir, check_target
-from twin.scenario import ScenarioError, load_scenario, scenario_to_toml
+from estimators.io.csvio import export_csv, import_csv
+from estimators.io.logformat import STREAMS, LogError, make_table, write_stream
+from estimators.shearer.positioning import PositioningError
+from twin.config.scenario import ScenarioError, load_scenario, scenario_to_toml
+from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
+from twin.pipeline.montecarlo import MonteCarloError
+from twin.pipeline.rundir import RunDirError, atomic_run_dir, check_target
 
 EXIT_BAD_INPUT = 2
 
@@ -33,16 +33,15 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
         trials: int = 1, sensors: bool = True, workers: int = 1, ray_address: str | None = None) -> Path:
     """Simulate a scenario into a run directory (sensor trial 0 at the top, trials 1.. in trials/NNN/, each with
     its estimates; their metrics gathered in trials.parquet), the trials on `workers` local processes or on
-    the Ray cluster at `ray_address` (twin.montecarlo)."""
-    from twin.experiment import is_experiment, run_experiment_file
-    if is_experiment(scenario):  # a SINS experiment file (kind = "sins_experiment"): twin.experiment
+    the Ray cluster at `ray_address` (twin.pipeline.montecarlo)."""
+    from twin.papers.sins_experiments import is_experiment, run_experiment_file
+    if is_experiment(scenario):  # a SINS experiment file (kind = "sins_experiment"): twin.papers.sins_experiments
         return run_experiment_file(scenario, out, seed, force, quiet)
-    from twin.support_turntable import is_turntable, run_turntable_file
-    if is_turntable(scenario):  # 002's turntable (kind = "support_turntable"): twin.support_turntable
+    from twin.papers.turntable import is_turntable, run_turntable_file
+    if is_turntable(scenario):  # 002's turntable (kind = "support_turntable"): twin.papers.turntable
         return run_turntable_file(scenario, out, seed, force, quiet)
-    from twin.faults import check_faults_in_run
-    from twin.haulage import Timeline
-    from twin.montecarlo import (
+    from twin.face.haulage import Timeline
+    from twin.pipeline.montecarlo import (
         TrialResult,
         format_monte_carlo,
         trial_context,
@@ -50,9 +49,10 @@ def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: 
         write_monte_carlo,
         write_sensors,
     )
-    from twin.recording import write_recording
-    from twin.report import format_summary, twin_summary
-    from twin.simulate import simulate
+    from twin.pipeline.simulate import simulate
+    from twin.sensors.faults import check_faults_in_run
+    from twin.view.recording import write_recording
+    from twin.view.summary import format_summary, twin_summary
 
     scn = load_scenario(scenario, seed)
     try:
@@ -176,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == "estimate":
             estimate(args.run_dir, args.quiet)
         elif args.command == "view":
-            from twin.recording import open_viewer
+            from twin.view.recording import open_viewer
             open_viewer(args.run_dir)
         elif args.command == "import":
             report = import_csv(args.csv_dir, args.out)
@@ -185,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
             for path in export_csv(args.run_dir, args.csv):
                 print(path)
         elif args.command == "report":
-            from twin.report_page import build_report
+            from twin.view.report import build_report
             print(build_report(args.run_dir))
     except (ScenarioError, RunDirError, LogError, PositioningError, FileNotFoundError, MonteCarloError) as err:
         print(f"longwall: error: {err}", file=sys.stderr)

@@ -1,0 +1,1 @@
+"""The sensor log: Parquet streams and their schema, CSV exchange, accuracy metrics."""

@@ -1,0 +1,1 @@
+"""Generic Kalman machinery: the RTS smoother, federated fusion, innovation-based noise estimation."""

@@ -1,0 +1,204 @@
+"""Closed-path optimal estimation model (CPOEM, 001 section 2.2): position fixes for the next cutting cycle.
+
+The shearer cuts the same face every cycle, moved towards the coal wall by the advance d (001 Fig. 3). Points
+every Delta metres of face coordinate u (the odometer's signed travel from the start) are recorded when the
+shearer crosses them on a straight cut, from the filter (or, better, the RTS-smoothed pass); on the next
+straight cut, when the shearer crosses u_i again, the recorded point moved by the advance of the pans there is a
+position fix (001 eq. 6, with C of eq. 7 turning the ENU increment into latitude, longitude, height):
+
+    p_i,j+1 = p_i,j + C C_b^n C_m^b [d, 0, 0]^T
+
+The advance comes from the push-ram stroke sensors of the supports on either side of the point (interpolated
+along the face): between two passes each pan is pushed once, so the ram of a support shows one stroke of the
+web, in one or several partial strokes, whatever the order of push and support advance
+(`ram_stroke`). A point without a valid stroke on both neighbouring supports (dropout, missing support) is
+skipped and reported, never guessed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators.faults.ram_levels import (
+    change_sigma,
+    drop_levels,
+    level_tolerance,
+    side_level,
+    swings,
+)
+from estimators.nav import earth
+
+
+@dataclass
+class Points:
+    """Recorded CPOEM points of the last straight cut (one row per face coordinate u_i = i * spacing)."""
+
+    u: np.ndarray  # (P,) face coordinate [m]
+    t: np.ndarray  # (P,) time the shearer crossed the point
+    llh: np.ndarray  # (P, 3) body-point latitude, longitude, height
+    cov: np.ndarray  # (P, 3, 3) ENU covariance of the point [m^2]
+    c_bn: np.ndarray  # (P, 3, 3) attitude at the point (advance direction = body x)
+
+    @classmethod
+    def empty(cls) -> Points:
+        return cls(np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3, 3)))
+
+    def take(self, keep: np.ndarray) -> Points:
+        """The points selected by `keep` (a mask or indices)."""
+        return Points(self.u[keep], self.t[keep], self.llh[keep], self.cov[keep], self.c_bn[keep])
+
+
+def crossings(u: np.ndarray, spacing: float, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
+    """Epochs j in (lo, hi] where the face coordinate crosses a multiple of `spacing`: (j, crossed u_i).
+
+    The crossing lies between epochs j - 1 and j (u_i between u[j-1] and u[j], first crossing per point)."""
+    seg = u[lo:hi + 1]
+    cell = np.floor(seg / spacing)
+    jumps = np.flatnonzero(cell[1:] != cell[:-1])
+    epochs, marks = [], []
+    for k in jumps:
+        a, b = cell[k], cell[k + 1]
+        # Moving up past (a+1)*spacing ..., or down past a*spacing ...
+        pts = np.arange(a + 1, b + 1) if b > a else np.arange(a, b, -1)
+        epochs.append(np.full(pts.size, lo + k + 1))
+        marks.append(pts * spacing)
+    if not epochs:
+        return np.zeros(0, int), np.zeros(0)
+    j, m = np.concatenate(epochs), np.concatenate(marks)
+    _, first = np.unique(m, return_index=True)
+    order = np.sort(first)
+    return j[order], m[order]
+
+
+def record(u: np.ndarray, t: np.ndarray, llh: np.ndarray, cov_enu: np.ndarray, c_bn: np.ndarray,
+           spacing: float, lo: int, hi: int) -> Points:
+    """Points crossed between epochs lo and hi, interpolated linearly between the two epochs around each."""
+    j, marks = crossings(u, spacing, lo, hi)
+    du = u[j] - u[j - 1]
+    w = np.where(np.abs(du) > 0, (marks - u[j - 1]) / np.where(du == 0, 1, du), 1.0)[:, None]
+    return Points(marks, t[j - 1] + w[:, 0] * (t[j] - t[j - 1]), llh[j - 1] + w * (llh[j] - llh[j - 1]),
+                  cov_enu[j], c_bn[j])
+
+
+RAM_WINDOW = 3
+"""Readings in the running median that cleans a noisy push-ram record before its drops are found (a precise
+sensor, below 1 mm of noise, is used as it reads: a fast end push may leave a single reading at the top)."""
+DROP_SIGMAS = 10.0
+"""Down-swing of the cleaned reading, in its noise sigmas, that is a drop: the noise over the thousands of
+readings of a pass spans about 8 sigma, a support's advance is a stroke."""
+NOISY_LEVEL_RUN = 10
+"""Fewest readings of a level of a noisy sensor (1 mm or more of noise): a last step of a push shorter than that
+cannot be told from neighbouring readings a few sigma off (seed004 trial 3, 0.02 m sensor: 2.303, 2.266 and
+2.238 m by a drop from a 2.20 m plateau made a 4 cm step of 5 readings); the twin's snake holds each step 37 s."""
+RAMP_SIGMAS = 3.0
+"""A reading this many noise sigmas off the level on its side of a drop lies on the drop's ramp."""
+RAM_LEVEL_SAMPLES = 60
+"""Readings next to an event whose median is a level of the stroke measurement (a minute at 1 Hz; the
+level-change test cuts a shorter plateau)."""
+RAM_TOP_SAMPLES = 30
+"""Readings before a drop whose median is the level the pan was pushed to (half a minute at 1 Hz). The last step
+of a snake push can be a few millimetres, always upward, below what the level-change test resolves on a noisy
+sensor, so a minute of readings mixes in the step before and reads low: with 0.02 m of noise and an 8 mm last step
+37 s before the advance, 3.2 mm short per stroke from 60 readings, 0.0 mm from 30 (tests/estimators/shearer/test_cpoem.py); on
+seed004 against the truth's ram and support advance, -3.9 and -2.8 mm, the spread 10.4 and 10.8 mm."""
+
+
+def ram_stroke(t: np.ndarray, ext: np.ndarray, valid: np.ndarray, t0: float, t1: float, noise_sd: float) -> float:
+    """The pan's advance at one support between t0 and t1: how far its ram extended (NaN when fewer than
+    RAM_WINDOW valid readings).
+
+    The ram extends while the support pushes the pan (in one or several partial strokes as the snake forms, or
+    in one stroke followed at once by the support's advance at the face end) and drops by about a stroke while
+    the support pulls itself up to the pan; only the extensions move the pan. So the advance is the net change of
+    the reading plus every drop:
+
+        d = (level at t1 - level at t0) + sum over drops (level before - level after).
+
+    Each level is the plateau next to its event (estimators.faults.ram_levels: readings within 6 sigma, at least 5 mm,
+    up to RAM_LEVEL_SAMPLES of them (RAM_TOP_SAMPLES before a drop), cut at a level change; of a noisy sensor at
+    least NOISY_LEVEL_RUN readings, so that outliers next to a drop are not taken for a last step), so the last
+    partial step of a push counts in full and the noise's extremes do not add up; a drop is a down-swing of
+    DROP_SIGMAS sigmas (at least 5 mm) of the reading cleaned by a running median. A drop that noise makes anyway
+    splits one plateau and adds about nothing."""
+    sel = (t > t0) & (t <= t1) & (valid > 0) & np.isfinite(ext)
+    r = ext[sel]
+    if r.size < RAM_WINDOW:
+        return np.nan
+    tol, sigma = level_tolerance(noise_sd), change_sigma(noise_sd)
+    min_run = 1
+    if noise_sd < 1e-3:
+        clean, threshold = r, tol
+    else:
+        min_run = NOISY_LEVEL_RUN
+        half = RAM_WINDOW // 2
+        pad = np.concatenate([np.full(half, r[0]), r, np.full(half, r[-1])])
+        clean = np.median(np.lib.stride_tricks.sliding_window_view(pad, RAM_WINDOW), axis=1)
+        threshold = DROP_SIGMAS * 1.25 * noise_sd / np.sqrt(RAM_WINDOW)
+    start = side_level(r, 0, 1, tol, sigma, RAM_LEVEL_SAMPLES, min_run)[0]
+    end = side_level(r, r.size - 1, -1, tol, sigma, RAM_LEVEL_SAMPLES, min_run)[0]
+    drops = [drop_levels(r, lo, hi, tol, sigma, RAM_LEVEL_SAMPLES, RAMP_SIGMAS * sigma, min_run, RAM_TOP_SAMPLES)
+             for lo, hi in swings(-clean, threshold)]
+    return float(end - start + sum(row[2] - row[3] for row in drops))
+
+
+@dataclass(frozen=True)
+class RamLog:
+    """Push-ram readings grouped per support, and where each support sits in face coordinates."""
+
+    t: list[np.ndarray]
+    ext: list[np.ndarray]
+    valid: list[np.ndarray]
+    u: np.ndarray  # (S,) face coordinate of each support [m]
+    noise_sd: float  # one-sigma noise of a reading [m]
+
+    @classmethod
+    def from_rows(cls, t, support, ext, valid, support_u, noise_sd: float) -> RamLog:
+        s = np.asarray(support)
+        groups = [np.flatnonzero(s == k) for k in range(len(support_u))]
+        return cls([t[g] for g in groups], [ext[g] for g in groups], [valid[g] for g in groups],
+                   np.asarray(support_u, float), noise_sd)
+
+    def advance(self, u: float, t0: float, t1: float) -> float:
+        """Pan advance at face coordinate u between t0 and t1 from the two neighbouring supports (NaN if one
+        of them has no stroke)."""
+        k = int(np.clip(np.searchsorted(self.u, u) - 1, 0, self.u.size - 2))
+        a = ram_stroke(self.t[k], self.ext[k], self.valid[k], t0, t1, self.noise_sd)
+        b = ram_stroke(self.t[k + 1], self.ext[k + 1], self.valid[k + 1], t0, t1, self.noise_sd)
+        w = float(np.clip((u - self.u[k]) / (self.u[k + 1] - self.u[k]), 0.0, 1.0))
+        return (1 - w) * a + w * b
+
+
+def predict_fixes(points: Points, u: np.ndarray, t: np.ndarray, epochs: np.ndarray, marks: np.ndarray,
+                  rams: RamLog, advance_sd: float, path_sd: float,
+                  path_along_sd: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Fixes for the crossings (epochs, marks) of the current pass from the previous pass's points (001 eq. 6).
+
+    The predicted point is moved along the face (body y at the point) by u[j] - u_i so that it refers to the
+    epoch where it is applied. R = point covariance + the change of the path between the passes, in the body axes
+    at the point: advance_sd and path_sd across the face (x), path_along_sd along it (y), path_sd vertically (z).
+    Returns (epochs, llh (F, 3), R (F, 3, 3), skipped face coordinates, advance direction in n at each point
+    (F, 3), the direction along which the ram stroke moved it)."""
+    path_b = np.diag([advance_sd ** 2 + path_sd ** 2, path_along_sd ** 2, path_sd ** 2])
+    idx = {round(v / 1e-6): k for k, v in enumerate(points.u)}
+    out_j, out_llh, out_r, out_adv, skipped = [], [], [], [], []
+    for j, m in zip(epochs, marks):
+        k = idx.get(round(m / 1e-6))
+        if k is None:
+            continue
+        d = rams.advance(m, points.t[k], t[j])
+        if not np.isfinite(d):
+            skipped.append(m)
+            continue
+        c = points.c_bn[k]
+        shift = c[:, 0] * d + c[:, 1] * (u[j] - m)
+        lat, lon, h = points.llh[k]
+        r_m, r_n = earth.radii(lat)
+        out_j.append(j)
+        out_llh.append([lat + shift[1] / (r_m + h), lon + shift[0] / ((r_n + h) * np.cos(lat)), h + shift[2]])
+        out_r.append(points.cov[k] + c @ path_b @ c.T)
+        out_adv.append(c[:, 0])
+    if not out_j:
+        return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.array(skipped), np.zeros((0, 3))
+    return np.array(out_j, np.int64), np.array(out_llh), np.array(out_r), np.array(skipped), np.array(out_adv)

@@ -1,0 +1,231 @@
+"""Strapdown mechanization in the local-level ENU frame from IMU increments (000 eqs. 3-5).
+
+Per interval, in the fixed order velocity, position, attitude, each with mid-interval quantities:
+
+* attitude increment of the body over N sub-samples: the rotation vector
+  phi = sum theta_i + (sum_{i<N} k_i theta_i) x theta_N (N-sample coning compensation, estimators.sins.coning);
+* velocity increment in the body frame with rotation and sculling corrections:
+  dv_b = sum v_i + 1/2 (sum theta_i) x (sum v_i) + sum_{i<N} k_i (theta_i x v_N + v_i x theta_N);
+* velocity: v_k = v_{k-1} + (I - 1/2 [zeta x]) C_nb(k-1) dv_b + (g_n - (2 w_ie + w_en) x v) h,
+  zeta = (w_ie + w_en) h the rotation of n over the interval;
+* position: latitude, longitude, height from the mean velocity;
+* attitude: q_nb(k) = Exp(-zeta) (x) q_nb(k-1) (x) Exp(phi).
+
+The kernel is numba; `mechanize` validates input and converts between arrays and the kernel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+
+from estimators.nav import earth
+from estimators.sins.coning import coefficients
+
+radii_nb = nb.njit(cache=True)(earth.radii)
+gravity_nb = nb.njit(cache=True)(earth.normal_gravity_kernel)
+_OMEGA = earth.OMEGA_IE
+
+
+@dataclass
+class NavState:
+    """Navigation solution at each time: geodetic position, ENU velocity, attitude q_nb."""
+
+    t: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    h: np.ndarray
+    v_n: np.ndarray  # (K, 3)
+    q_nb: np.ndarray  # (K, 4)
+
+
+@nb.njit(cache=True)
+def cross3(a, b):
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+@nb.njit(cache=True)
+def qmul(p, q):
+    return np.array([
+        p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
+        p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
+        p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
+        p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0]])
+
+
+@nb.njit(cache=True)
+def qexp(phi):
+    """Unit quaternion of the rotation vector phi (series below 1e-8 rad)."""
+    theta = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    if theta < 1e-8:
+        c, s = 1.0 - theta * theta / 8, 0.5 - theta * theta / 48
+    else:
+        c, s = np.cos(0.5 * theta), np.sin(0.5 * theta) / theta
+    return np.array([c, s * phi[0], s * phi[1], s * phi[2]])
+
+
+@nb.njit(cache=True)
+def qrot(q, v):
+    u = q[1:]
+    t = 2.0 * cross3(u, v)
+    return v + q[0] * t + cross3(u, t)
+
+
+@nb.njit(cache=True)
+def nav_rates(lat, h, v):
+    """w_ie^n and w_en^n (ENU) at (lat, h) with velocity v."""
+    r_m, r_n = radii_nb(lat)
+    w_ie = np.array([0.0, _OMEGA * np.cos(lat), _OMEGA * np.sin(lat)])
+    w_en = np.array([-v[1] / (r_m + h), v[0] / (r_n + h), v[0] * np.tan(lat) / (r_n + h)])
+    return w_ie, w_en
+
+
+@nb.njit(cache=True)
+def skew3(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+@nb.njit(cache=True)
+def quat_mat(q):
+    """C_b^n of q_nb."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+@nb.njit(cache=True)
+def rotvec_mat(r):
+    """Rotation matrix of the rotation vector r (Rodrigues; series for tiny angles)."""
+    a2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    if a2 < 1e-16:
+        s, c = 1.0 - a2 / 6.0, 0.5 - a2 / 24.0
+    else:
+        a = np.sqrt(a2)
+        s, c = np.sin(a) / a, (1.0 - np.cos(a)) / a2
+    k = skew3(r)
+    return np.eye(3) + s * k + c * (k @ k)
+
+
+@nb.njit(cache=True)
+def mat_rotvec(c):
+    """Rotation vector of a rotation matrix (angles below pi)."""
+    cos_a = min(1.0, max(-1.0, 0.5 * (c[0, 0] + c[1, 1] + c[2, 2] - 1)))
+    a = np.arccos(cos_a)
+    v = np.array([c[2, 1] - c[1, 2], c[0, 2] - c[2, 0], c[1, 0] - c[0, 1]])
+    return 0.5 * v if a < 1e-9 else a / (2 * np.sin(a)) * v
+
+
+def compensate(dtheta: np.ndarray, dv: np.ndarray, n_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per update of N increments (rows 1.., grouped by N): the rotation vector with coning compensation and
+    the body velocity increment with rotation and sculling compensation (000 eqs. 60-61, 68-69), (U, 3) each.
+
+    phi = sum theta_i + c x theta_N,  dv_b = sum v_i + 1/2 (sum theta_i) x (sum v_i) + c x v_N + d x theta_N,
+    with c = sum_{i<N} k_i theta_i and d = sum_{i<N} k_i v_i (estimators.sins.coning)."""
+    u = (dtheta.shape[0] - 1) // n_samples
+    th = dtheta[1:1 + u * n_samples].reshape(u, n_samples, 3)
+    v = dv[1:1 + u * n_samples].reshape(u, n_samples, 3)
+    k = coefficients(n_samples)
+    sum_th, sum_v = th.sum(axis=1), v.sum(axis=1)
+    c = np.einsum("i,uij->uj", k, th[:, :-1])
+    d = np.einsum("i,uij->uj", k, v[:, :-1])
+    phi = sum_th + np.cross(c, th[:, -1])
+    dv_b = sum_v + 0.5 * np.cross(sum_th, sum_v) + np.cross(c, v[:, -1]) + np.cross(d, th[:, -1])
+    return phi, dv_b
+
+
+@nb.njit(cache=True)
+def body_attitude(q0: np.ndarray, phi: np.ndarray) -> np.ndarray:
+    """Attitude of the body relative to a non-rotating frame after each update: q_u = q_{u-1} (x) Exp(phi_u)."""
+    out = np.empty((phi.shape[0] + 1, 4))
+    out[0] = q0
+    for u in range(phi.shape[0]):
+        q = qmul(out[u], qexp(phi[u]))
+        out[u + 1] = q / np.sqrt(np.sum(q * q))
+    return out
+
+
+@nb.njit(cache=True)
+def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height):
+    """Update u (over (t_upd[u-1], t_upd[u]]) with the compensated phi[u-1], dv_b[u-1]; outputs at index u."""
+    for u in range(1, lat.size):
+        dt = t_upd[u] - t_upd[u - 1]
+        # Mid-interval position and velocity, extrapolated from the last two epochs.
+        if u >= 2:
+            lat_m = lat[u - 1] + 0.5 * (lat[u - 1] - lat[u - 2])
+            h_m = hgt[u - 1] + 0.5 * (hgt[u - 1] - hgt[u - 2])
+            v_m = vel[u - 1] + 0.5 * (vel[u - 1] - vel[u - 2])
+        else:
+            lat_m, h_m, v_m = lat[0], hgt[0], vel[0].copy()
+        w_ie, w_en = nav_rates(lat_m, h_m, v_m)
+        zeta = (w_ie + w_en) * dt
+        dv_n = qrot(quat[u - 1], dv_b[u - 1])
+        dv_n = dv_n - 0.5 * cross3(zeta, dv_n)
+        g_n = np.array([0.0, 0.0, -gravity_nb(lat_m, h_m)])
+        vel[u] = vel[u - 1] + dv_n + (g_n - cross3(2.0 * w_ie + w_en, v_m)) * dt
+        if hold_height:  # the vertical channel held (an altitude aid or a known floor): no vertical motion
+            vel[u, 2] = 0.0
+        v_bar = 0.5 * (vel[u] + vel[u - 1])
+        hgt[u] = hgt[u - 1] + v_bar[2] * dt
+        h_bar = 0.5 * (hgt[u] + hgt[u - 1])
+        r_m, r_n = radii_nb(lat[u - 1])
+        lat[u] = lat[u - 1] + v_bar[1] * dt / (r_m + h_bar)
+        lat_bar = 0.5 * (lat[u] + lat[u - 1])
+        r_m, r_n = radii_nb(lat_bar)
+        lon[u] = lon[u - 1] + v_bar[0] * dt / ((r_n + h_bar) * np.cos(lat_bar))
+        # Attitude with the n-frame rotation re-evaluated at the new mid-interval state.
+        w_ie, w_en = nav_rates(lat_bar, h_bar, v_bar)
+        q = qmul(qmul(qexp(-(w_ie + w_en) * dt), quat[u - 1]), qexp(phi[u - 1]))
+        quat[u] = q / np.sqrt(np.sum(q * q))
+
+
+def compensated_increments(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray,
+                           n_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Check a log of increments (row k over (t[k-1], t[k]]; row 0 unused) and compensate it per update of
+    `n_samples` increments: (update times t[0], t[N], ... ; rotation vectors; body velocity increments).
+
+    Raises ValueError with one line naming the first bad row: shapes, time order, a sample-rate change (a gap or
+    a mixed-rate log), non-finite values."""
+    t = np.ascontiguousarray(t, float)
+    dtheta = np.ascontiguousarray(dtheta, float)
+    dv = np.ascontiguousarray(dv, float)
+    if dtheta.shape != (t.size, 3) or dv.shape != (t.size, 3):
+        raise ValueError(f"increments must be ({t.size}, 3) like t; got {dtheta.shape} and {dv.shape}")
+    step = np.diff(t)
+    if t.size > 1 and not np.all(step > 0):
+        raise ValueError(f"time must increase; row {int(np.argmin(step > 0)) + 1} does not")
+    if t.size > 2:
+        median = np.median(step)
+        odd = np.flatnonzero(np.abs(step - median) > 0.5 * median)
+        if odd.size:
+            raise ValueError(f"sample interval at row {odd[0] + 1} is {step[odd[0]]:.6g} s, the median is "
+                             f"{median:.6g} s: resample or split the log at the gap")
+    for name, arr in (("dtheta", dtheta), ("dv", dv)):
+        bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
+        if bad.size:
+            raise ValueError(f"{name} row {bad[0]} is not finite")
+    phi, dv_b = compensate(dtheta, dv, n_samples)
+    t_upd = np.ascontiguousarray(t[: phi.shape[0] * n_samples + 1: n_samples])
+    return t_upd, phi, dv_b
+
+
+def mechanize(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, lat0: float, lon0: float, h0: float,
+              v0_n: np.ndarray, q0_nb: np.ndarray, n_samples: int = 4, hold_height: bool = False) -> NavState:
+    """Integrate increments (row k over (t[k-1], t[k]]; row 0 unused) from the state at t[0].
+
+    Attitude and velocity are updated every `n_samples` increments with N-sample coning and sculling
+    compensation (estimators.sins.coning; N = 1 is none); the solution is at t[0], t[N], t[2N], ...
+    `hold_height` keeps the height and zeroes the vertical velocity (the unstable vertical channel held).
+    """
+    t_upd, phi, dv_b = compensated_increments(t, dtheta, dv, n_samples)
+    earth.check_latitude(lat0)
+    n = phi.shape[0] + 1
+    lat, lon, hgt = np.empty(n), np.empty(n), np.empty(n)
+    vel, quat = np.empty((n, 3)), np.empty((n, 4))
+    lat[0], lon[0], hgt[0], vel[0] = lat0, lon0, h0, v0_n
+    quat[0] = np.asarray(q0_nb, float) / np.linalg.norm(q0_nb)
+    _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height)
+    return NavState(t_upd, lat, lon, hgt, vel, quat)

@@ -1,0 +1,149 @@
+"""`longwall run`: the default scenario end to end, atomic run directories, bad input, reproducibility."""
+
+from __future__ import annotations
+
+import filecmp
+import json
+
+import numpy as np
+import pytest
+from rerun.chunk import RrdReader
+
+from estimators.io.logformat import STREAMS, read_stream
+from tests.conftest import SCENARIO_DIR
+from twin.cli import main
+
+TRUTH_FILES = ("truth_shearer.parquet", "truth_pans.parquet", "truth_supports.parquet", "truth_cycles.parquet")
+
+
+@pytest.fixture(scope="module")
+def default_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "default"
+    assert main(["run", "--out", str(out), "--quiet"]) == 0
+    return out
+
+
+def test_default_run_writes_a_complete_run_directory(default_run):
+    names = {p.name for p in default_run.iterdir()}
+    assert set(TRUTH_FILES) | {"scenario.toml", "metrics.json", "run.rrd"} <= names
+    for name in TRUTH_FILES:
+        read_stream(default_run, STREAMS[name.removesuffix(".parquet")])  # validates columns and units
+    metrics = json.loads((default_run / "metrics.json").read_text())
+    assert metrics["twin"]["scenario"] == "default" and len(metrics["twin"]["cycles"]) == 2
+    assert not [p for p in default_run.parent.iterdir() if ".partial-" in p.name]
+
+
+def test_recording_reads_back_with_the_face_entities(default_run):
+    reader = RrdReader(str(default_run / "run.rrd"))
+    entities = {chunk.entity_path for chunk in reader.stream().to_chunks()}
+    for entity in ("/world/floor", "/world/pans", "/world/supports", "/world/rams", "/world/shearer",
+                   "/world/shearer_path", "/plots/shearer_speed", "/plots/bend_horizontal_deg",
+                   "/plots/ram_length"):
+        assert entity in entities or entity.lstrip("/") in entities, entity
+
+
+def test_existing_directory_is_refused_without_force(default_run, capsys):
+    before = sorted(p.name for p in default_run.iterdir())
+    assert main(["run", "--out", str(default_run), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--force" in err
+    assert sorted(p.name for p in default_run.iterdir()) == before
+
+
+@pytest.mark.parametrize("content, words", [
+    ('name = "x"\n[face]\npan_count = "many"\n', ["face.pan_count"]),
+    ('name = "x"\nbogus = 1\n', ["bogus", "unknown key"]),
+    ('name = "x"\ncycles = 99\n', ["cycles"]),
+])
+def test_bad_scenario_is_one_line_exit_2_nothing_written(tmp_path, capsys, content, words):
+    scenario = tmp_path / "bad.toml"
+    scenario.write_text(content)
+    out = tmp_path / "out"
+    assert main(["run", str(scenario), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(scenario) in err
+    for word in words:
+        assert word in err
+    assert not out.exists() and [p.name for p in tmp_path.iterdir()] == ["bad.toml"]
+
+
+def test_missing_scenario_file(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "missing.toml"), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    assert "not found" in capsys.readouterr().err
+
+
+def short_scenario(tmp_path, seed: int):
+    """The default face with one short cycle, for the reproducibility checks."""
+    text = (SCENARIO_DIR / "default.toml").read_text().replace("cycles = 2", "cycles = 1")
+    path = tmp_path / "short.toml"
+    path.write_text(text)
+    out = tmp_path / f"seed{seed}-{len(list(tmp_path.iterdir()))}"
+    assert main(["run", str(path), "--out", str(out), "--seed", str(seed), "--quiet"]) == 0
+    return out
+
+
+def test_same_seed_gives_bit_identical_truth_and_another_seed_does_not(tmp_path):
+    a, b = short_scenario(tmp_path, 7), short_scenario(tmp_path, 7)
+    for name in TRUTH_FILES:
+        assert filecmp.cmp(a / name, b / name, shallow=False), name
+    c = short_scenario(tmp_path, 8)
+    # Rows at t = 0 are the initial pans; their bends come from the seed.
+    bends = [read_stream(run, STREAMS["truth_pans"]).column("bend_h").to_numpy()[:43] for run in (a, c)]
+    assert np.abs(bends[0] - bends[1]).max() > 1e-4
+
+
+def test_a_crash_leaves_no_run_directory(tmp_path, monkeypatch):
+    import twin.view.recording
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(twin.view.recording, "write_recording", broken)
+    scenario = tmp_path / "short.toml"
+    scenario.write_text((SCENARIO_DIR / "default.toml").read_text().replace("cycles = 2", "cycles = 1"))
+    with pytest.raises(RuntimeError):
+        main(["run", str(scenario), "--out", str(tmp_path / "out"), "--quiet"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["short.toml"]
+
+
+def test_export_and_import_give_identical_streams(default_run, tmp_path):
+    csv_dir, back = tmp_path / "csv", tmp_path / "back"
+    assert main(["export", str(default_run), "--csv", str(csv_dir)]) == 0
+    assert main(["import", str(csv_dir), "--out", str(back)]) == 0
+    for name in ("imu", "odometer", "pushram", "mag", "faults", "truth_shearer", "truth_pans"):
+        a = read_stream(default_run, STREAMS[name])
+        b = read_stream(back, STREAMS[name])
+        assert a.schema.equals(b.schema, check_metadata=True), name  # names, types and units
+        for col in a.column_names:  # values bit for bit, NaN where NaN
+            np.testing.assert_array_equal(a.column(col).to_numpy(zero_copy_only=False),
+                                          b.column(col).to_numpy(zero_copy_only=False), err_msg=f"{name}.{col}")
+
+
+def test_monte_carlo_trials_are_written_beside_trial_zero(tmp_path):
+    scenario = tmp_path / "short.toml"
+    scenario.write_text((SCENARIO_DIR / "default.toml").read_text().replace("cycles = 2", "cycles = 1"))
+    out = tmp_path / "mc"
+    assert main(["run", str(scenario), "--out", str(out), "--trials", "3", "--quiet"]) == 0
+    imus = [read_stream(d, STREAMS["imu"]) for d in (out, out / "trials" / "001", out / "trials" / "002")]
+    assert imus[0].column("t").equals(imus[2].column("t"))
+    assert not imus[0].column("dtheta_x").equals(imus[1].column("dtheta_x"))
+    assert not (out / "trials" / "001" / "truth_shearer.parquet").exists()  # one truth for all trials
+
+
+def test_run_writes_estimates_and_estimate_reruns_them(default_run, capsys):
+    from estimators.io.logformat import read_estimate
+    metrics = json.loads((default_run / "metrics.json").read_text())
+    assert set(metrics["estimators"]) >= {"dr", "kf", "kf_cpoem", "kf_cpoem_rts"}
+    assert len(metrics["estimators"]["kf"]["cycles"]) == 3  # two cycles and "all"
+    assert (default_run / "estimates.rrd").is_file()
+    before = read_estimate(default_run, "kf_cpoem_rts").column("lat").to_numpy()
+    assert main(["estimate", str(default_run)]) == 0
+    assert "SEP per cutting cycle" in capsys.readouterr().out
+    after = read_estimate(default_run, "kf_cpoem_rts").column("lat").to_numpy()
+    assert np.array_equal(before, after)  # same log, same result
+
+
+def test_estimate_without_a_scenario_is_one_line(tmp_path, capsys):
+    assert main(["estimate", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "scenario.toml" in err

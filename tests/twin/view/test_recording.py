@@ -1,0 +1,174 @@
+"""twin.view.recording: a synthetic run written to .rrd and read back with rerun.chunk.RrdReader."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow as pa
+import pytest
+from rerun.chunk import RrdReader
+
+from estimators.io.logformat import (
+    TRUTH_CYCLES,
+    TRUTH_PANS,
+    TRUTH_SHEARER,
+    TRUTH_SUPPORTS,
+    make_table,
+)
+from twin.config.scenario import Face, Scenario
+from twin.view.recording import TIMELINE, decimate, write_recording
+
+
+def synthetic_truth(n_pans: int = 4, n_supports: int = 4, n_updates: int = 3, shearer_s: float = 5.0,
+                    shearer_hz: float = 200.0, pan_length: float = 1.75,
+                    seed: int = 0) -> dict[str, pa.Table]:
+    """Truth tables shaped like a run: all pans at t = 0, then a changing subset at each later update."""
+    rng = np.random.default_rng(seed)
+    # Pans: full set at t=0, then every other pan (alternating) at each later time.
+    t_list, pan_list = [np.zeros(n_pans)], [np.arange(n_pans)]
+    for k in range(1, n_updates):
+        pans = np.arange(k % 2, n_pans, 2)
+        t_list.append(np.full(pans.size, 10.0 * k))
+        pan_list.append(pans)
+    t = np.concatenate(t_list)
+    pan = np.concatenate(pan_list)
+    n = t.size
+    yaw = rng.normal(0, 0.005, n)
+    pans = make_table(TRUTH_PANS, {
+        "t": t, "pan": pan,
+        "p_t_e": 0.05 * t, "p_t_n": (pan + 0.5) * pan_length, "p_t_u": np.full(n, 0.35),
+        "q_tp_w": np.cos(yaw / 2), "q_tp_x": np.zeros(n), "q_tp_y": np.zeros(n), "q_tp_z": np.sin(yaw / 2),
+        "bend_h": np.where(pan == n_pans - 1, np.nan, rng.normal(0, 0.01, n)),
+        "bend_v": np.where(pan == n_pans - 1, np.nan, rng.normal(0, 0.01, n)),
+        "advance": 0.05 * t,
+    })
+    # Supports: same pattern.
+    st = np.concatenate([np.zeros(n_supports)] + [np.full(n_supports, 10.0 * k + 5.0) for k in range(1, n_updates)])
+    sid = np.tile(np.arange(n_supports), n_updates)
+    m = st.size
+    supports = make_table(TRUTH_SUPPORTS, {
+        "t": st, "support": sid,
+        "p_t_e": -1.2 + 0.01 * st, "p_t_n": (sid + 0.5) * pan_length, "p_t_u": np.zeros(m),
+        "advance": 0.01 * st, "ram": 1.2 + 0.1 * rng.random(m), "canopy": np.full(m, 3.0),
+        "set": (sid % 2).astype(np.int8),
+    })
+    # Shearer: straight run along the face, one cycle change half way.
+    ts = np.arange(int(round(shearer_s * shearer_hz))) / shearer_hz
+    k = ts.size
+    zeros, ones = np.zeros(k), np.ones(k)
+    shearer = make_table(TRUTH_SHEARER, {
+        "t": ts, "lat": np.full(k, np.radians(34.27)), "lon": np.full(k, np.radians(117.18)), "h": ones * 36.9,
+        "p_t_e": 0.5 * ones, "p_t_n": 5.0 + 0.13 * ts, "p_t_u": 1.25 * ones,
+        "v_n_e": zeros, "v_n_n": 0.13 * ones, "v_n_u": zeros,
+        "q_nb_w": ones, "q_nb_x": zeros, "q_nb_y": zeros, "q_nb_z": zeros,
+        **{f"{p}_{a}": zeros for p in ("w_ib_b", "w_nb_b", "f_b") for a in "xyz"},
+        "s": 5.0 + 0.13 * ts, "pan_rear": np.zeros(k, np.int32), "pan_front": np.ones(k, np.int32),
+        "cycle": (ts >= shearer_s / 2).astype(np.int32), "phase": np.ones(k, np.int8),
+    })
+    cycles = make_table(TRUTH_CYCLES, {
+        "cycle": np.array([0, 1]), "direction": np.array([1, -1]), "t": np.array([0.0, shearer_s / 2]),
+        "t_cut_end": np.array([1.0, 3.5]), "t_sump_end": np.array([1.5, 4.0]),
+        "t_push_end": np.array([2.0, 4.5]), "t_end": np.array([shearer_s / 2, shearer_s]),
+        "s_sump": np.array([10.0, 10.0]),
+    })
+    return {"truth_shearer": shearer, "truth_pans": pans, "truth_supports": supports, "truth_cycles": cycles}
+
+
+def flat_floor(n_pans: int = 4, pan_length: float = 1.75) -> tuple[np.ndarray, np.ndarray]:
+    x, y = np.meshgrid(np.linspace(-5, 5, 6), np.linspace(0, n_pans * pan_length, 5), indexing="ij")
+    vertices = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    ij = np.arange(x.size).reshape(x.shape)
+    a, b, c, d = ij[:-1, :-1].ravel(), ij[1:, :-1].ravel(), ij[1:, 1:].ravel(), ij[:-1, 1:].ravel()
+    return vertices, np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+
+
+def _sim_times(chunks, entity: str) -> np.ndarray:
+    """Distinct sim_time values [s] of an entity's temporal chunks."""
+    values = [chunk.to_record_batch().column(TIMELINE).cast(pa.int64()).to_numpy()
+              for chunk in chunks if chunk.entity_path == entity and not chunk.is_static]
+    return np.unique(np.concatenate(values)) / 1e9 if values else np.zeros(0)
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    path = tmp_path_factory.mktemp("run") / "run.rrd"
+    # model_construct: the geometry fields only, without the whole-run consistency checks.
+    scn = Scenario.model_construct(name="test", face=Face(azimuth_deg=30.0))
+    write_recording(path, scn, synthetic_truth(), flat_floor())
+    return path
+
+
+def test_entities_and_times(recording):
+    reader = RrdReader(recording)
+    assert len(reader.recordings()) == 1
+    assert reader.recordings()[0].application_id == "longwall-twin"
+    assert len(reader.blueprints()) == 1
+    chunks = reader.stream().to_chunks()
+    entities = {c.entity_path for c in chunks}
+    expected = {"/world/floor", "/world/pans", "/world/supports", "/world/rams", "/world/shearer",
+                "/world/shearer/body", "/world/shearer/drums", "/world/shearer_path", "/plots/shearer_speed",
+                "/plots/cycle", "/plots/bend_horizontal_deg", "/plots/bend_vertical_deg", "/plots/ram_length"}
+    assert expected <= entities, expected - entities
+    for entity in ("/world/floor", "/world/shearer/body", "/world/shearer/drums", "/world/shearer_path"):
+        assert all(c.is_static for c in chunks if c.entity_path == entity)
+
+    np.testing.assert_allclose(_sim_times(chunks, "/world/pans"), [0.0, 10.0, 20.0])
+    np.testing.assert_allclose(_sim_times(chunks, "/plots/bend_horizontal_deg"), [0.0, 10.0, 20.0])
+    np.testing.assert_allclose(_sim_times(chunks, "/world/supports"), [0.0, 15.0, 25.0])
+    np.testing.assert_allclose(_sim_times(chunks, "/plots/ram_length"), [0.0, 15.0, 25.0])
+    shearer_t = _sim_times(chunks, "/world/shearer")
+    # 5 s at 200 Hz decimated to 10 Hz: 0.0, 0.1, ..., 4.9 and the last sample 4.995.
+    assert shearer_t.size == 51
+    np.testing.assert_allclose(shearer_t[:50], np.arange(50) / 10, atol=1e-9)
+    assert shearer_t.size == _sim_times(chunks, "/plots/shearer_speed").size
+
+
+def test_pan_boxes_forward_filled(recording):
+    """Every pan-update time carries all 4 pans even though only 2 changed; bends drop the last pan."""
+    chunks = RrdReader(recording).stream().to_chunks()
+    for entity, component, per_row in (("/world/pans", "Boxes3D:centers", 4),
+                                       ("/world/supports", "Boxes3D:half_sizes", 4),
+                                       ("/world/rams", "LineStrips3D:strips", 4)):
+        lengths = []
+        for chunk in chunks:
+            if chunk.entity_path == entity and not chunk.is_static:
+                batch = chunk.to_record_batch()
+                lengths += [len(x) for x in batch.column(component).to_pylist() if x is not None]
+        assert lengths == [per_row] * 3, entity
+    bars = []
+    for chunk in chunks:
+        if chunk.entity_path == "/plots/bend_horizontal_deg" and not chunk.is_static:
+            for row in chunk.to_record_batch().column("BarChart:values").to_pylist():
+                (tensor,) = row
+                bars.append(tensor["shape"])
+    assert bars == [[3]] * 3
+
+
+def test_decimate():
+    t = np.arange(2000) / 200.0
+    idx = decimate(t, 10.0)
+    assert idx.size == 101 and idx[0] == 0 and idx[-1] == 1999
+    np.testing.assert_allclose(t[idx[:100]], np.arange(100) / 10)
+
+
+def test_open_viewer_errors(tmp_path, monkeypatch):
+    import twin.view.recording as recording
+
+    with pytest.raises(FileNotFoundError, match="run.rrd"):
+        recording.open_viewer(tmp_path)
+    (tmp_path / "run.rrd").write_bytes(b"")
+    monkeypatch.setattr(recording.sys, "executable", str(tmp_path / "bin" / "python"))
+    monkeypatch.setattr(recording.shutil, "which", lambda name: None)
+    with pytest.raises(FileNotFoundError, match="rerun viewer executable not found"):
+        recording.open_viewer(tmp_path)
+
+
+def test_latest_rows_forward_fill():
+    from twin.view.recording import _latest_rows
+
+    # Rows: t=0 pans 0..2; t=5 pan 1; t=9 pans 2, 0 (unsorted); pan 3 first seen at t=5.
+    t = np.array([0.0, 0.0, 0.0, 5.0, 9.0, 9.0, 5.0])
+    ident = np.array([0, 1, 2, 1, 2, 0, 3])
+    times, ids, rows = _latest_rows(t, ident)
+    np.testing.assert_array_equal(times, [0.0, 5.0, 9.0])
+    np.testing.assert_array_equal(ids, [0, 1, 2, 3])
+    np.testing.assert_array_equal(rows, [[0, 1, 2, 6], [0, 3, 2, 6], [5, 3, 4, 6]])

@@ -1,0 +1,1 @@
+"""Scenario files: the TOML reader, validated sections, IMU grades."""

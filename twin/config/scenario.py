@@ -1,0 +1,318 @@
+"""Scenario files: TOML in, validated and unit-converted `Scenario` out.
+
+A scenario file is the single description of a run. Units at this edge are the ones a mining engineer
+writes (degrees, m/min, Hz); `Scenario` keeps them as written so the resolved file reads like the input,
+and the `*_rad` / `*_m_s` properties convert once for the code. Any problem is a `ScenarioError` whose
+message is one line naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from twin.config.imu_grades import GRADES
+from twin.config.sensors import Fault, Sensors, Vector3
+from twin.face import snake
+from twin.face.layout import floor_pitch_change
+
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+BendLimit = Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)]
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot be run; the message is one line: file, key, what is wrong."""
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+class Site(_Section):
+    """Reference geodetic point: origin of the MuJoCo world (ENU tangent plane)."""
+
+    lat_deg: Annotated[float, Field(ge=-89, le=89, allow_inf_nan=False)] = 34.27
+    lon_deg: Annotated[float, Field(ge=-180, le=180, allow_inf_nan=False)] = 117.18
+    height_m: Annotated[float, Field(ge=-5000, le=9000, allow_inf_nan=False)] = 36.0
+
+
+class Face(_Section):
+    """The armoured face conveyor line, the floor it lies on and the coal to be cut."""
+
+    azimuth_deg: Annotated[float, Field(ge=0, lt=360, allow_inf_nan=False)] = 0.0
+    """Direction of the face line from headgate to tailgate, degrees clockwise from north.
+    The face advances 90 deg clockwise from it (body x, towards the coal wall)."""
+    pan_count: Annotated[int, Field(ge=8, le=400)] = 44
+    pan_length_m: Annotated[float, Field(ge=1.5, le=2.05, allow_inf_nan=False)] = 1.75
+    face_length_m: PositiveFloat | None = None
+    """Optional check: must equal pan_count * pan_length_m within 1 mm when given."""
+    bend_limit_horizontal_deg: BendLimit = 1.0
+    bend_limit_vertical_deg: BendLimit = 3.0
+    initial_bend_horizontal_deg: Literal["random"] | list[Finite] = "random"
+    """Per-chute horizontal bend (pan i+1 yaw minus pan i yaw), pan_count - 1 values, or "random"."""
+    initial_straightness_deg: NonNegativeFloat = 0.3
+    """Standard deviation of the random initial pan yaw (smooth, AR(1) along the face)."""
+    seam_dip_deg: Annotated[float, Field(ge=-20, le=20, allow_inf_nan=False)] = 0.0
+    """Floor slope along the face; positive rises towards the tailgate."""
+    advance_dip_deg: Annotated[float, Field(ge=-20, le=20, allow_inf_nan=False)] = 0.0
+    """Floor slope in the advance direction; positive rises towards the coal wall."""
+    undulation_amplitude_m: NonNegativeFloat = 0.1
+    undulation_wavelength_m: Annotated[float, Field(ge=5, allow_inf_nan=False)] = 30.0
+    web_depth_m: Annotated[float, Field(ge=0.3, le=1.5, allow_inf_nan=False)] = 0.8
+    panel_length_m: PositiveFloat = 20.0
+    """Extent of coal (and floor) in the advance direction; cycles * web_depth_m must fit in it."""
+
+
+class Supports(_Section):
+    """Hydraulic roof supports (shields) and their push rams."""
+
+    pans_per_support: Annotated[int, Field(ge=1, le=4)] = 1
+    ram_length_set_m: Annotated[float, Field(ge=0.5, le=3.0, allow_inf_nan=False)] = 1.2
+    """Ram length between a set support and its pan before a push (fully retracted)."""
+    ram_speed_m_s: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = 0.1
+    sequence: Literal["after_push", "before_push"] = "after_push"
+    """Support-advance sequence: after the pans are pushed (conventional), or before (immediate forward
+    support, the supports following the shearer); see twin.face.pushadvance."""
+    advance_lag_pans: Annotated[int, Field(ge=0, le=20)] = 2
+    """after_push: a support advances once its pan and the pans this many nearer the shearer are fully
+    pushed. before_push: once the shearer's trailing end is this many pans past it."""
+    canopy_height_m: Annotated[float, Field(ge=1.0, le=7.0, allow_inf_nan=False)] = 3.0
+    lower_m: Annotated[float, Field(gt=0, le=0.5, allow_inf_nan=False)] = 0.1
+    """How far the canopy is lowered from the roof while the support advances."""
+
+
+class Shearer(_Section):
+    length_m: Annotated[float, Field(ge=3, le=20, allow_inf_nan=False)] = 8.0
+    shoe_spacing_m: Annotated[float, Field(ge=1, le=15, allow_inf_nan=False)] = 5.0
+    body_height_m: Annotated[float, Field(gt=0, le=3, allow_inf_nan=False)] = 0.9
+    """Height of the body reference point above the running line."""
+    suspension_frequency_hz: Annotated[float, Field(ge=1, le=100, allow_inf_nan=False)] = 10.0
+    suspension_damping_ratio: Annotated[float, Field(gt=0, le=2, allow_inf_nan=False)] = 1.0
+
+
+class Stop(_Section):
+    """A scripted stop of the shearer during a straight cut."""
+
+    cycle: Annotated[int, Field(ge=0)]
+    at_m: NonNegativeFloat
+    """Distance travelled into the cycle's straight cut where the shearer stops."""
+    duration_s: PositiveFloat
+
+
+class Haulage(_Section):
+    cutting_speed_m_min: Annotated[float, Field(ge=1, le=30, allow_inf_nan=False)] = 8.0
+    return_speed_m_min: Annotated[float, Field(ge=1, le=40, allow_inf_nan=False)] = 18.0
+    """Speed through coal already cut (the start of a pass over the previous sump)."""
+    sump_speed_m_min: Annotated[float, Field(ge=1, le=30, allow_inf_nan=False)] = 6.0
+    acceleration_m_s2: Annotated[float, Field(ge=0.005, le=2, allow_inf_nan=False)] = 0.05
+    reversal_stop_s: NonNegativeFloat = 10.0
+    end_push_stop_s: NonNegativeFloat = 30.0
+    """Stop while the end pans are pushed during snake sumping."""
+    stops: list[Stop] = []
+
+
+class Pattern(_Section):
+    kind: Literal["bidirectional"] = "bidirectional"
+    snake_length_pans: Annotated[int, Field(ge=2, le=40)] = 12
+    push_lag_pans: Annotated[int, Field(ge=0, le=20)] = 2
+    """Pans between the shearer's trailing end and the first pan of the snake."""
+    push_step_pans: Annotated[int, Field(ge=1, le=4)] = 1
+    """The push-advance controller acts each time the shearer has travelled this many pans."""
+
+
+class Rates(_Section):
+    truth_hz: Annotated[float, Field(ge=50, le=2000, allow_inf_nan=False)] = 200.0
+    """Rate of the published shearer truth (samples of the truth splines)."""
+    ride_hz: Annotated[float, Field(ge=50, le=2000, allow_inf_nan=False)] = 100.0
+    """Step rate of the shearer's MuJoCo ride (suspension); the truth splines pass through its samples."""
+    face_timestep_s: Annotated[float, Field(ge=0.001, le=0.02, allow_inf_nan=False)] = 0.01
+
+
+class ShearerPositioning(_Section):
+    """The shearer positioning estimators of 001 that `longwall run` / `longwall estimate` run on the log."""
+
+    methods: list[Literal["dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag",
+                          "afkf", "fkf_rail"]] = [
+        "dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline"]
+    """estimators.shearer.positioning METHODS; an empty list runs none."""
+    tuning: Literal["ours", "appendix_a"] = "ours"
+    """ours: P0 and Q from the IMU grade and the survey; appendix_a: 001 Appendix A (Table 1 x 3, noise x 5)."""
+    filter_rate_hz: Annotated[float, Field(gt=0, le=50, allow_inf_nan=False)] = 10.0
+    n_samples: Annotated[int, Field(ge=1, le=5)] = 4
+    """Coning/sculling sub-samples per mechanization update."""
+    cpoem_spacing_m: Annotated[float, Field(ge=0.2, le=50, allow_inf_nan=False)] = 2.0
+    """Delta of 001 section 2.2: the distance between CPOEM points (001 uses 2, 6 and 10 m)."""
+    mag_extra_sigma_deg: Annotated[float, Field(ge=0, le=30, allow_inf_nan=False)] = 0.5
+    """Magnetic yaw error the magnetometer's white noise does not cover (calibration residual, motor field) [deg]."""
+    mag_field_check: bool = True
+    """afkf: leave out magnetometer readings whose strength or dip disagrees with the geomagnetic model."""
+    mag_hard_iron_t: Vector3 = [0.0, 0.0, 0.0]
+    """Hard-iron offset [T] of the magnetometer's calibration (estimators.nav.geomagnetic.fit_ellipsoid), removed from
+    the readings before use."""
+    mag_soft_iron_correction: Annotated[list[Vector3], Field(min_length=3, max_length=3)] = [
+        [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    """The calibration's S^-1 (rows): calibrated field = S^-1 (reading - hard iron)."""
+
+
+class Estimators(_Section):
+    shearer: ShearerPositioning = ShearerPositioning()
+
+
+class Scenario(_Section):
+    name: Annotated[str, Field(min_length=1)]
+    seed: Annotated[int, Field(ge=0)] = 0
+    cycles: Annotated[int, Field(ge=1, le=200)] = 1
+    site: Site = Site()
+    face: Face = Face()
+    supports: Supports = Supports()
+    shearer: Shearer = Shearer()
+    haulage: Haulage = Haulage()
+    pattern: Pattern = Pattern()
+    rates: Rates = Rates()
+    sensors: Sensors = Sensors()
+    faults: list[Fault] = []
+    estimators: Estimators = Estimators()
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "Scenario":
+        f, sh, p = self.face, self.shearer, self.pattern
+        length = f.pan_count * f.pan_length_m
+        if f.face_length_m is not None and abs(f.face_length_m - length) > 1e-3:
+            raise ValueError(
+                f"face.face_length_m: {f.face_length_m} m differs from pan_count * pan_length_m = {length:.3f} m")
+        if isinstance(f.initial_bend_horizontal_deg, list):
+            bends = f.initial_bend_horizontal_deg
+            if len(bends) != f.pan_count - 1:
+                raise ValueError(f"face.initial_bend_horizontal_deg: {len(bends)} values, need pan_count - 1 = "
+                                 f"{f.pan_count - 1}")
+            worst = max(abs(b) for b in bends)
+            if worst > f.bend_limit_horizontal_deg:
+                raise ValueError(f"face.initial_bend_horizontal_deg: {worst} deg exceeds "
+                                 f"bend_limit_horizontal_deg = {f.bend_limit_horizontal_deg}")
+        if sh.shoe_spacing_m >= sh.length_m:
+            raise ValueError(f"shearer.shoe_spacing_m: {sh.shoe_spacing_m} m must be shorter than "
+                             f"shearer.length_m = {sh.length_m} m")
+        end_zone = sh.length_m + (p.snake_length_pans + p.push_lag_pans + 2) * f.pan_length_m
+        if 2 * end_zone > length:
+            raise ValueError(f"face.pan_count: a {length:.1f} m face is too short for the shearer and the snake "
+                             f"at both ends (needs > {2 * end_zone:.1f} m); add pans or shorten the snake")
+        bend = floor_pitch_change(f.undulation_amplitude_m, f.undulation_wavelength_m, f.pan_length_m)
+        if bend > 0.8 * math.radians(f.bend_limit_vertical_deg):
+            raise ValueError(f"face.undulation_amplitude_m: the floor bends up to {math.degrees(bend):.2f} deg per pan, "
+                             f"more than 80 % of bend_limit_vertical_deg = {f.bend_limit_vertical_deg}; flatten the "
+                             f"floor or lengthen undulation_wavelength_m")
+        if self.cycles * f.web_depth_m > f.panel_length_m:
+            raise ValueError(f"cycles: {self.cycles} cycles of {f.web_depth_m} m exceed face.panel_length_m = "
+                             f"{f.panel_length_m} m; lengthen the panel or run fewer cycles")
+        # A full web over the snake must fit the horizontal bend limit (see twin.face.snake).
+        max_push = snake.capacity_m(p.snake_length_pans, f.pan_length_m, math.radians(f.bend_limit_horizontal_deg))
+        if f.web_depth_m > max_push:
+            raise ValueError(f"pattern.snake_length_pans: {p.snake_length_pans} pans bend at most {max_push:.2f} m "
+                             f"within bend_limit_horizontal_deg; web_depth_m {f.web_depth_m} m needs a longer snake")
+        n_supports = len(range(self.supports.pans_per_support // 2, f.pan_count, self.supports.pans_per_support))
+        for k, fault in enumerate(self.faults):
+            if fault.t_end_s <= fault.t_start_s:
+                raise ValueError(f"faults[{k}]: t_end_s {fault.t_end_s} must be after t_start_s {fault.t_start_s}")
+            needs_target = fault.kind.startswith("ram_") or fault.kind == "push_shortfall"
+            if needs_target and (fault.target is None or fault.target >= n_supports):
+                raise ValueError(f"faults[{k}]: {fault.kind} needs a target support 0..{n_supports - 1} "
+                                 f"(got {fault.target})")
+        for where, name in (("sensors.imu.grade", self.sensors.imu.grade),
+                            ("sensors.support_imu.grade", self.sensors.support_imu.grade)):
+            if name not in GRADES:
+                raise ValueError(f"{where}: no IMU preset '{name}' (presets: {', '.join(sorted(GRADES))})")
+        ratio = self.rates.truth_hz / self.sensors.imu.rate_hz
+        if abs(ratio - round(ratio)) > 1e-9:
+            raise ValueError(f"sensors.imu.rate_hz: {self.sensors.imu.rate_hz} Hz must divide rates.truth_hz = "
+                             f"{self.rates.truth_hz} Hz (IMU increments are sums of truth intervals)")
+        bad = [j for j in self.sensors.support_imu.supports if j >= n_supports]
+        if bad:
+            raise ValueError(f"sensors.support_imu.supports: no support {bad[0]} (supports 0..{n_supports - 1})")
+        for stop in self.haulage.stops:
+            if stop.cycle >= self.cycles:
+                raise ValueError(f"haulage.stops: stop in cycle {stop.cycle} but the run has {self.cycles} cycles")
+            if stop.at_m > travel_length_m(self):
+                raise ValueError(f"haulage.stops: stop at {stop.at_m} m is beyond the "
+                                 f"{travel_length_m(self):.1f} m of travel")
+        return self
+
+
+def travel_length_m(scn: Scenario) -> float:
+    """Arc length the shearer centre travels in a straight cut (face end to face end)."""
+    return scn.face.pan_count * scn.face.pan_length_m - scn.shearer.length_m
+
+
+def _format_error(source: str, err: ValidationError) -> str:
+    first = err.errors()[0]
+    loc = ".".join(str(x) for x in first["loc"] if not str(x).startswith("function-after"))
+    msg = first["msg"].removeprefix("Value error, ")
+    if first["type"] == "extra_forbidden":
+        msg = "unknown key (check the spelling; see scenarios/default.toml for the keys)"
+    got = first.get("input")
+    detail = f" (got {got!r})" if first["type"] not in ("extra_forbidden", "value_error") and not isinstance(
+        got, dict) else ""
+    where = f"{loc}: " if loc else ""
+    return f"{source}: {where}{msg}{detail}"
+
+
+def parse_scenario(data: dict, source: str = "<scenario>") -> Scenario:
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as err:
+        raise ScenarioError(_format_error(source, err)) from None
+
+
+def load_scenario(path: str | Path, seed: int | None = None) -> Scenario:
+    """Read and validate a scenario TOML file; `seed` overrides the file's seed."""
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(f"{path}: scenario file not found")
+    try:
+        data = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise ScenarioError(f"{path}: not valid TOML: {err}") from None
+    if seed is not None:
+        data["seed"] = seed
+    return parse_scenario(data, str(path))
+
+
+def scenario_to_toml(scn: Scenario) -> str:
+    """The resolved scenario (every default made visible) as TOML text."""
+    data = scn.model_dump(exclude_none=True)
+    lines: list[str] = []
+
+    def value(v) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return '"' + v.replace('"', '\\"') + '"'
+        if isinstance(v, list):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(v)
+
+    def table(prefix: str, d: dict) -> None:
+        scalars = {k: v for k, v in d.items() if not isinstance(v, dict) and not _is_table_list(v)}
+        if prefix:
+            lines.append(f"\n[{prefix}]")
+        lines.extend(f"{k} = {value(v)}" for k, v in scalars.items())
+        for k, v in d.items():
+            if _is_table_list(v):
+                for item in v:
+                    lines.append(f"\n[[{prefix + '.' if prefix else ''}{k}]]")
+                    lines.extend(f"{kk} = {value(vv)}" for kk, vv in item.items())
+        for k, v in d.items():
+            if isinstance(v, dict):
+                table(f"{prefix}.{k}" if prefix else k, v)
+
+    table("", data)
+    return "\n".join(lines).lstrip() + "\n"
+
+
+def _is_table_list(v) -> bool:
+    return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)

@@ -1,0 +1,253 @@
+"""MuJoCo models assembled with MjSpec from the MJCF pieces in `models/`.
+
+Two models come from one scenario:
+
+* the face model (`build_face_spec`): a contiguous range of pans, each its own body with six scalar joints
+  (flat layout), neighbours tied by site-based connect equalities at their running-line ends, the relative
+  horizontal and vertical bend limited by fixed tendons (yaw and pitch differences); one hydraulic support
+  per `pans_per_support` pans with its push ram, a spatial tendon driven by an integrated-velocity actuator
+  (the tendon length is the ram reading) and a canopy leg actuator; the floor a height field. A range
+  that does not reach a face end is closed by mocap anchors standing in for the neighbouring pans, so a
+  window of the face can be simulated alone while the rest stays put.
+* the ride model (`build_ride_spec`): the shearer as a free body held by a soft weld (its suspension) to a
+  mocap target placed from its two shoes on the pan line.
+
+Pan joints are relative to the face frame F (bodies sit at the world origin turned into F), so a pan's
+qpos is its state (x, y, z, yaw, pitch, roll) in F; see twin.face.layout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from estimators.nav.rotations import mat_to_quat
+from twin.config.scenario import Scenario
+from twin.face.layout import (
+    PAN_WIDTH_M,
+    SUPPORT_BASE_LENGTH_M,
+    FaceFrame,
+    Floor,
+    support_stations,
+)
+
+PAN_JOINTS = ("x", "y", "z", "yaw", "pitch", "roll")
+HFIELD_RESOLUTION_M = 0.25
+FLOOR_MARGIN_M = 6.0
+RAM_FORCE_PUSH_N = 4.0e5
+RAM_FORCE_PULL_N = 6.0e5
+RAM_GAIN_N_M = 5.0e7
+RAM_DAMPING_N_S_M = 1.0e6
+SUPPORT_FRICTION_SET_N = 2.0e6
+SUPPORT_FRICTION_LOWERED_N = 1.0e4
+"""Base sliding resistance of a lowered support (base lift on) [N]."""
+
+
+def models_dir() -> Path:
+    """The MJCF pieces: the repository's `models/` (installed as the package data `twin.models`)."""
+    return Path(str(resources.files("twin.models")))
+
+
+@cache
+def _piece(name: str) -> mujoco.MjSpec:
+    return mujoco.MjSpec.from_file(str(models_dir() / f"{name}.xml"))
+
+
+def _piece_copy(name: str) -> mujoco.MjSpec:
+    return _piece(name).copy()
+
+
+@dataclass(frozen=True)
+class FloorGrid:
+    """The floor sampled on a regular grid in F (for the height field and the Rerun mesh)."""
+
+    x: np.ndarray  # (ncol,)
+    y: np.ndarray  # (nrow,)
+    z: np.ndarray  # (nrow, ncol)
+
+    @classmethod
+    def from_scenario(cls, scn: Scenario, floor: Floor) -> "FloorGrid":
+        length = scn.face.pan_count * scn.face.pan_length_m
+        x0 = -(scn.supports.ram_length_set_m + PAN_WIDTH_M + SUPPORT_BASE_LENGTH_M + FLOOR_MARGIN_M)
+        x1 = scn.face.panel_length_m + FLOOR_MARGIN_M
+        y0, y1 = -FLOOR_MARGIN_M, length + FLOOR_MARGIN_M
+        nx = int(np.ceil((x1 - x0) / HFIELD_RESOLUTION_M)) + 1
+        ny = int(np.ceil((y1 - y0) / HFIELD_RESOLUTION_M)) + 1
+        x = np.linspace(x0, x0 + (nx - 1) * HFIELD_RESOLUTION_M, nx)
+        y = np.linspace(y0, y0 + (ny - 1) * HFIELD_RESOLUTION_M, ny)
+        return cls(x, y, floor.height(x[None, :], y[:, None]))
+
+    def mesh_t(self, frame: FaceFrame) -> tuple[np.ndarray, np.ndarray]:
+        """Triangle mesh of the floor in t: vertices (V, 3) and triangles (T, 3)."""
+        xx, yy = np.meshgrid(self.x, self.y)
+        verts_f = np.column_stack([xx.ravel(), yy.ravel(), self.z.ravel()])
+        ny, nx = self.z.shape
+        idx = np.arange(ny * nx).reshape(ny, nx)
+        a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
+        tris = np.concatenate([np.stack([a, b, d], -1).reshape(-1, 3), np.stack([a, d, c], -1).reshape(-1, 3)])
+        return verts_f @ frame.mat_tf.T, tris
+
+
+def _add_floor(spec: mujoco.MjSpec, grid: FloorGrid, quat_tf: np.ndarray, mat_tf: np.ndarray) -> None:
+    z0, z1 = float(grid.z.min()) - 0.01, float(grid.z.max()) + 0.01
+    hf = spec.add_hfield(name="floor", nrow=grid.z.shape[0], ncol=grid.z.shape[1],
+                         size=[(grid.x[-1] - grid.x[0]) / 2, (grid.y[-1] - grid.y[0]) / 2, z1 - z0, 1.0],
+                         userdata=((grid.z - z0) / (z1 - z0)).ravel().tolist())
+    centre_f = np.array([(grid.x[0] + grid.x[-1]) / 2, (grid.y[0] + grid.y[-1]) / 2, z0])
+    spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname=hf.name,
+                            pos=mat_tf @ centre_f, quat=quat_tf, contype=0, conaffinity=1,
+                            rgba=[0.35, 0.3, 0.25, 1])
+
+
+def _scale_pan(body: mujoco.MjsBody, prefix: str, length: float) -> None:
+    half = length / 2
+    for geom in body.geoms:
+        if geom.name in (f"{prefix}trough", f"{prefix}rack"):
+            geom.size = [geom.size[0], half, geom.size[2]]
+        elif "foot" in geom.name:
+            sign = 1.0 if geom.pos[1] > 0 else -1.0
+            geom.pos = [geom.pos[0], sign * (half - 0.075), geom.pos[2]]
+    for site in body.sites:
+        if site.name.endswith("rail_start"):
+            site.pos = [0, -half, 0]
+        elif site.name.endswith("rail_end"):
+            site.pos = [0, half, 0]
+
+
+@dataclass(frozen=True)
+class FaceIndex:
+    """Addresses of a compiled face model's state, by pan and support (window-local order)."""
+
+    pans: np.ndarray  # global pan indices in this model
+    supports: np.ndarray  # global support indices in this model
+    pan_qpos: np.ndarray  # (npan, 6) qpos addresses of x, y, z, yaw, pitch, roll
+    pan_dof: np.ndarray  # (npan, 6)
+    sup_qpos: np.ndarray  # (nsup, 2) qpos of x, leg
+    sup_dof: np.ndarray  # (nsup, 2)
+    ram_act: np.ndarray  # (nsup,) actuator ids of rams (integrated velocity; act = target length)
+    leg_act: np.ndarray  # (nsup,) actuator ids of canopy legs
+    ram_tendon: np.ndarray  # (nsup,) tendon ids
+    anchor_eq: np.ndarray  # (2,) equality ids of the head and tail anchors (-1 when at a face end)
+    anchor_mocap: np.ndarray  # (2,) mocap ids of the anchors (-1 when at a face end)
+
+
+def build_face_spec(scn: Scenario, grid: FloorGrid, first: int, count: int, anchors: bool) -> mujoco.MjSpec:
+    """Spec of pans first..first+count-1 with their supports, rams, bend limits and floor.
+
+    With `anchors`, both ends are tied to mocap anchors (standing in for the neighbouring pans) whose
+    equalities the caller deactivates at a face end; a window model is compiled once and moved along the
+    face by setting its state and its supports' body positions.
+    """
+    f, sup = scn.face, scn.supports
+    frame = FaceFrame(np.radians(f.azimuth_deg))
+    mat_tf = frame.mat_tf
+    quat_tf = mat_to_quat(mat_tf)
+    spec = mujoco.MjSpec()
+    spec.modelname = f"face_{first}_{first + count - 1}"
+    spec.option.timestep = scn.rates.face_timestep_s
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.noslip_iterations = 0
+    spec.compiler.degree = False
+    _add_floor(spec, grid, quat_tf, mat_tf)
+    pans = range(first, first + count)
+    lim_h, lim_v = np.radians(f.bend_limit_horizontal_deg), np.radians(f.bend_limit_vertical_deg)
+    for i in pans:
+        body = spec.worldbody.add_frame(quat=quat_tf).attach_body(_piece_copy("pan").body("pan"), f"pan{i}_", "")
+        _scale_pan(body, f"pan{i}_", f.pan_length_m)
+    for i in pans[:-1]:
+        spec.add_equality(name=f"joint{i}", type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                          name1=f"pan{i}_rail_end", name2=f"pan{i + 1}_rail_start",
+                          solref=[0.02, 1.0], solimp=[0.99, 0.999, 0.001, 0.5, 2])
+        for kind, lim in (("yaw", lim_h), ("pitch", lim_v)):
+            ten = spec.add_tendon(name=f"bend_{kind}{i}", limited=mujoco.mjtLimited.mjLIMITED_TRUE,
+                                  range=[-float(lim), float(lim)], solref_limit=[0.02, 1.0],
+                                  solimp_limit=[0.99, 0.999, 0.001, 0.5, 2])
+            ten.wrap_joint(f"pan{i + 1}_{kind}", 1.0)
+            ten.wrap_joint(f"pan{i}_{kind}", -1.0)
+    for side, (pan, site) in enumerate(((first, "rail_start"), (first + count - 1, "rail_end"))):
+        if anchors:
+            anchor = spec.worldbody.add_body(name=f"anchor{side}", mocap=True)
+            anchor.add_site(name=f"anchor{side}")
+            spec.add_equality(name=f"anchor{side}", type=mujoco.mjtEq.mjEQ_CONNECT,
+                              objtype=mujoco.mjtObj.mjOBJ_SITE, name1=f"pan{pan}_{site}", name2=f"anchor{side}",
+                              solref=[0.02, 1.0], solimp=[0.99, 0.999, 0.001, 0.5, 2])
+    stations = support_stations(scn)
+    for j in np.flatnonzero((stations >= first) & (stations < first + count)):
+        i = stations[j]
+        y_station = (i + 0.5) * f.pan_length_m
+        body = spec.worldbody.add_frame(pos=mat_tf @ [0.0, y_station, 0.0], quat=quat_tf).attach_body(
+            _piece_copy("support").body("support"), f"sup{j}_", "")
+        body.first_body().geoms[0].size = [2.0, 0.45 * f.pan_length_m, 0.1]
+        body.geoms[0].size = [1.5, 0.45 * f.pan_length_m, 0.25]
+        ram = spec.add_tendon(name=f"ram{j}")
+        ram.wrap_site(f"sup{j}_ram")
+        ram.wrap_site(f"pan{i}_ram")
+        spec.add_actuator(name=f"ram{j}", target=f"ram{j}", trntype=mujoco.mjtTrn.mjTRN_TENDON,
+                          dyntype=mujoco.mjtDyn.mjDYN_INTEGRATOR, gaintype=mujoco.mjtGain.mjGAIN_FIXED,
+                          biastype=mujoco.mjtBias.mjBIAS_AFFINE, gainprm=[RAM_GAIN_N_M] + [0] * 9,
+                          biasprm=[0, -RAM_GAIN_N_M, -RAM_DAMPING_N_S_M] + [0] * 7, actlimited=True,
+                          actrange=[0.3, sup.ram_length_set_m + 2.0 * f.web_depth_m],
+                          forcelimited=True, forcerange=[-RAM_FORCE_PULL_N, RAM_FORCE_PUSH_N],
+                          ctrllimited=True, ctrlrange=[-20.0, 20.0])
+        spec.add_actuator(name=f"leg{j}", target=f"sup{j}_leg", trntype=mujoco.mjtTrn.mjTRN_JOINT,
+                          gaintype=mujoco.mjtGain.mjGAIN_FIXED, biastype=mujoco.mjtBias.mjBIAS_AFFINE,
+                          gainprm=[2e6] + [0] * 9, biasprm=[0, -2e6, -2e5] + [0] * 7,
+                          ctrllimited=True, ctrlrange=[0.5, 7.0])
+    return spec
+
+
+def index_face_model(model: mujoco.MjModel, scn: Scenario, first: int, count: int) -> FaceIndex:
+    pans = np.arange(first, first + count)
+    stations = support_stations(scn)
+    sups = np.flatnonzero((stations >= first) & (stations < first + count))
+
+    def jnt(name: str) -> int:
+        return model.joint(name).id
+
+    pan_j = np.array([[jnt(f"pan{i}_{n}") for n in PAN_JOINTS] for i in pans])
+    sup_j = np.array([[jnt(f"sup{j}_{n}") for n in ("x", "leg")] for j in sups]).reshape(-1, 2)
+    anchor_eq, anchor_mocap = [], []
+    for side in (0, 1):
+        eq = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, f"anchor{side}")
+        anchor_eq.append(eq)
+        body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"anchor{side}")
+        anchor_mocap.append(model.body_mocapid[body] if body >= 0 else -1)
+    return FaceIndex(
+        pans=pans, supports=sups,
+        pan_qpos=model.jnt_qposadr[pan_j], pan_dof=model.jnt_dofadr[pan_j],
+        sup_qpos=model.jnt_qposadr[sup_j], sup_dof=model.jnt_dofadr[sup_j],
+        ram_act=np.array([model.actuator(f"ram{j}").id for j in sups], int),
+        leg_act=np.array([model.actuator(f"leg{j}").id for j in sups], int),
+        ram_tendon=np.array([model.tendon(f"ram{j}").id for j in sups], int),
+        anchor_eq=np.array(anchor_eq), anchor_mocap=np.array(anchor_mocap),
+    )
+
+
+def build_ride_spec(scn: Scenario) -> mujoco.MjSpec:
+    """The shearer on its suspension: free body welded softly to the mocap target `ride`.
+
+    The weld's time constant and damping ratio come from the scenario's suspension frequency and damping
+    (MuJoCo solref = [1 / (2 pi f) scaled to the ride timestep's stability bound, zeta]).
+    """
+    sh = scn.shearer
+    spec = _piece_copy("shearer")
+    spec.modelname = "shearer_ride"
+    dt = 1.0 / scn.rates.ride_hz
+    spec.option.timestep = dt
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    timeconst = max(1.0 / (2 * np.pi * sh.suspension_frequency_hz), 2.0 * dt)
+    spec.equality("suspension").solref = [timeconst, sh.suspension_damping_ratio]
+    body = spec.body("shearer")
+    half = sh.length_m / 2
+    body.geoms[0].size = [0.6, half - 1.0, 0.5]
+    for geom in body.geoms[1:]:
+        geom.pos = [geom.pos[0], np.sign(geom.pos[1]) * (half - 0.4), geom.pos[2]]
+    for site in body.sites:
+        if site.name.startswith("shoe"):
+            site.pos = [0.0, np.sign(site.pos[1]) * sh.shoe_spacing_m / 2, -sh.body_height_m]
+    return spec

@@ -1,0 +1,1 @@
+"""The papers' own experiments: 000's SINS experiments and 002's turntable."""

@@ -1,0 +1,1 @@
+"""Running a scenario: simulation, Monte Carlo trials, run directories, estimator wiring."""

@@ -1,0 +1,188 @@
+"""Run the shearer positioning estimators on a run directory: estimates Parquet, metrics, estimates.rrd.
+
+The estimators read only the log (estimators.shearer.positioning.load_log); what they are told about the machine
+(IMU error budget, lever arm, odometer pulse length, where the supports sit along the face) comes from the
+scenario, as a mining engineer would enter it from the datasheets and the face layout. The truth is used only to
+score the result (estimators.io.metrics) and to give the true sensor states beside the estimated ones.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from estimators.faults.ram_checks import RamLayout
+from estimators.io import metrics
+from estimators.io.logformat import (
+    ESTIMATE_DETECTORS,
+    ESTIMATE_FUSION,
+    ESTIMATE_STATES,
+    STREAMS,
+    read_estimate,
+    read_stream,
+    write_estimate,
+)
+from estimators.shearer import positioning as sp
+from estimators.shearer.federated import detector_chi2
+from twin.config.imu_grades import grade
+from twin.config.scenario import Scenario
+from twin.face.layout import support_stations
+
+
+def _psd(sigma: float, tau: float) -> float:
+    """Random-walk density matching a Gauss-Markov in-run bias over its correlation time: 2 sigma^2 / tau."""
+    return 2 * sigma ** 2 / tau if sigma > 0 and tau > 0 else 0.0
+
+
+def positioning_config(scn: Scenario) -> sp.Config:
+    """The filter configuration a user would write for this face and machine."""
+    est = scn.estimators.shearer
+    g = grade(scn.sensors.imu.grade)
+    ram = scn.sensors.pushram
+    # The IMU's pitch and roll mounting come from the static calibration (000 section 6.1-6.2, taken as exact
+    # here); its yaw mounting is not found statically and is left to the filter (inside the survey's heading).
+    mount = np.radians(scn.sensors.imu.misalignment_deg)
+    kw = {"lever_arm_m": tuple(scn.sensors.imu.lever_arm_m), "imu_mounting_rad": (float(mount[0]), float(mount[1]), 0.0),
+          "metres_per_pulse": scn.sensors.odometer.metres_per_pulse,
+          "support_u_m": tuple((support_stations(scn) + 0.5) * scn.face.pan_length_m - scn.shearer.length_m / 2),
+          "n_samples": est.n_samples, "filter_rate_hz": est.filter_rate_hz, "cpoem_spacing_m": est.cpoem_spacing_m,
+          "ram_noise_sd": max(ram.noise_m, ram.resolution_m), "advance_sd": max(5 * ram.noise_m, 0.003),
+          "rail_advance_sd": max(1.5 * ram.noise_m, 0.003),
+          "chute_length_m": scn.face.pan_length_m,
+          "end_zone_m": scn.shearer.length_m + (scn.pattern.push_lag_pans + scn.pattern.snake_length_pans + 2)
+          * scn.face.pan_length_m,
+          "mag": sp.MagSettings(date=scn.sensors.mag.date, noise_t=max(scn.sensors.mag.noise_t, 1e-9),
+                                extra_sigma=math.radians(est.mag_extra_sigma_deg), field_check=est.mag_field_check,
+                                hard_iron_t=tuple(est.mag_hard_iron_t),
+                                soft_iron_correction=tuple(map(tuple, est.mag_soft_iron_correction)))}
+    if est.tuning == "appendix_a":
+        return sp.Config.appendix_a(**kw)
+    imu = sp.ImuNoise(gyro_arw=max(g.gyro_arw, 1e-6), accel_vrw=max(g.accel_vrw, 1e-5),
+                      gyro_bias=max(g.gyro_bias, g.gyro_bias_instability, 1e-7),
+                      accel_bias=max(g.accel_bias, g.accel_bias_instability, 1e-5),
+                      gyro_bias_psd=_psd(g.gyro_bias_instability, g.gyro_bias_tau),
+                      accel_bias_psd=_psd(g.accel_bias_instability, g.accel_bias_tau),
+                      accel_nonorth=max(g.accel_nonorth, 1e-6))
+    return sp.Config(imu=imu, **kw)
+
+
+def ram_layout(scn: Scenario) -> RamLayout:
+    """What a user knows of the scenario's face and its push-ram sensors (estimators.faults.ram_checks)."""
+    k = scn.supports.pans_per_support
+    return RamLayout(n_supports=support_stations(scn).size, spacing_m=k * scn.face.pan_length_m,
+                     stroke_m=scn.face.web_depth_m, noise_m=scn.sensors.pushram.noise_m,
+                     resolution_m=scn.sensors.pushram.resolution_m, pan_length_m=scn.face.pan_length_m,
+                     bend_limit_deg=scn.face.bend_limit_horizontal_deg)
+
+
+def true_states(scn: Scenario) -> dict[str, float]:
+    """True odometer scale-factor error (twin.sensors.odometer: dk_D = 1 / (1 + e) - 1) and odometer mounting angles as
+    the filter holds them: the rotation vector of C_m^b' from the frame m in which the machine moves along y
+    (001 eqs. 1-4, the non-holonomic frame) to the frame b' the filter's increments are in.
+
+    The shearer moves along its body y (it rides the pan rails), so m is the body frame b. positioning_config
+    turns the IMU axes into b with the calibrated pitch and roll mounting only, so b' is b turned back by the
+    IMU's yaw mounting m_z: C_m^b' = Rz(-m_z), and the true angles are (0, 0, -m_z). The twin's
+    [sensors.odometer] mounting_deg turns the encoder's axis, which changes its count only by the cosine of the
+    angle (1.4e-5 at 0.3 deg) and is not a mounting the motion constraints can see."""
+    return {"odo_scale": 1.0 / (1.0 + scn.sensors.odometer.scale_error) - 1.0, "odo_mount_x": 0.0,
+            "odo_mount_y": 0.0, "odo_mount_z": -math.radians(scn.sensors.imu.misalignment_deg[2])}
+
+
+def detector_thresholds(scn: Scenario) -> dict[str, float]:
+    """Thresholds of the rail model's detectors as the filter runs them: the residual and dual-state chi-square
+    tests at the false-alarm probability (estimators.shearer.federated.detector_chi2), T1/T0 of the fading
+    SPRT."""
+    detector = positioning_config(scn).detector
+    residual, dual = detector_chi2(detector)
+    return {"residual": residual, "dual_state": dual, "t_on": detector.t_on, "t_off": detector.t_off}
+
+
+def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict:
+    """Run the scenario's shearer estimators on run_dir; writes estimates/, estimates.rrd (with `recording`) and
+    returns the metrics. A log the estimators cannot use raises PositioningError (one line). With instrumented
+    supports the metrics also hold their canopy attitude under SUPPORT_ATTITUDE (twin.pipeline.support_estimate)."""
+    # The canopy attitude of the instrumented supports (issue 8), under the key SUPPORT_ATTITUDE.
+    from twin.pipeline.support_estimate import SUPPORT_ATTITUDE, support_attitude
+    from twin.view.estimate_recording import write_estimate_recording
+    supports = support_attitude(run_dir, scn)
+    out = {} if supports is None else {SUPPORT_ATTITUDE: supports.metrics}
+    if recording and supports is not None and not scn.estimators.shearer.methods:
+        write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, None, {}, {}, supports=supports)
+    methods = tuple(scn.estimators.shearer.methods)
+    if not methods:
+        return out
+    log = sp.load_log(run_dir)
+    sols = sp.estimate(log, positioning_config(scn), methods)
+    truth = read_stream(run_dir, STREAMS["truth_shearer"])
+    cycles = read_stream(run_dir, STREAMS["truth_cycles"])
+    states_truth = true_states(scn)
+    for name, sol in sols.items():
+        write_estimate(run_dir, name, sp.estimate_columns(sol))
+        if sol.cal is not None:
+            write_estimate(run_dir, name, sp.state_columns(sol), ESTIMATE_STATES)
+        if sol.fusion is not None:
+            write_estimate(run_dir, name, sol.fusion, ESTIMATE_FUSION)
+        if sol.detectors is not None:
+            write_estimate(run_dir, name, sol.detectors, ESTIMATE_DETECTORS)
+        table = read_estimate(run_dir, name)
+        t, err = metrics.position_errors(table, truth)
+        entry = {"cycles": metrics.cycle_metrics(t, err, cycles), "notes": sol.notes}
+        if sol.cal is not None:
+            entry["odo_scale"] = {"estimate": float(sol.cal[-1, 9]), "truth": states_truth["odo_scale"]}
+            entry["odo_mount_deg"] = {a: {"estimate": float(np.degrees(sol.cal[-1, 6 + i])),
+                                          "truth": math.degrees(states_truth[f"odo_mount_{a}"])}
+                                      for i, a in enumerate("xyz")}
+        out[name] = entry
+    if recording:
+        estimates = {name: read_estimate(run_dir, name) for name in sols}
+        states = {name: read_estimate(run_dir, name, ESTIMATE_STATES) for name, sol in sols.items() if sol.cal is not None}
+        fusion = {name: read_estimate(run_dir, name, ESTIMATE_FUSION) for name, sol in sols.items()
+                  if sol.fusion is not None}
+        thresholds = detector_thresholds(scn)
+        detectors = {name: (read_estimate(run_dir, name, ESTIMATE_DETECTORS), thresholds)
+                     for name, sol in sols.items() if sol.detectors is not None}
+        write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, truth, estimates, states, states_truth,
+                                 fusion=fusion, detectors=detectors, supports=supports)
+    return out
+
+
+PAPER_FIGURES = {
+    "seed001": ("sep", "001 Table 3, KF + CPOEM + RTS: 0.50 0.32 0.13 0.17"),
+    "seed003": ("max", "003 Table 2: SINS/OD 0.901 E 1.249 N, SINS/OD/MAG 0.220 E 0.325 N"),
+    "seed003_interference": ("max", "003 section 5.2: CKF 3.827 E 1.942 N, FKF 1.545 E 1.942 N"),
+}
+"""The paper figures a scenario reproduces, printed beside the table they belong to."""
+
+
+def format_estimators(estimators: dict, scenario: str = "") -> str:
+    """Per-method SEP per cutting cycle and maximum |east|, |north| error over the run [m] as tables, with the
+    paper's figures for the scenarios that reproduce one (PAPER_FIGURES)."""
+    # The supports' canopy attitude (twin.pipeline.support_estimate) has its own table, after the shearer's.
+    from twin.pipeline.support_estimate import SUPPORT_ATTITUDE, format_support_attitude
+    supports = format_support_attitude(estimators.get(SUPPORT_ATTITUDE))
+    estimators = {name: e for name, e in estimators.items() if name != SUPPORT_ATTITUDE}
+    if not estimators:
+        return supports
+    table, paper = PAPER_FIGURES.get(scenario, ("", ""))
+    n = max(len(e["cycles"]) - 1 for e in estimators.values())
+    lines = ["", "shearer position, SEP per cutting cycle [m]" + (f" ({paper})" if table == "sep" else ""),
+             f"{'method':16s}" + "".join(f"{'A' + str(k + 1):>8s}" for k in range(n)) + f"{'all':>8s}"]
+    for name, e in estimators.items():
+        lines.append(f"{name:16s}" + "".join(f"{c['sep']:8.3f}" for c in e["cycles"]))
+    lines += ["", "shearer position, maximum error over the run [m]" + (f" ({paper})" if table == "max" else ""),
+              f"{'method':16s}{'east':>8s}{'north':>8s}{'horiz.':>8s}"]
+    for name, e in estimators.items():
+        run = e["cycles"][-1]
+        lines.append(f"{name:16s}{run['max_e']:8.3f}{run['max_n']:8.3f}{run['max_horizontal']:8.3f}")
+    return "\n".join(lines) + supports
+
+
+def write_metrics(run_dir: Path, estimators: dict) -> None:
+    path = Path(run_dir) / "metrics.json"
+    data = json.loads(path.read_text()) if path.is_file() else {}
+    data["estimators"] = estimators
+    path.write_text(json.dumps(data, indent=2) + "\n")

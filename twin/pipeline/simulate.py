@@ -1,0 +1,271 @@
+"""Orchestration: scenario in, truth tables out.
+
+Multi-rate (DESIGN "Simulation strategy"): the haulage timeline gives the shearer's arc length s(t); the
+push-advance controller turns each pan crossing of the shearer's trailing end into ram targets, and the face
+simulator moves the window of pans and supports that event touches; the shearer then rides the resulting
+pan line at the truth rate in one batched rollout, and the truth splines are fitted through its samples.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators.io import logformat as lf
+from estimators.nav.rotations import euler_to_quat, mat_to_quat, quat_mul
+from twin.config.scenario import Scenario
+from twin.face.haulage import Timeline
+from twin.face.layout import (
+    FaceFrame,
+    Floor,
+    bend_angles,
+    initial_pans,
+    support_stations,
+)
+from twin.face.model import FloorGrid
+from twin.face.pushadvance import PushAdvanceController
+from twin.face.ride import PanVersion, ride_targets_t, shoe_pans, simulate_ride
+from twin.face.simulator import WINDOW_MARGIN_PANS, FaceSimulator, FaceState
+from twin.face.truth import shearer_truth
+from twin.sensors.clock import sample_times
+from twin.sensors.faults import faults_of, shortfall_profile
+
+MIN_EVENT_S = 2.0
+"""Shortest time an event takes (valves, a small correction push)."""
+SET_TIME_S = 6.0
+"""Time a support takes to lower and set again around its advance (added to the ram travel time)."""
+
+RAM_DEADBAND_M = 1e-3
+"""A ram whose target moves less than this is left alone in an event."""
+
+MAX_REPUSHES = 8
+"""Most times the end pans are pushed again after the snake sumping (each only where still off target)."""
+SUPPORT_DEADBAND_M = 5e-3
+"""A support this far short of its advance target is advanced again at the next event."""
+
+Progress = Callable[[str, float], None]
+"""Callback (stage, fraction done in 0..1)."""
+
+
+@dataclass
+class SimResult:
+    tables: dict[str, dict[str, np.ndarray]]
+    floor_grid: FloorGrid
+    frame: FaceFrame
+    duration_s: float
+    events: int
+
+
+class _FaceRecorder:
+    """Collects pan and support rows whenever they change, and the pan-line versions for the ride."""
+
+    def __init__(self, scn: Scenario, frame: FaceFrame, state: FaceState):
+        self.scn, self.frame = scn, frame
+        self.pans0 = state.pans.copy()
+        self.sup_x0 = state.sup_x.copy()
+        self.pan_rows: list[dict[str, np.ndarray]] = []
+        self.sup_rows: list[dict[str, np.ndarray]] = []
+        self.versions: list[PanVersion] = []
+        self.record(0.0, state, np.arange(state.pans.shape[0]), np.arange(state.sup_x.size))
+
+    def record(self, t: float, state: FaceState, pans: np.ndarray, sups: np.ndarray,
+               lowered: np.ndarray | None = None, t_begin: float | None = None) -> None:
+        """Rows for `pans` and `sups` at time t; supports in `lowered` are logged lowered (canopy down).
+
+        Pans that moved started moving at `t_begin` (default t)."""
+        mat_tf = self.frame.mat_tf
+        st = state.pans[pans]
+        bend_h, bend_v = bend_angles(state.pans)
+        pad = np.append(bend_h, np.nan), np.append(bend_v, np.nan)
+        q_fp = euler_to_quat(st[:, 4], st[:, 5], st[:, 3])
+        q_tp = quat_mul(np.broadcast_to(mat_to_quat(mat_tf), q_fp.shape), q_fp)
+        p_t = st[:, :3] @ mat_tf.T
+        self.pan_rows.append({
+            "t": np.full(pans.size, t), "pan": pans, **_split(p_t, "p_t", "enu"), **_split(q_tp, "q_tp", "wxyz"),
+            "bend_h": pad[0][pans], "bend_v": pad[1][pans], "advance": st[:, 0] - self.pans0[pans, 0]})
+        is_lowered = np.zeros(sups.size, bool) if lowered is None else np.isin(sups, lowered)
+        y = (self.scn.face.pan_length_m * (support_stations(self.scn)[sups] + 0.5))
+        p_f = np.column_stack([state.sup_x[sups], y, state.sup_z[sups]])
+        self.sup_rows.append({
+            "t": np.full(sups.size, t), "support": sups, **_split(p_f @ mat_tf.T, "p_t", "enu"),
+            "advance": state.sup_x[sups] - self.sup_x0[sups], "ram": state.ram[sups],
+            "canopy": state.sup_leg[sups] - np.where(is_lowered, self.scn.supports.lower_m, 0.0),
+            "set": (~is_lowered).astype(np.int8)})
+        if pans.size:
+            self.versions.append(PanVersion(t if t_begin is None else t_begin, t, state.pans.copy()))
+
+    def tables(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        return _concat(self.pan_rows), _concat(self.sup_rows)
+
+
+def _split(arr: np.ndarray, prefix: str, axes: str) -> dict[str, np.ndarray]:
+    return {f"{prefix}_{a}": arr[:, i] for i, a in enumerate(axes)}
+
+
+def _concat(rows: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
+    out = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
+    order = np.lexsort((out[next(k for k in out if k in ("pan", "support"))], out["t"]))
+    return {k: v[order] for k, v in out.items()}
+
+
+def window_sizes(scn: Scenario) -> list[int]:
+    """Window sizes (pans) for the events: one over the snake and the advancing supports during the cut,
+    one over the snake, the lags and the shearer's length at a face end; both with margins."""
+    p = scn.pattern
+    cut = p.snake_length_pans + p.push_step_pans + scn.supports.advance_lag_pans + 1
+    end = p.snake_length_pans + p.push_lag_pans + scn.supports.advance_lag_pans + int(
+        np.ceil(scn.shearer.length_m / scn.face.pan_length_m)) + 2
+    return [min(scn.face.pan_count, w + 2 * WINDOW_MARGIN_PANS) for w in (cut, end)]
+
+
+def shearer_chunks(scn: Scenario, timeline: Timeline) -> np.ndarray:
+    """Chunk boundaries [s] of the shearer's ride: the middle of each reversal stop, where it stands still."""
+    stop = scn.haulage.reversal_stop_s
+    # On the ride clock, so that a chunk's ride ends exactly where the next begins and no truth sample between
+    # them is lost.
+    ride_hz = scn.rates.ride_hz
+    inner = [round((p.t_start + stop / 2) * ride_hz) / ride_hz for p in timeline.cycles[1:]] if stop >= 1.0 else []
+    return np.array([0.0, *inner, timeline.duration])
+
+
+def shearer_chunk(scn: Scenario, timeline: Timeline, versions: list[PanVersion], t0: float, t1: float,
+                  last: bool) -> dict[str, np.ndarray]:
+    """Ride and truth columns for times in [t0, t1) ([t0, t1] for the last chunk)."""
+    ride_hz, truth_hz = scn.rates.ride_hz, scn.rates.truth_hz
+    t_ride = sample_times(t0, t1, ride_hz)
+    pos, quat = simulate_ride(scn, *ride_targets_t(versions, t_ride, timeline.sample(t_ride)["s"], scn))
+    t = sample_times(t0, t1, truth_hz)
+    t = t[(t <= t_ride[-1]) & ((t < t1) | last)]
+    haul = timeline.sample(t)
+    site, frame = scn.site, FaceFrame(np.radians(scn.face.azimuth_deg))
+    truth = shearer_truth(t_ride, pos, quat, t, mat_to_quat(frame.mat_tf), np.radians(site.lat_deg),
+                          np.radians(site.lon_deg), site.height_m)
+    rear, front = shoe_pans(haul["s"], scn)
+    return {
+        "t": t, "lat": truth.lat, "lon": truth.lon, "h": truth.h, **_split(truth.p_t, "p_t", "enu"),
+        **_split(truth.v_n, "v_n", "enu"), **_split(truth.q_nb, "q_nb", "wxyz"),
+        **_split(truth.w_ib_b, "w_ib_b", "xyz"), **_split(truth.w_nb_b, "w_nb_b", "xyz"),
+        **_split(truth.f_b, "f_b", "xyz"), "s": haul["s"], "pan_rear": rear, "pan_front": front,
+        "cycle": haul["cycle"], "phase": haul["phase"]}
+
+
+def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
+    """Run the twin for a scenario: the face events, the shearer ride and the truth."""
+    report = progress or (lambda stage, frac: None)
+    rng = np.random.default_rng(scn.seed)
+    frame = FaceFrame(np.radians(scn.face.azimuth_deg))
+    floor = Floor.from_scenario(scn, rng)
+    timeline = Timeline(scn)
+    sim = FaceSimulator(scn, floor, window_sizes(scn))
+    ctrl = PushAdvanceController(scn)
+    state = sim.initial_supports(initial_pans(scn, floor, rng), ctrl.support_lag_m())
+    sim.settle(state)
+    pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
+    recorder = _FaceRecorder(scn, frame, state)
+    length, ram_speed = scn.face.pan_length_m, scn.supports.ram_speed_m_s
+    events = 0
+
+    last_target = np.zeros(sim.stations.size)
+    last_moved = np.zeros(sim.stations.size, bool)
+    shortfalls = faults_of(scn.faults, "push_shortfall")
+
+    def shortfall_at(t: float) -> np.ndarray:
+        return sum((shortfall_profile(f, sim.stations.size) for f in shortfalls if f.t_start_s <= t < f.t_end_s),
+                   np.zeros(sim.stations.size))
+
+    def event(t: float, s_trail: float | None, t_next: float, repush: bool = False) -> bool:
+        """One push-advance event; `repush` pushes the last event's pans again to their targets.
+
+        Returns whether any ram moved."""
+        nonlocal events, last_target, last_moved
+        pan_target, advancing = ctrl.update(s_trail)
+        region = (pan_target != last_target) | advancing | (last_moved & repush)
+        last_target = pan_target
+        # A push shortfall (a fault of the face, not of the sensors): the pans stop short while it lasts,
+        # and their supports, which follow them, with them.
+        short = shortfall_at(t)
+        pan_target = pan_target - short
+        sup_goal = ctrl.sup_target - short
+        if region.any():
+            # A support near the action that is short of its advance (it stuck, or its pan was pulled
+            # back) advances again.
+            near = np.zeros_like(region)
+            near[np.flatnonzero(region).min():np.flatnonzero(region).max() + 1] = True
+            advancing |= near & (sup_goal - (state.sup_x - sup_x0) > SUPPORT_DEADBAND_M)
+        # Strokes that take each pan from where it is to its target, from where its support stands; an
+        # advancing support then pulls itself up to its own target.
+        shift = pan_target - (state.pans[sim.stations, 0] - pan_x0)
+        push = sim.ram_lengths(state, shift, state.sup_x)
+        target = np.where(advancing, sim.ram_lengths(state, shift, sup_x0 + sup_goal), push)
+        moved = (region | advancing) & ((np.abs(push - state.ram) > RAM_DEADBAND_M) | advancing)
+        last_moved = moved
+        if not moved.any():
+            return False
+        advancing &= moved
+        t_begin = t
+        lowered = np.flatnonzero(advancing)
+        if lowered.size:
+            recorder.record(t_begin, state, np.zeros(0, int), lowered, lowered)
+        stroke = np.abs(push - state.ram)[moved].max()
+        travel = stroke + np.abs(target - push)[moved].max()
+        # The rams take their stroke at the ram speed, but the controller keeps pace with the shearer: an
+        # event is over before the next one is due (the pans never move under the shearer).
+        duration = max(MIN_EVENT_S, travel / ram_speed + (SET_TIME_S if lowered.size else 0.0))
+        t_done = t_begin + min(duration, 0.9 * (t_next - t_begin))
+        t_push = t_begin
+        if np.any(advancing & (np.abs(push - state.ram) > RAM_DEADBAND_M)):
+            # Push and advance in one event (the end push of snake sumping): the rams extend first, then the
+            # supports pull themselves up. Recorded in two steps, so the strokes show in the ram readings.
+            pans, sups = sim.step_event(state, moved, push, push, np.zeros_like(advancing))
+            t_push = t_begin + (t_done - t_begin) * stroke / max(travel, 1e-9)
+            recorder.record(t_push, state, pans, sups, lowered, t_begin=t_begin)
+        pans, sups = sim.step_event(state, moved, push, target, advancing)
+        recorder.record(t_done, state, pans, sups, t_begin=t_push)
+        events += 1
+        return True
+
+    # The shearer's ride and truth run chunk by chunk on the other core while the face simulates on:
+    # a chunk needs only the pan line up to its end, and each starts with the shearer at rest.
+    bounds = shearer_chunks(scn, timeline)
+    pending = []
+    half = scn.shearer.length_m / 2
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        for plan in timeline.cycles:
+            ctrl.begin_cycle(plan.direction)
+            step = length * scn.pattern.push_step_pans
+            times, marks = timeline.crossings(plan.cycle, -plan.direction * half, step)
+            for t, t_next, mark in zip(times, np.append(times[1:], plan.t_cut_end), marks):
+                event(float(t), float(mark), float(t_next))
+            # Snake sumping: the end pans are pushed while the shearer stands at C, then pushed again where
+            # the end supports' advance pulled them back; all before the shearer moves on.
+            end_events = 1 + MAX_REPUSHES
+            t_slot = (plan.t_push_end - plan.t_sump_end) / end_events
+            for k in range(end_events):
+                if not event(plan.t_sump_end + k * t_slot, None, plan.t_sump_end + (k + 1) * t_slot, repush=k > 0):
+                    break
+            report("face", (plan.cycle + 1) / len(timeline.cycles))
+            last = plan.cycle == len(timeline.cycles) - 1
+            # Chunk k ends in the reversal stop after cycle k, before cycle k+1's first push.
+            ready = [plan.cycle] if len(bounds) - 1 == len(timeline.cycles) else (
+                range(len(bounds) - 1) if last else [])
+            for c in ready:
+                pending.append(pool.submit(shearer_chunk, scn, timeline, list(recorder.versions), bounds[c],
+                                           bounds[c + 1], c == len(bounds) - 2))
+        chunks = []
+        for k, fut in enumerate(pending):
+            chunks.append(fut.result())
+            report("shearer", (k + 1) / len(pending))
+    shearer = {key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]}
+    pans_tab, sups_tab = recorder.tables()
+    cycles = {
+        "cycle": np.array([p.cycle for p in timeline.cycles]), "direction": np.array([p.direction for p in timeline.cycles]),
+        "t": np.array([p.t_start for p in timeline.cycles]), "t_cut_end": np.array([p.t_cut_end for p in timeline.cycles]),
+        "t_sump_end": np.array([p.t_sump_end for p in timeline.cycles]),
+        "t_push_end": np.array([p.t_push_end for p in timeline.cycles]),
+        "t_end": np.array([p.t_end for p in timeline.cycles]), "s_sump": np.array([p.s_sump for p in timeline.cycles])}
+    tables = {lf.TRUTH_SHEARER.name: shearer, lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab,
+              lf.TRUTH_CYCLES.name: cycles}
+    return SimResult(tables, sim.grid, frame, timeline.duration, events)

@@ -1,0 +1,341 @@
+"""The estimators' Rerun recording: `estimates.rrd` beside a run's `run.rrd`, merged with it by the viewer.
+
+The file carries the application id and the recording id of run.rrd (read from it; a fresh id when the run has
+none, e.g. an imported log), so `longwall view` shows the truth replay and the estimates as one recording. Its
+default blueprint is the run's with a second "Estimates" tab of plots. Everything is logged column-wise with
+`send_columns` on the `sim_time` timeline; plots are decimated to at most `PLOT_RATE_HZ`.
+
+Entities, per estimator METHOD (errors as estimators.io.metrics defines them: estimate - truth in East/North/Up at
+the truth point; attitude the psi-angle phi, C_b^n(true) = (I + [phi x]) C_b^n(est)):
+
+* `world/estimates/METHOD/path`       static LineStrips3D of the estimated body path in t, one strip per cycle
+* `world/estimates/METHOD/position`   Points3D, the estimated body point in t at the plot rate
+* `plots/errors/METHOD/{east,north,up}`               Scalars, position error [m]
+* `plots/attitude_errors/METHOD/{e,n,u}`              Scalars, attitude error phi [deg]
+* `plots/sigma/METHOD/position/{east,north,up}`       Scalars, +- one-sigma of the position [m]
+* `plots/sigma/METHOD/attitude/{e,n,u}`               Scalars, +- one-sigma of the attitude [deg]
+* `plots/flags/METHOD`                                Scalars 0/1: position fix, ZUPT, skipped measurement in
+                                                      each plot interval (estimators.io.logformat FLAG_*)
+* `plots/states/METHOD/{gyro_bias,accel_bias,odo_mount,odo_scale}`   Scalars, the filter's sensor states
+  [deg/h, mg, deg, 1], with the true values as flat series where given
+* `plots/sigma/METHOD/{gyro_bias,accel_bias,odo_mount,odo_scale}`    Scalars, +- their one-sigma
+
+and for a federated filter (ESTIMATE_FUSION, 003 section 4):
+
+* `plots/fusion/METHOD/beta`                          Scalars, information-sharing coefficients per sub-filter
+* `plots/fusion/METHOD/r_yaw`                         Scalars, the yaw noise sd the magnetometer sub-filter used
+                                                      (estimated from its innovations) [deg]
+* `plots/fusion/METHOD/yaw_innovation`                Scalars, yaw closing-error innovation [deg]
+* `plots/fusion/METHOD/magnetometer`                  Scalars 0/1: reading used, disturbed, gated in each plot
+                                                      interval (estimators.shearer.federated_filter MAG_*)
+* `plots/fusion/METHOD/subfilter_errors/{east,north}` Scalars, position error of the global estimate and of each
+                                                      sub-filter's own estimate before the fusion [m]
+
+and for the rail kinematics model's filter (ESTIMATE_DETECTORS, 004 section IV):
+
+* `plots/detectors/METHOD/{residual,dual_state,fsprt}`  Scalars, each detector's statistic per fix with its
+                                                      thresholds
+* `plots/detectors/METHOD/isolated`                   Scalars 0/1, the rail model isolated
+* `world/estimates/METHOD/rail`                       static Points3D, the rail model's predicted points (the
+                                                      shearer's path it predicts), beside the true path of run.rrd
+
+and for the supports' canopy attitude (twin.pipeline.support_estimate.SupportAttitude, issue 8; ANGLE pitch, roll, yaw):
+
+* `plots/support_attitude/angles/ANGLE/SUPPORT/{METHOD,truth}`  Scalars, each method's angle and the truth [deg]
+* `plots/support_attitude/errors/ANGLE/SUPPORT/METHOD`  Scalars, estimate - truth [deg]
+* `plots/support_attitude/magnetometer/SUPPORT`      Scalars: ours' disturbance flags 0/1 (norm, dip, gate,
+                                                      accelerating) in each plot interval, and the shearer's field
+                                                      at the unit over its peak
+* `plots/support_attitude/gd_objective`              static BarChart, the GD-UKF's objective per iteration [deg]
+"""
+
+from __future__ import annotations
+
+import uuid
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import rerun as rr
+import rerun.blueprint as rrb
+
+from estimators.io.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT, NONORTH_AXES
+from estimators.io.metrics import attitude_errors, column, columns, position_errors
+from estimators.nav import earth
+from estimators.shearer.federated_filter import MAG_DISTURBED, MAG_GATED, MAG_USED
+from estimators.support.error_state import FLAG_ACCEL, FLAG_DIP, FLAG_GATE, FLAG_NORM
+from twin.config.imu_grades import DEG, DEG_PER_H, MG
+from twin.config.scenario import Scenario
+from twin.pipeline.support_estimate import ANGLES, SupportAttitude
+from twin.view.recording import (
+    APPLICATION_ID,
+    _series,
+    _time_column,
+    blueprint,
+    decimate,
+    run_recording_id,
+)
+
+PLOT_RATE_HZ = 10.0
+"""Largest rate of the logged plots and the moving estimate point."""
+
+POSITION_AXES = ("east", "north", "up")
+ATTITUDE_AXES = ("e", "n", "u")
+STATE_GROUPS = {  # state column prefix: (axes, SI value per display unit, display unit)
+    "gyro_bias": ("xyz", DEG_PER_H, "deg/h"),
+    "accel_bias": ("xyz", MG, "mg"),
+    "odo_mount": ("xyz", DEG, "deg"),
+    "odo_scale": ("", 1.0, "1"),
+    "accel_nonorth": (NONORTH_AXES, DEG, "deg"),
+}
+FLAG_SERIES = (("position fix", FLAG_POSITION), ("ZUPT", FLAG_ZUPT), ("skipped", FLAG_SKIPPED))
+MAG_SERIES = (("used", MAG_USED), ("disturbed", MAG_DISTURBED), ("gated", MAG_GATED))
+SUBFILTERS = ("odometer", "aiding")
+_PALETTE = np.array([[40, 160, 240], [60, 200, 90], [200, 80, 220], [240, 200, 40], [120, 120, 255]], np.uint8)
+
+
+def _names(group: str) -> list[str]:
+    axes = STATE_GROUPS[group][0]
+    return [f"{group}_{a}" for a in axes] if axes else [group]
+
+
+def plot_rows(table: pa.Table, rate_hz: float) -> tuple[pa.Table, np.ndarray]:
+    """The rows kept for plotting (first of each 1/rate_hz interval and the last) and their times."""
+    keep = decimate(column(table, "t"), rate_hz)
+    sub = table.take(pa.array(keep))
+    return sub, column(sub, "t")
+
+
+def _log_band(rec: rr.RecordingStream, entity: str, t: np.ndarray, sd: np.ndarray, label: str) -> None:
+    """+- one-sigma of (K,) values as two series, unless there is no sigma at all (NaN throughout)."""
+    if np.isfinite(sd).any():
+        _series(rec, entity, t, np.column_stack([sd, -sd]), [f"+1 sigma {label}", f"-1 sigma {label}"])
+
+
+def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method: str, table: pa.Table,
+                  rate_hz: float, color: np.ndarray) -> None:
+    if table.num_rows == 0:
+        return
+    sub, t = plot_rows(table, rate_hz)
+    site = scn.site
+    p_t = earth.lla_to_enu(column(sub, "lat"), column(sub, "lon"), column(sub, "h"), np.radians(site.lat_deg),
+                           np.radians(site.lon_deg), site.height_m).astype(np.float32)
+    # One strip per cycle, the cycle of the truth sample at or before each estimate time.
+    t_truth = column(truth_shearer, "t")
+    cycle = column(truth_shearer, "cycle")[np.clip(np.searchsorted(t_truth, t, side="right") - 1, 0, None)]
+    breaks = np.flatnonzero(np.diff(cycle)) + 1
+    rec.log(f"world/estimates/{method}/path", rr.LineStrips3D(np.split(p_t, breaks), radii=0.03, colors=color),
+            static=True)
+    rec.log(f"world/estimates/{method}/position", rr.Points3D.from_fields(radii=0.15, colors=color), static=True)
+    rec.send_columns(f"world/estimates/{method}/position", indexes=[_time_column(t)],
+                     columns=rr.Points3D.columns(positions=p_t))
+
+    _, err = position_errors(sub, truth_shearer)
+    _, phi = attitude_errors(sub, truth_shearer)
+    sd_pos, sd_att = columns(sub, "sd_pos"), np.degrees(columns(sub, "sd_att"))
+    for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
+        _series(rec, f"plots/errors/{method}/{axis}", t, err[:, i:i + 1], [f"{method} {axis} [m]"])
+        _series(rec, f"plots/attitude_errors/{method}/{a}", t, np.degrees(phi[:, i:i + 1]),
+                [f"{method} phi_{a} [deg]"])
+        _log_band(rec, f"plots/sigma/{method}/position/{axis}", t, sd_pos[:, i], f"{method} {axis} [m]")
+        _log_band(rec, f"plots/sigma/{method}/attitude/{a}", t, sd_att[:, i], f"{method} phi_{a} [deg]")
+
+    _log_flags(rec, f"plots/flags/{method}", table, "flags", FLAG_SERIES, method, rate_hz)
+
+
+def _log_flags(rec: rr.RecordingStream, entity: str, table: pa.Table, name: str, series, method: str,
+               rate_hz: float) -> None:
+    """Flags are events: OR them over each plot interval so a single-sample fix is not decimated away."""
+    t_all = column(table, "t")
+    keep = decimate(t_all, rate_hz)
+    flags = np.bitwise_or.reduceat(np.asarray(table.column(name).to_numpy(), np.int64), keep)
+    _series(rec, entity, t_all[keep], np.column_stack([(flags & bit) != 0 for _, bit in series]).astype(float),
+            [f"{method} {label}" for label, _ in series])
+
+
+def _log_fusion(rec: rr.RecordingStream, truth_shearer, method: str, estimate: pa.Table, fusion: pa.Table,
+                rate_hz: float) -> None:
+    sub, t = plot_rows(fusion, rate_hz)
+    root = f"plots/fusion/{method}"
+    _series(rec, f"{root}/r_yaw", t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None], [f"{method} sd yaw [deg]"])
+    _series(rec, f"{root}/yaw_innovation", t, np.degrees(column(sub, "yaw_innovation"))[:, None],
+            [f"{method} yaw innovation [deg]"])
+    _log_flags(rec, f"{root}/magnetometer", fusion, "mag_flags", MAG_SERIES, method, rate_hz)
+    beta = np.column_stack([column(sub, f"beta_{s}") for s in SUBFILTERS])
+    if not np.isfinite(beta).any():
+        return  # a centralized filter: no sub-filters
+    _series(rec, f"{root}/beta", t, beta, [f"{method} beta {s}" for s in SUBFILTERS])
+    est, _ = plot_rows(estimate, rate_hz)
+    _, err = position_errors(est, truth_shearer)
+    for i, axis in enumerate(POSITION_AXES[:2]):
+        d = np.column_stack([np.zeros(t.size)] + [column(sub, f"{s}_d_pos_{'en'[i]}") for s in SUBFILTERS])
+        _series(rec, f"{root}/subfilter_errors/{axis}", t, err[:, i:i + 1] + d,
+                [f"{method} global {axis} [m]"] + [f"{method} {s} sub-filter {axis} [m]" for s in SUBFILTERS])
+
+
+def _log_states(rec: rr.RecordingStream, method: str, table: pa.Table, truth: dict[str, float] | None,
+                rate_hz: float) -> None:
+    if table.num_rows == 0:
+        return
+    sub, t = plot_rows(table, rate_hz)
+    for group, (_, per_unit, unit) in STATE_GROUPS.items():
+        names = _names(group)
+        values = np.column_stack([column(sub, n) for n in names]) / per_unit
+        labels = [f"{n} [{unit}]" for n in names]
+        known = [n for n in names if truth and n in truth]
+        if known:
+            flat = np.broadcast_to(np.array([truth[n] for n in known]) / per_unit, (t.size, len(known)))
+            values = np.column_stack([values, flat])
+            labels += [f"{n} true [{unit}]" for n in known]
+        _series(rec, f"plots/states/{method}/{group}", t, values, labels)
+        sd = np.column_stack([column(sub, f"sd_{n}") for n in names]) / per_unit
+        _series(rec, f"plots/sigma/{method}/{group}", t, np.column_stack([sd, -sd]),
+                [f"{sign}1 sigma {n} [{unit}]" for sign in "+-" for n in names])
+
+
+def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, table: pa.Table,
+                   thresholds: dict[str, float]) -> None:
+    if table.num_rows == 0:
+        return
+    t = column(table, "t")
+    root = f"plots/detectors/{method}"
+    for name in ("residual", "dual_state"):
+        _series(rec, f"{root}/{name}", t, np.column_stack([column(table, name), np.full(t.size, thresholds[name])]),
+                [f"{method} {name}", f"{name} threshold"])
+    _series(rec, f"{root}/fsprt", t, np.column_stack([column(table, "fsprt"), np.full(t.size, thresholds["t_on"]),
+                                                      np.full(t.size, thresholds["t_off"])]),
+            [f"{method} fsprt", "fsprt T1 (fault)", "fsprt T0 (clear)"])
+    _series(rec, f"{root}/isolated", t, column(table, "isolated")[:, None].astype(float), [f"{method} isolated"])
+    site = scn.site
+    p_t = earth.lla_to_enu(column(table, "lat"), column(table, "lon"), column(table, "h"), np.radians(site.lat_deg),
+                           np.radians(site.lon_deg), site.height_m).astype(np.float32)
+    rec.log(f"world/estimates/{method}/rail", rr.Points3D(p_t, radii=0.08, colors=[240, 120, 40]), static=True)
+
+
+def estimate_views(methods: list[str], state_methods: list[str], fusion_methods: list[str] = (),
+                   detector_methods: list[str] = ()) -> tuple[rrb.View, ...]:
+    """Time-series views of the Estimates tab: each error axis over all methods with their sigma bands, each
+    group of sensor states, the flags, and the fusion of federated filters."""
+    views = []
+    for axis in POSITION_AXES:
+        views.append(rrb.TimeSeriesView(
+            name=f"Position error {axis} [m]", origin="/",
+            contents=[f"plots/errors/{m}/{axis}" for m in methods] + [f"plots/sigma/{m}/position/{axis}"
+                                                                       for m in methods]))
+    for a in ATTITUDE_AXES:
+        views.append(rrb.TimeSeriesView(
+            name=f"Attitude error phi_{a} [deg]", origin="/",
+            contents=[f"plots/attitude_errors/{m}/{a}" for m in methods] + [f"plots/sigma/{m}/attitude/{a}"
+                                                                             for m in methods]))
+    for group, (_, _, unit) in STATE_GROUPS.items() if state_methods else ():
+        views.append(rrb.TimeSeriesView(
+            name=f"{group} [{unit}]", origin="/",
+            contents=[f"plots/states/{m}/{group}" for m in state_methods] + [f"plots/sigma/{m}/{group}"
+                                                                              for m in state_methods]))
+    views.append(rrb.TimeSeriesView(name="Position fixes, ZUPTs, skipped", origin="plots/flags"))
+    for part, title in (("beta", "Information sharing"), ("r_yaw", "Magnetometer yaw noise sd [deg]"),
+                        ("yaw_innovation", "Yaw innovation [deg]"), ("magnetometer", "Magnetometer readings"),
+                        ("subfilter_errors", "Sub-filter position errors [m]")) if fusion_methods else ():
+        views.append(rrb.TimeSeriesView(name=title, origin="/",
+                                        contents=[f"plots/fusion/{m}/{part}/**" for m in fusion_methods]))
+    for part, title in (("residual", "Residual chi-square"), ("dual_state", "Dual-state chi-square"),
+                        ("fsprt", "Fading SPRT"), ("isolated", "Rail model isolated")) if detector_methods else ():
+        views.append(rrb.TimeSeriesView(name=title, origin="/",
+                                        contents=[f"plots/detectors/{m}/{part}/**" for m in detector_methods]))
+    return tuple(views)
+
+
+# The supports' canopy attitude (issue 8).
+SUPPORT_FLAG_SERIES = (("norm", FLAG_NORM), ("dip", FLAG_DIP), ("gate", FLAG_GATE), ("accelerating", FLAG_ACCEL))
+SUPPORT_PLOT_RATE_HZ = 2.0
+"""Largest rate of the supports' plots: a canopy moves over seconds (an advance, the shearer's pass), and a face has
+many units."""
+
+
+def support_attitude_views(supports: SupportAttitude | None) -> tuple[rrb.View, ...]:
+    """Views of the supports' canopy attitude: each angle and its error over all supports and methods, ours'
+    magnetometer flags beside the shearer's field, the GD-UKF objective."""
+    if supports is None:
+        return ()
+    root = "plots/support_attitude"
+    return (*(rrb.TimeSeriesView(name=f"Support {a} [deg]", origin=f"{root}/angles/{a}") for a in ANGLES),
+            *(rrb.TimeSeriesView(name=f"Support {a} error [deg]", origin=f"{root}/errors/{a}") for a in ANGLES),
+            rrb.TimeSeriesView(name="Support magnetometer: ours' flags, shearer's field / peak",
+                               origin=f"{root}/magnetometer"),
+            rrb.BarChartView(name="GD-UKF objective per iteration [deg]", origin=f"{root}/gd_objective"))
+
+
+def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, rate_hz: float) -> None:
+    """Each support's angles (with the truth) and errors per method, ours' flags (OR-ed over each plot
+    interval) with the shearer's field, the GD objective; decimated to rate_hz, sent column-wise."""
+    root = "plots/support_attitude"
+    for name, t in supports.t.items():
+        keep = decimate(t, rate_hz)
+        est = np.degrees(supports.euler[name][:, keep])
+        truth = np.degrees(supports.truth_euler[name][:, keep]) if supports.truth_euler else None
+        for i, j in enumerate(supports.supports):
+            for a, angle in enumerate(ANGLES):
+                _series(rec, f"{root}/angles/{angle}/{j}/{name}", t[keep], est[i, :, a:a + 1],
+                        [f"support {j} {name} [deg]"])
+                if truth is not None:
+                    _series(rec, f"{root}/errors/{angle}/{j}/{name}", t[keep],
+                            ((est[i, :, a] - truth[i, :, a] + 180.0) % 360.0 - 180.0)[:, None],
+                            [f"support {j} {name} [deg]"])
+                    if name == "ours":
+                        _series(rec, f"{root}/angles/{angle}/{j}/truth", t[keep], truth[i, :, a:a + 1],
+                                [f"support {j} truth [deg]"])
+    t = supports.t["ours"]
+    keep = decimate(t, rate_hz)
+    for i, j in enumerate(supports.supports):
+        flags = np.bitwise_or.reduceat(supports.flags[i].astype(np.int64), keep)
+        values = [(flags & bit) != 0 for _, bit in SUPPORT_FLAG_SERIES]
+        labels = [f"support {j} ours {label}" for label, _ in SUPPORT_FLAG_SERIES]
+        if supports.near is not None:
+            values.append(np.maximum.reduceat(supports.near[i], keep))
+            labels.append(f"support {j} shearer's field / peak")
+        _series(rec, f"{root}/magnetometer/{j}", t[keep], np.column_stack(values).astype(float), labels)
+    if supports.objective:
+        rec.log(f"{root}/gd_objective", rr.BarChart(np.degrees(supports.objective)), static=True)
+
+
+
+def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates: dict[str, pa.Table],
+                             states: dict[str, pa.Table], states_truth: dict[str, float] | None = None,
+                             rate_hz: float = PLOT_RATE_HZ, fusion: dict[str, pa.Table] | None = None,
+                             detectors: dict[str, tuple[pa.Table, dict[str, float]]] | None = None,
+                             supports: SupportAttitude | None = None) -> None:
+    """Write the estimators' outputs as `path` (normally RUN_DIR/estimates.rrd) with the recording id of
+    RUN_DIR/run.rrd.
+
+    `truth_shearer`: the truth_shearer table (or its columns as arrays); `estimates`: method name -> ESTIMATE
+    table; `states`: method name -> ESTIMATE_STATES table (filters with sensor states only); `states_truth`:
+    true values of the sensor states by ESTIMATE_STATES column name in SI units (e.g. "gyro_bias_x" [rad/s],
+    "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters);
+    `detectors`: method name -> (ESTIMATE_DETECTORS table, thresholds by statistic: residual, dual_state, t_on,
+    t_off); `supports`: the supports' canopy attitude (twin.pipeline.support_estimate.support_attitude).
+    Estimate times must lie within the truth span (LogError otherwise).
+    """
+    fusion = fusion or {}
+    detectors = detectors or {}
+    if not rate_hz > 0:
+        raise ValueError(f"write_estimate_recording: rate_hz must be positive, got {rate_hz}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=run_recording_id(path.parent) or uuid.uuid4())
+    # The supports' views after the shearer's.
+    views = estimate_views(list(estimates), list(states), list(fusion), list(detectors)) if estimates else ()
+    rec.save(path, default_blueprint=blueprint(views + support_attitude_views(supports)))
+    try:
+        for k, (method, table) in enumerate(estimates.items()):
+            _log_estimate(rec, scn, truth_shearer, method, table, rate_hz, _PALETTE[k % len(_PALETTE)])
+        for method, table in states.items():
+            _log_states(rec, method, table, states_truth, rate_hz)
+        for method, table in fusion.items():
+            _log_fusion(rec, truth_shearer, method, estimates[method], table, rate_hz)
+        for method, (table, thresholds) in detectors.items():
+            _log_detectors(rec, scn, method, table, thresholds)
+        if supports is not None:
+            _log_support_attitude(rec, supports, min(rate_hz, SUPPORT_PLOT_RATE_HZ))
+        rec.flush()
+    finally:
+        rec.disconnect()

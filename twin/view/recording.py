@@ -1,0 +1,447 @@
+"""The run's Rerun recording: the truth streams as a 3-D replay plus plots, written to one .rrd file.
+
+Everything is logged column-wise with `send_columns` on the duration timeline `sim_time` (seconds from the
+scenario start): one call per entity carries its whole history, with the per-time instance batches given by
+partition lengths. The Rerun world is the tangent plane t (ENU, metres, Z up), the frame of the truth
+tables' `p_t_*` columns.
+
+Entities (fixed names, checked by tests):
+
+* `world/floor`             static Mesh3D of the floor
+* `world/pans`              Boxes3D, one per pan, at every pan-update time (colour: horizontal bend vs limit)
+* `world/supports`          Boxes3D, one per support, at every support-update time (colour: set / lowered)
+* `world/rams`              LineStrips3D, support point to support point + ram * advance direction
+* `world/shearer`           Transform3D (t <- body) at `shearer_rate_hz`; static children `body`, `drums`
+* `world/shearer_path`      static LineStrips3D of the decimated path, one strip per cycle
+* `plots/shearer_speed`     Scalars, horizontal ground speed [m/s]
+* `plots/cycle`             Scalars, cycle index
+* `plots/bend_horizontal_deg`, `plots/bend_vertical_deg`   BarChart per chute at every pan-update time
+* `plots/ram_length`        BarChart per support at every support-update time
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+import uuid
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute  # noqa: F401  (pa.compute)
+import rerun as rr
+import rerun.blueprint as rrb
+from rerun.chunk import RrdReader
+
+from estimators.nav.earth import mat_en
+from estimators.nav.rotations import mat_to_quat, quat_mul, quat_rotate
+from twin.config.scenario import Scenario
+from twin.face.layout import PAN_HEIGHT_M, PAN_WIDTH_M, SUPPORT_BASE_LENGTH_M
+
+TIMELINE = "sim_time"
+APPLICATION_ID = "longwall-twin"
+RUN_RRD = "run.rrd"
+ESTIMATES_RRD = "estimates.rrd"
+"""The estimators' recording beside run.rrd: same application and recording id, so the viewer merges the two."""
+
+SHEARER_WIDTH_M = 1.2
+"""Body extent across the face (body x) of the drawn shearer."""
+SHEARER_HEIGHT_M = 1.0
+"""Body height of the drawn shearer; its underside sits on the running line."""
+DRUM_RADIUS_M = 0.9
+
+_GREY = np.array([150, 150, 150], float)
+_RED = np.array([230, 30, 30], float)
+_SET_RGBA = np.array([70, 110, 170, 255], np.uint8)
+_LOWERED_RGBA = np.array([240, 160, 40, 255], np.uint8)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Helpers
+
+
+def _col(table: pa.Table, name: str) -> np.ndarray:
+    return table.column(name).to_numpy()
+
+
+def _vec(table: pa.Table, prefix: str, axes: str = "enu") -> np.ndarray:
+    return np.column_stack([_col(table, f"{prefix}_{a}") for a in axes]).astype(float)
+
+
+def _time_column(t: np.ndarray) -> rr.TimeColumn:
+    """Seconds as a duration timeline, rounded to whole nanoseconds (no truncation of 0.1 -> 99999999 ns)."""
+    ns = np.round(np.asarray(t, float) * 1e9).astype(np.int64)
+    return rr.TimeColumn(TIMELINE, duration=ns.astype("timedelta64[ns]"))
+
+
+def _xyzw(q_wxyz: np.ndarray) -> np.ndarray:
+    """Scalar-first (w, x, y, z) to Rerun's (x, y, z, w)."""
+    return np.ascontiguousarray(q_wxyz[..., [1, 2, 3, 0]], dtype=np.float32)
+
+
+def _latest_rows(t: np.ndarray, ident: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Forward-filled row index of every id at every distinct time of a (t, id)-keyed stream.
+
+    Returns (times (n_t,), ids (n_id,), rows (n_t, n_id)): rows[k, j] is the table row holding the latest
+    state of ids[j] at times[k]. An id that first appears after times[0] takes its first state before that.
+    """
+    order = np.lexsort((ident, t))  # by t, then id; later rows win for duplicates
+    times, t_idx = np.unique(t[order], return_inverse=True)
+    ids, id_idx = np.unique(ident[order], return_inverse=True)
+    # Sorted positions increase with time, so the running maximum of the position is the latest update.
+    pos = np.full((times.size, ids.size), -1, np.int64)
+    pos[t_idx, id_idx] = np.arange(order.size)
+    pos = np.maximum.accumulate(pos, axis=0)
+    first = np.where(pos >= 0, pos, np.iinfo(np.int64).max).min(axis=0)
+    pos = np.where(pos >= 0, pos, first[None, :])
+    return times, ids, order[pos]
+
+
+class _TensorColumn:
+    """A column of 1-D float32 tensors (one per row) in Rerun's TensorData arrow layout.
+
+    The Python TensorData batch accepts a single tensor only; this builds the same struct array for n rows
+    so a BarChart history goes out in one `send_columns` call.
+    """
+
+    def __init__(self, values: np.ndarray) -> None:
+        values = np.ascontiguousarray(values, np.float32)
+        n_rows, n_vals = values.shape
+        data_type = rr.BarChart(values=np.zeros(1, np.float32)).values.as_arrow_array().type
+        shape_type = data_type.field("shape").type
+        names_type = data_type.field("names").type
+        union_type = data_type.field("buffer").type
+        row_offsets = pa.array(np.arange(n_rows + 1, dtype=np.int32))
+        shape = pa.ListArray.from_arrays(row_offsets, pa.array(np.full(n_rows, n_vals, np.uint64)), type=shape_type)
+        names = pa.nulls(n_rows, names_type)
+        # Dense union: every row is the F32 member, row k at offset k of the F32 child.
+        children = [pa.nulls(0, type=f.type) for f in union_type]
+        f32 = [f.name for f in union_type].index("F32")
+        value_offsets = pa.array(np.arange(0, n_rows * n_vals + 1, n_vals, dtype=np.int32))
+        children[f32] = pa.ListArray.from_arrays(value_offsets, pa.array(values.ravel())).cast(
+            union_type[f32].type, safe=False)
+        type_ids = pa.array(np.full(n_rows, union_type.type_codes[f32], np.int8))
+        row_index = pa.array(np.arange(n_rows, dtype=np.int32))
+        buffer = pa.Array.from_buffers(union_type, n_rows, [None, type_ids.buffers()[1], row_index.buffers()[1]],
+                                       children=children)
+        self._array = pa.StructArray.from_arrays([shape, names, buffer], fields=list(data_type)).cast(data_type)
+
+    def as_arrow_array(self) -> pa.Array:
+        return self._array
+
+
+def _send_bar_chart(rec: rr.RecordingStream, entity: str, times: np.ndarray, values: np.ndarray) -> None:
+    column = rr.ComponentColumn(rr.BarChart.descriptor_values(), _TensorColumn(values))
+    rec.send_columns(entity, indexes=[_time_column(times)], columns=[column])
+
+
+def decimate(t: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Indices of the first sample in each 1/rate_hz interval (plus the last sample)."""
+    if t.size == 0:
+        return np.zeros(0, np.int64)
+    bins = np.floor(np.asarray(t, float) * rate_hz + 1e-9)
+    keep = np.flatnonzero(np.r_[True, np.diff(bins) > 0])
+    if keep[-1] != t.size - 1:
+        keep = np.r_[keep, t.size - 1]
+    return keep
+
+
+def _advance_axis(scn: Scenario) -> np.ndarray:
+    a = np.radians(scn.face.azimuth_deg)
+    return np.array([np.cos(a), -np.sin(a), 0.0])
+
+
+def _face_quat_xyzw(scn: Scenario) -> np.ndarray:
+    """Rotation of the face frame F in t: about z by -azimuth."""
+    half = -0.5 * np.radians(scn.face.azimuth_deg)
+    return np.array([0.0, 0.0, np.sin(half), np.cos(half)], np.float32)
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Entities
+
+
+def _log_floor(rec: rr.RecordingStream, floor_mesh: tuple[np.ndarray, np.ndarray]) -> None:
+    vertices = np.asarray(floor_mesh[0], float)
+    triangles = np.asarray(floor_mesh[1], np.int64)
+    # Area-weighted vertex normals.
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    face_n = np.cross(b - a, c - a)
+    normals = np.zeros_like(vertices)
+    for k in range(3):
+        np.add.at(normals, triangles[:, k], face_n)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+    z = vertices[:, 2]
+    span = max(float(np.ptp(z)), 1e-6) if z.size else 1.0
+    s = ((z - z.min()) / span)[:, None] if z.size else np.zeros((0, 1))
+    colors = ((1 - s) * np.array([90, 80, 70]) + s * np.array([170, 160, 140])).astype(np.uint8)
+    rec.log("world/floor", rr.Mesh3D(vertex_positions=vertices.astype(np.float32),
+                                     triangle_indices=triangles.astype(np.uint32),
+                                     vertex_normals=normals.astype(np.float32), vertex_colors=colors),
+            static=True)
+
+
+def _log_pans(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table) -> None:
+    if pans.num_rows == 0:
+        return
+    times, _, rows = _latest_rows(_col(pans, "t"), _col(pans, "pan"))
+    n_t, n_p = rows.shape
+    p = _vec(pans, "p_t")[rows]                       # (n_t, n_p, 3)
+    q = _vec(pans, "q_tp", "wxyz")[rows]              # (n_t, n_p, 4)
+    bend_h = _col(pans, "bend_h")[rows]
+    bend_v = _col(pans, "bend_v")[rows]
+
+    z_axis = quat_rotate(q, np.array([0.0, 0.0, 1.0]))
+    centres = p - 0.5 * PAN_HEIGHT_M * z_axis
+    limit = np.radians(scn.face.bend_limit_horizontal_deg)
+    ratio = np.clip(np.nan_to_num(np.abs(bend_h), nan=0.0) / limit, 0.0, 1.0)[..., None]
+    rgb = ((1 - ratio) * _GREY + ratio * _RED).astype(np.uint8)
+    half = np.array([0.5 * PAN_WIDTH_M, 0.5 * scn.face.pan_length_m, 0.5 * PAN_HEIGHT_M], np.float32)
+
+    rec.send_columns(
+        "world/pans",
+        indexes=[_time_column(times)],
+        columns=rr.Boxes3D.columns(
+            half_sizes=np.broadcast_to(half, (n_t * n_p, 3)),
+            centers=centres.reshape(-1, 3).astype(np.float32),
+            quaternions=_xyzw(q).reshape(-1, 4),
+            colors=rgb.reshape(-1, 3),
+        ).partition(np.full(n_t, n_p)),
+    )
+    rec.log("world/pans", rr.Boxes3D.from_fields(fill_mode="solid"), static=True)
+    # Per-chute bends: drop the last pan (no next pan, NaN).
+    chutes_h = np.nan_to_num(np.degrees(bend_h[:, :-1]), nan=0.0)
+    chutes_v = np.nan_to_num(np.degrees(bend_v[:, :-1]), nan=0.0)
+    if n_p > 1:
+        _send_bar_chart(rec, "plots/bend_horizontal_deg", times, chutes_h)
+        _send_bar_chart(rec, "plots/bend_vertical_deg", times, chutes_v)
+
+
+def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table) -> None:
+    if supports.num_rows == 0:
+        return
+    times, _, rows = _latest_rows(_col(supports, "t"), _col(supports, "support"))
+    n_t, n_s = rows.shape
+    p = _vec(supports, "p_t")[rows]                   # (n_t, n_s, 3) ram connection on the base
+    ram = _col(supports, "ram")[rows]
+    canopy = _col(supports, "canopy")[rows]
+    is_set = _col(supports, "set")[rows] != 0
+    x_t = _advance_axis(scn)
+
+    centres = p - 0.5 * SUPPORT_BASE_LENGTH_M * x_t + (0.5 * canopy)[..., None] * np.array([0.0, 0.0, 1.0])
+    half = np.empty((n_t, n_s, 3))
+    half[..., 0] = 0.5 * SUPPORT_BASE_LENGTH_M
+    half[..., 1] = 0.5 * 0.9 * scn.face.pan_length_m
+    half[..., 2] = 0.5 * canopy
+    colors = np.where(is_set[..., None], _SET_RGBA, _LOWERED_RGBA)
+    lengths = np.full(n_t, n_s)
+    rec.send_columns(
+        "world/supports",
+        indexes=[_time_column(times)],
+        columns=rr.Boxes3D.columns(
+            half_sizes=half.reshape(-1, 3).astype(np.float32),
+            centers=centres.reshape(-1, 3).astype(np.float32),
+            quaternions=np.broadcast_to(_face_quat_xyzw(scn), (n_t * n_s, 4)),
+            colors=colors.reshape(-1, 4),
+        ).partition(lengths),
+    )
+    strips = np.stack([p, p + ram[..., None] * x_t], axis=2)  # (n_t, n_s, 2, 3)
+    rec.send_columns(
+        "world/rams",
+        indexes=[_time_column(times)],
+        columns=rr.LineStrips3D.columns(strips=strips.reshape(-1, 2, 3).astype(np.float32)).partition(lengths),
+    )
+    rec.log("world/rams", rr.LineStrips3D.from_fields(radii=0.05, colors=[200, 200, 60]), static=True)
+    _send_bar_chart(rec, "plots/ram_length", times, ram)
+
+
+def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate_hz: float) -> None:
+    sh = scn.shearer
+    body_z = 0.5 * SHEARER_HEIGHT_M - sh.body_height_m  # underside on the running line
+    rec.log("world/shearer/body", rr.Boxes3D(
+        half_sizes=[0.5 * SHEARER_WIDTH_M, 0.5 * sh.length_m, 0.5 * SHEARER_HEIGHT_M],
+        centers=[0.0, 0.0, body_z], colors=[230, 200, 40], fill_mode="solid"), static=True)
+    drum_len = scn.face.web_depth_m
+    drum_x = 0.5 * SHEARER_WIDTH_M + 0.5 * drum_len
+    drum_z = DRUM_RADIUS_M - sh.body_height_m - PAN_HEIGHT_M  # drums reach the floor
+    s45 = np.sqrt(0.5)
+    rec.log("world/shearer/drums", rr.Cylinders3D(
+        lengths=[drum_len, drum_len], radii=[DRUM_RADIUS_M, DRUM_RADIUS_M],
+        centers=[[drum_x, -0.5 * sh.length_m, drum_z], [drum_x, 0.5 * sh.length_m, drum_z]],
+        quaternions=[[0.0, s45, 0.0, s45]] * 2,  # cylinder axis z -> body x (towards the coal wall)
+        colors=[[120, 120, 130], [120, 120, 130]], fill_mode="solid"), static=True)
+    if shearer.num_rows == 0:
+        return
+
+    t_all = _col(shearer, "t")
+    keep = decimate(t_all, rate_hz)
+    sub = shearer.take(pa.array(keep))
+    t = t_all[keep]
+    p = _vec(sub, "p_t")
+    q_nb = _vec(sub, "q_nb", "wxyz")
+    # n (ENU at the shearer) to t (ENU at the site origin): C_n^t = (C_t^e)^T C_n^e.
+    c_te = mat_en(np.radians(scn.site.lat_deg), np.radians(scn.site.lon_deg))
+    c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(_col(sub, "lat"), _col(sub, "lon"))
+    q_tb = quat_mul(mat_to_quat(c_nt), q_nb)
+    index = [_time_column(t)]
+    rec.send_columns("world/shearer", indexes=index,
+                     columns=rr.Transform3D.columns(translation=p.astype(np.float32), quaternion=_xyzw(q_tb)))
+
+    cycle = _col(sub, "cycle")
+    order = np.argsort(cycle, kind="stable")
+    _, counts = np.unique(cycle[order], return_counts=True)
+    strips = np.split(p[order].astype(np.float32), np.cumsum(counts)[:-1])
+    rec.log("world/shearer_path", rr.LineStrips3D(strips, radii=0.03, colors=[240, 120, 40]), static=True)
+
+    speed = np.hypot(_col(sub, "v_n_e"), _col(sub, "v_n_n"))
+    rec.log("plots/shearer_speed", rr.SeriesLines(names="horizontal speed [m/s]"), static=True)
+    rec.send_columns("plots/shearer_speed", indexes=index, columns=rr.Scalars.columns(scalars=speed))
+    rec.log("plots/cycle", rr.SeriesLines(names="cycle"), static=True)
+    rec.send_columns("plots/cycle", indexes=index, columns=rr.Scalars.columns(scalars=cycle.astype(float)))
+
+
+def _mean_rate(t: np.ndarray, values: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
+    """Block means of increments per second at about rate_hz (sums over blocks / their duration)."""
+    if t.size < 2:
+        return t, values
+    dt = float(np.median(np.diff(t)))
+    step = max(1, int(round(1.0 / (rate_hz * dt))))
+    n = (t.size // step) * step
+    blocks = values[:n].reshape(n // step, step, -1).sum(axis=1)
+    return t[step - 1:n:step], blocks / (step * dt)
+
+
+def _series(rec: rr.RecordingStream, entity: str, t: np.ndarray, values: np.ndarray, names: list[str]) -> None:
+    rec.log(entity, rr.SeriesLines(names=names), static=True)
+    rec.send_columns(entity, indexes=[_time_column(t)], columns=rr.Scalars.columns(scalars=values))
+
+
+def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz: float) -> None:
+    """Every sensor channel as time series (fast streams averaged to about rate_hz), fault windows as
+    0/1 steps, the ram readings as a bar chart per support."""
+    if "imu" in sensors:
+        imu = sensors["imu"]
+        t = _col(imu, "t")
+        for name, prefix, label in (("gyro", "dtheta", "rad/s"), ("accel", "dv", "m/s^2")):
+            tt, rate = _mean_rate(t, _vec(imu, prefix, "xyz"), rate_hz)
+            _series(rec, f"sensors/imu/{name}", tt, rate, [f"{a} [{label}]" for a in "xyz"])
+    if "odometer" in sensors:
+        odo = sensors["odometer"]
+        _series(rec, "sensors/odometer/distance", _col(odo, "t"), _col(odo, "distance")[:, None], ["distance [m]"])
+    if "mag" in sensors:
+        mag = sensors["mag"]
+        keep = decimate(_col(mag, "t"), rate_hz)
+        _series(rec, "sensors/mag", _col(mag, "t")[keep], _vec(mag, "b", "xyz")[keep] * 1e6,
+                [f"{a} [uT]" for a in "xyz"])
+    if "support_imu" in sensors:
+        units = sensors["support_imu"]
+        for j in np.unique(_col(units, "support")):
+            rows = units.filter(pa.compute.equal(units.column("support"), int(j)))
+            keep = decimate(_col(rows, "t"), rate_hz)
+            sub = rows.take(pa.array(keep))
+            _series(rec, f"sensors/support_imu/{j}/accel", _col(sub, "t"), _vec(sub, "accel", "xyz"),
+                    [f"{a} [m/s^2]" for a in "xyz"])
+            _series(rec, f"sensors/support_imu/{j}/gyro", _col(sub, "t"), _vec(sub, "gyro", "xyz"),
+                    [f"{a} [rad/s]" for a in "xyz"])
+    if "pushram" in sensors:
+        ram = sensors["pushram"]
+        t, support = _col(ram, "t"), _col(ram, "support")
+        times, inverse = np.unique(t, return_inverse=True)
+        grid = np.full((times.size, int(support.max()) + 1), np.nan)
+        grid[inverse, support] = _col(ram, "extension")
+        keep = decimate(times, min(rate_hz, 0.2))
+        _send_bar_chart(rec, "sensors/pushram", times[keep], grid[keep])
+    if "faults" in sensors and sensors["faults"].num_rows:
+        faults = sensors["faults"]
+        for kind, target, t0, t1 in zip(faults.column("kind").to_pylist(), _col(faults, "target"),
+                                       _col(faults, "t_start"), _col(faults, "t_end")):
+            name = f"faults/{kind}" + (f"_{target}" if target >= 0 else "")
+            _series(rec, name, np.array([0.0, t0, t1]), np.array([[0.0], [1.0], [0.0]]), [f"{name} active"])
+
+
+def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
+    """3-D face view taking most of the window, plots in a column on the right (the estimators' plots, when
+    given, in a second tab of that column)."""
+    twin_plots = rrb.Vertical(
+        rrb.TimeSeriesView(name="Shearer speed [m/s]", origin="plots/shearer_speed"),
+        rrb.TimeSeriesView(name="Cycle", origin="plots/cycle"),
+        rrb.BarChartView(name="Horizontal bend per chute [deg]", origin="plots/bend_horizontal_deg"),
+        rrb.BarChartView(name="Vertical bend per chute [deg]", origin="plots/bend_vertical_deg"),
+        rrb.BarChartView(name="Ram length [m]", origin="plots/ram_length"),
+        rrb.TimeSeriesView(name="Sensors", origin="sensors", contents="sensors/**"),
+        rrb.TimeSeriesView(name="Fault windows", origin="faults"),
+        name="Twin",
+    )
+    plots = rrb.Tabs(twin_plots, rrb.Vertical(*estimate_views, name="Estimates")) if estimate_views else twin_plots
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(name="Face", origin="world", contents="world/**"),
+            plots,
+            column_shares=[3, 1],
+        ),
+        collapse_panels=True,
+    )
+
+
+# --------------------------------------------------------------------------------------------------------------
+# Public API
+
+
+def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
+                    floor_mesh: tuple[np.ndarray, np.ndarray], shearer_rate_hz: float = 10.0,
+                    sensors: dict[str, pa.Table] | None = None) -> None:
+    """Write the truth streams of a run as a Rerun recording (.rrd) with its blueprint.
+
+    `truth` maps "truth_shearer", "truth_pans", "truth_supports" (required) and "truth_cycles" (optional,
+    not drawn) to tables with the columns of `estimators.io.logformat`. `floor_mesh` is (vertices (V, 3) in t,
+    triangle indices (T, 3)). The shearer stream is decimated to `shearer_rate_hz`.
+    """
+    missing = [k for k in ("truth_shearer", "truth_pans", "truth_supports") if k not in truth]
+    if missing:
+        raise KeyError(f"write_recording: missing truth streams {', '.join(missing)}")
+    if not shearer_rate_hz > 0:
+        raise ValueError(f"write_recording: shearer_rate_hz must be positive, got {shearer_rate_hz}")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
+    rec.save(path, default_blueprint=blueprint())
+    try:
+        rec.send_recording_name(scn.name)
+        rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        _log_floor(rec, floor_mesh)
+        _log_pans(rec, scn, truth["truth_pans"])
+        _log_supports(rec, scn, truth["truth_supports"])
+        _log_shearer(rec, scn, truth["truth_shearer"], shearer_rate_hz)
+        _log_sensors(rec, sensors or {}, shearer_rate_hz)
+        rec.flush()
+    finally:
+        rec.disconnect()
+
+
+def run_recording_id(run_dir: Path) -> str | None:
+    """The recording id of `run_dir/run.rrd` (None without a readable one): recordings written beside it with
+    this id and APPLICATION_ID merge with it in the viewer."""
+    rrd = Path(run_dir) / RUN_RRD
+    try:
+        recordings = RrdReader(rrd).recordings() if rrd.is_file() else []
+    except (OSError, ValueError, RuntimeError):
+        return None
+    return recordings[0].recording_id if recordings else None
+
+
+def open_viewer(run_dir: Path) -> None:
+    """Open `run_dir/run.rrd` (and `estimates.rrd` beside it, if there is one) in the Rerun viewer (a detached
+    `rerun` process)."""
+    rrd = Path(run_dir) / RUN_RRD
+    if not rrd.is_file():
+        raise FileNotFoundError(f"{rrd}: recording not found (write it first)")
+    beside = Path(sys.executable).parent / "rerun"
+    exe = str(beside) if beside.is_file() else shutil.which("rerun")
+    if exe is None:
+        raise FileNotFoundError(f"rerun viewer executable not found next to {sys.executable} or on PATH "
+                                "(pip install rerun-sdk)")
+    files = [str(p) for p in (rrd, Path(run_dir) / ESTIMATES_RRD) if p.is_file()]
+    subprocess.Popen([exe, *files], start_new_session=True,
+                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

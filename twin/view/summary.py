@@ -1,0 +1,57 @@
+"""Run summaries: the face and shearer facts a mining engineer checks after a run, as a dict and a table."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from twin.config.scenario import Scenario
+
+
+def latest_per_id(t: np.ndarray, ident: np.ndarray, n: int, t_max: float) -> np.ndarray:
+    """Row index of the latest row of each id 0..n-1 at or before t_max (rows sorted by time); -1 if none."""
+    rows = np.flatnonzero(t <= t_max)
+    out = np.full(n, -1)
+    out[ident[rows]] = rows  # later rows overwrite earlier ones
+    return out
+
+
+def twin_summary(scn: Scenario, tables: dict[str, dict[str, np.ndarray]], wall_s: float) -> dict:
+    pans, sups = tables["truth_pans"], tables["truth_supports"]
+    shearer, cycles = tables["truth_shearer"], tables["truth_cycles"]
+    n_pan = scn.face.pan_count
+    n_sup = int(sups["support"].max()) + 1
+    duration = float(shearer["t"][-1])
+    per_cycle = []
+    for k, t_end in enumerate(cycles["t_end"]):
+        pan_adv = pans["advance"][latest_per_id(pans["t"], pans["pan"], n_pan, t_end)]
+        sup_adv = sups["advance"][latest_per_id(sups["t"], sups["support"], n_sup, t_end)]
+        want = (k + 1) * scn.face.web_depth_m
+        per_cycle.append({
+            "cycle": k, "t_start_s": float(cycles["t"][k]), "t_end_s": float(t_end),
+            "pan_advance_error_max_mm": float(np.abs(pan_adv - want).max() * 1e3),
+            "support_advance_error_max_mm": float(np.abs(sup_adv - want).max() * 1e3)})
+    speed = np.hypot(shearer["v_n_e"], shearer["v_n_n"])
+    return {
+        "scenario": scn.name, "seed": scn.seed, "simulated_s": duration, "wall_s": wall_s,
+        "real_time_factor": duration / wall_s if wall_s > 0 else float("inf"),
+        "shearer_samples": int(shearer["t"].size), "pan_updates": int(pans["t"].size),
+        "max_bend_horizontal_deg": float(np.degrees(np.nanmax(np.abs(pans["bend_h"])))),
+        "max_bend_vertical_deg": float(np.degrees(np.nanmax(np.abs(pans["bend_v"])))),
+        "max_speed_m_min": float(speed.max() * 60), "cycles": per_cycle}
+
+
+def format_summary(summary: dict) -> str:
+    lines = [
+        f"scenario {summary['scenario']} (seed {summary['seed']}): {summary['simulated_s'] / 3600:.2f} h simulated "
+        f"in {summary['wall_s']:.1f} s ({summary['real_time_factor']:.0f}x real time)",
+        f"shearer samples {summary['shearer_samples']:,}, pan updates {summary['pan_updates']:,}, "
+        f"max speed {summary['max_speed_m_min']:.1f} m/min",
+        f"max bend: horizontal {summary['max_bend_horizontal_deg']:.3f} deg, "
+        f"vertical {summary['max_bend_vertical_deg']:.3f} deg",
+        "",
+        f"{'cycle':>5} {'start [s]':>10} {'end [s]':>10} {'pan adv err [mm]':>17} {'support adv err [mm]':>21}",
+    ]
+    for c in summary["cycles"]:
+        lines.append(f"{c['cycle']:>5} {c['t_start_s']:>10.1f} {c['t_end_s']:>10.1f} "
+                     f"{c['pan_advance_error_max_mm']:>17.1f} {c['support_advance_error_max_mm']:>21.1f}")
+    return "\n".join(lines)
