@@ -17,6 +17,7 @@ containing ``tan L`` or ``sec L`` degrade near the poles.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 __all__ = [
@@ -44,6 +45,9 @@ __all__ = [
     "lla_to_enu",
     "enu_to_lla",
     "mat_nt",
+    "radii_nb",
+    "gravity_nb",
+    "nav_rates",
 ]
 
 # --- WGS-84 defining and derived constants ---------------------------------
@@ -260,3 +264,19 @@ def mat_nt(lat, lon, lat0, lon0):
     """
     c_ne = np.swapaxes(mat_en(lat, lon), -1, -2)
     return c_ne @ mat_en(lat0, lon0)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Kernel helpers: scalar forms compiled with numba for the sequential kernels (mechanization, filters).
+
+radii_nb = nb.njit(cache=True)(radii)
+gravity_nb = nb.njit(cache=True)(normal_gravity_kernel)
+
+
+@nb.njit(cache=True)
+def nav_rates(lat, h, v):
+    """w_ie^n and w_en^n (ENU) at (lat, h) with velocity v."""
+    r_m, r_n = radii_nb(lat)
+    w_ie = np.array([0.0, OMEGA_IE * np.cos(lat), OMEGA_IE * np.sin(lat)])
+    w_en = np.array([-v[1] / (r_m + h), v[0] / (r_n + h), v[0] * np.tan(lat) / (r_n + h)])
+    return w_ie, w_en

@@ -18,6 +18,7 @@ Vectors have shape ``(...,3)``, quaternions ``(...,4)``, matrices
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 __all__ = [
@@ -35,6 +36,14 @@ __all__ = [
     "euler_to_quat",
     "quat_to_euler",
     "heading_deg_cw_from_north",
+    "cross3",
+    "qmul",
+    "qexp",
+    "qrot",
+    "skew3",
+    "quat_mat",
+    "rotvec_mat",
+    "mat_rotvec",
 ]
 
 # Below this angle [rad] the series of sin(x/2)/x resp. atan(x)/x are used;
@@ -243,3 +252,77 @@ def heading_deg_cw_from_north(yaw):
     """
     hdg = np.mod(-np.rad2deg(yaw), 360.0)
     return (np.where(hdg >= 360.0, 0.0, hdg) + 0.0)[()]
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Kernel helpers: the same algebra on single vectors, compiled with numba for the sequential kernels
+# (mechanization, filters). One set, used by every kernel of the package.
+
+
+@nb.njit(cache=True)
+def cross3(a, b):
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+
+
+@nb.njit(cache=True)
+def qmul(p, q):
+    return np.array([
+        p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
+        p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
+        p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
+        p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0]])
+
+
+@nb.njit(cache=True)
+def qexp(phi):
+    """Unit quaternion of the rotation vector phi (series below 1e-8 rad)."""
+    theta = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    if theta < 1e-8:
+        c, s = 1.0 - theta * theta / 8, 0.5 - theta * theta / 48
+    else:
+        c, s = np.cos(0.5 * theta), np.sin(0.5 * theta) / theta
+    return np.array([c, s * phi[0], s * phi[1], s * phi[2]])
+
+
+@nb.njit(cache=True)
+def qrot(q, v):
+    u = q[1:]
+    t = 2.0 * cross3(u, v)
+    return v + q[0] * t + cross3(u, t)
+
+
+@nb.njit(cache=True)
+def skew3(v):
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+@nb.njit(cache=True)
+def quat_mat(q):
+    """C_b^n of q_nb."""
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+@nb.njit(cache=True)
+def rotvec_mat(r):
+    """Rotation matrix of the rotation vector r (Rodrigues; series for tiny angles)."""
+    a2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+    if a2 < 1e-16:
+        s, c = 1.0 - a2 / 6.0, 0.5 - a2 / 24.0
+    else:
+        a = np.sqrt(a2)
+        s, c = np.sin(a) / a, (1.0 - np.cos(a)) / a2
+    k = skew3(r)
+    return np.eye(3) + s * k + c * (k @ k)
+
+
+@nb.njit(cache=True)
+def mat_rotvec(c):
+    """Rotation vector of a rotation matrix (angles below pi)."""
+    cos_a = min(1.0, max(-1.0, 0.5 * (c[0, 0] + c[1, 1] + c[2, 2] - 1)))
+    a = np.arccos(cos_a)
+    v = np.array([c[2, 1] - c[1, 2], c[0, 2] - c[2, 0], c[1, 0] - c[0, 1]])
+    return 0.5 * v if a < 1e-9 else a / (2 * np.sin(a)) * v

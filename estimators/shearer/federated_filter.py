@@ -47,7 +47,9 @@ from estimators.io.logformat import (
 )
 from estimators.kalman.adaptive_noise import window_push, window_r
 from estimators.kalman.fusion import fuse_kernel, sharing_kernel
+from estimators.kalman.update import joseph_update
 from estimators.nav.geomagnetic import yaw_closing_error_nb
+from estimators.nav.rotations import quat_mat
 from estimators.shearer.odometer_filter import (
     CAL_SCALE,
     DP,
@@ -65,14 +67,12 @@ from estimators.shearer.odometer_filter import (
     QUAT,
     apply_correction,
     fix_measurement,
-    joseph_update,
     keep_covariance,
     mechanize_epoch,
     odometer_update,
     stand_update,
     transition,
 )
-from estimators.sins.strapdown import quat_mat
 
 SUB_ODOMETER, SUB_AIDING = 0, 1
 N_SUB = 2

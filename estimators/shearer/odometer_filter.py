@@ -54,16 +54,15 @@ from estimators.io.logformat import (
     FLAG_VELOCITY,
     FLAG_ZUPT,
 )
-from estimators.sins.strapdown import (
+from estimators.kalman.update import gated_update, joseph_update
+from estimators.nav.earth import gravity_nb, nav_rates, radii_nb
+from estimators.nav.rotations import (
     cross3,
-    gravity_nb,
     mat_rotvec,
-    nav_rates,
     qexp,
     qmul,
     qrot,
     quat_mat,
-    radii_nb,
     rotvec_mat,
     skew3,
 )
@@ -142,23 +141,6 @@ def discretize(f, q_psd, dt):
     return phi, 0.5 * (phi @ qc @ phi.T + qc) * dt
 
 
-@nb.njit(cache=True)
-def joseph_update(x, p, z, h, r):
-    """Kalman update of (x, P) with (z, H, R) in Joseph form; returns the normalized innovation squared."""
-    y = z - h @ x
-    s = h @ p @ h.T + r
-    s_inv = np.linalg.inv(s)
-    k = p @ h.T @ s_inv
-    x += k @ y
-    ikh = np.eye(x.size) - k @ h
-    p[:, :] = ikh @ p @ ikh.T + k @ r @ k.T
-    return y @ s_inv @ y
-
-
-@nb.njit(cache=True)
-def nis(x, p, z, h, r):
-    y = z - h @ x
-    return y @ np.linalg.solve(h @ p @ h.T + r, y)
 
 
 @nb.njit(cache=True)
@@ -374,13 +356,8 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
             flag |= FLAG_SKIPPED
         while k_fix < fix_epoch.size and fix_epoch[k_fix] == j:
             z, h = fix_measurement(nav, lever, fix_llh[k_fix], N_STATES)
-            gamma = nis(x, p, z, h, fix_r[k_fix])
-            nis_out[k_fix] = gamma
-            if gamma <= fix_gate[k_fix]:
-                joseph_update(x, p, z, h, fix_r[k_fix])
-                flag |= FLAG_POSITION
-            else:
-                flag |= FLAG_SKIPPED
+            nis_out[k_fix], applied = gated_update(x, p, z, h, fix_r[k_fix], fix_gate[k_fix])
+            flag |= FLAG_POSITION if applied else FLAG_SKIPPED
             k_fix += 1
         if keep_covariance(x, p, p_pred[j]):
             flag |= FLAG_COVARIANCE_REPAIRED

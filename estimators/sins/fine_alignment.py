@@ -91,15 +91,16 @@ import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, unscented_transform
 from scipy.stats import chi2
 
+from estimators.kalman.update import joseph_update
 from estimators.nav import earth
 from estimators.nav.rotations import (
     mat_to_euler,
     mat_to_quat,
     quat_to_euler,
     quat_to_mat,
+    rotvec_mat,
 )
 from estimators.sins.coarse_alignment import AlignmentError, heading_limit, level_limit
-from estimators.sins.strapdown import rotvec_mat
 
 DV = slice(0, 2)
 PHI = slice(2, 5)
@@ -300,16 +301,6 @@ def _measurement(c0, c1, v, dth, w, T, r_vel, r_rate, zero_rate):
     return z, hm, r
 
 
-@nb.njit(cache=True)
-def _update(x, p, z, hm, r):
-    """Kalman update in Joseph form, in place; returns the normalized innovation squared."""
-    y = z - hm @ x
-    s = hm @ p @ hm.T + r
-    k = np.linalg.solve(s, hm @ p).T
-    x += k @ y
-    ikh = np.eye(N_STATES) - k @ hm
-    p[:, :] = ikh @ p @ ikh.T + k @ r @ k.T
-    return y @ np.linalg.solve(s, y)
 
 
 @nb.njit(cache=True)
@@ -340,7 +331,7 @@ def _reset(c, v, x, p):
 def _correct(k, c0, c, v, x, p, dth, w, T, r_vel, r_rate, zero_rate, c_out, s_out, b_out, nis_out):
     """Measurement update, reset and outputs of block k (shared by both loops); returns the nominal (c, v)."""
     z, hm, r = _measurement(c0, c, v, dth, w, T, r_vel, r_rate, zero_rate)
-    nis_out[k] = _update(x, p, z, hm, r)
+    nis_out[k] = joseph_update(x, p, z, hm, r)
     c, v = _reset(c, v, x, p)
     c_out[k] = c
     for i in range(N_STATES):
