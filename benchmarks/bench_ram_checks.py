@@ -25,7 +25,16 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators.faults import ram_checks as rc
+from estimators.faults.ram_checks import check_log
+from estimators.faults.ram_findings import format_finding
+from estimators.faults.ram_levels import LEVEL_SAMPLES
+from estimators.faults.ram_neighbours import (
+    NEIGHBOUR_SIGMAS,
+    NEIGHBOUR_WINDOW,
+    _neighbour_filter,
+)
+from estimators.faults.ram_self_checks import BURST_RATIO, _flat_run
+from estimators.faults.ram_strokes import _stroke_threshold
 from twin.config.scenario import load_scenario, parse_scenario
 from twin.face.layout import support_stations
 from twin.pipeline.estimate import ram_layout
@@ -80,12 +89,12 @@ def main() -> None:
     print(f"{scn.name}: {scn.cycles} cycles, {duration / 3600:.2f} h, {support_stations(scn).size} supports, "
           f"ram noise {scn.sensors.pushram.noise_m} m; physics {time.perf_counter() - t0:.0f} s")
     layout = ram_layout(scn)
-    interior = rc._neighbour_filter(layout.n_supports)
-    tau_n = layout.bend_m * interior[3][TARGET] + rc.NEIGHBOUR_SIGMAS * layout.sigma_m * interior[2][TARGET] \
-        * 1.2533 / np.sqrt(rc.NEIGHBOUR_WINDOW)
-    tau_s = rc._stroke_threshold(layout, np.array([rc.LEVEL_SAMPLES]), np.array([rc.LEVEL_SAMPLES]))[0]
+    interior = _neighbour_filter(layout.n_supports)
+    tau_n = layout.bend_m * interior[3][TARGET] + NEIGHBOUR_SIGMAS * layout.sigma_m * interior[2][TARGET] \
+        * 1.2533 / np.sqrt(NEIGHBOUR_WINDOW)
+    tau_s = _stroke_threshold(layout, np.array([LEVEL_SAMPLES]), np.array([LEVEL_SAMPLES]))[0]
     print(f"thresholds: neighbour {tau_n:.3f} m (support {TARGET}), stroke {tau_s:.3f} m (15-reading plateaus), "
-          f"flat run {rc._flat_run(layout)} readings, burst {rc.BURST_RATIO * layout.sigma_m:.3f} m")
+          f"flat run {_flat_run(layout)} readings, burst {BURST_RATIO * layout.sigma_m:.3f} m")
 
     clean = sensor_streams(scn, result.tables, ideal, 0)["pushram"]
     print(f"\n{'fault':<16}{'value':>8}{'window [s]':>17}  {'detected':<9}{'delay [s]':>10}  {'named':<14}"
@@ -95,7 +104,7 @@ def main() -> None:
         faulty = parse_scenario({**scn.model_dump(), "faults": [fault]}, scn.name)
         ram = sensor_streams(faulty, result.tables, ideal, 0)["pushram"]
         start = time.perf_counter()
-        found = rc.check_log(ram, ram_layout(faulty))
+        found = check_log(ram, ram_layout(faulty))
         check_seconds.append(time.perf_counter() - start)
         t0, t1, kind = fault["t_start_s"], fault["t_end_s"], KIND[fault["kind"]]
         if kind == "rail_deviation":
@@ -117,7 +126,7 @@ def main() -> None:
         print(f"{fault['kind']:<16}{fault['value']:>8g}{f'{t0:.0f}-{t1:.0f}':>17}  {row}  {len(other)}"
               f"   (target {where})")
         for f in other:
-            print(f"{'':<18}{rc.format_finding(f)}")
+            print(f"{'':<18}{format_finding(f)}")
     print(f"{'push_shortfall':<16}{'':>8}{'':>17}  not a sensor fault: the ram reads the commanded stroke; left to "
           "the rail kinematics model filter")
 
@@ -125,14 +134,14 @@ def main() -> None:
     for trial in range(args.trials):
         ram = sensor_streams(scn, result.tables, ideal, trial)["pushram"]
         start = time.perf_counter()
-        found = rc.check_log(ram, layout)
+        found = check_log(ram, layout)
         check_seconds.append(time.perf_counter() - start)
         alarms.append(len(found))
         findings_seen += found
     print(f"\nfalse alarms over {args.trials} fault-free trials: {sum(alarms)} findings "
           f"({sum(a > 0 for a in alarms)} trials with any)")
     for f in findings_seen:
-        print(f"  {rc.format_finding(f)}")
+        print(f"  {format_finding(f)}")
     print(f"checks: {np.median(check_seconds):.1f} s per log ({duration / 3600:.1f} h x "
           f"{layout.n_supports} supports at {scn.sensors.pushram.rate_hz:g} Hz)")
 

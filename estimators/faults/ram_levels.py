@@ -2,7 +2,7 @@
 
 A ram's reading is a staircase: it rises in one or several partial strokes while the support pushes its pan and
 falls by about a stroke when the support advances. The CPOEM advance (estimators.shearer.cpoem.ram_stroke) and the
-per-support sensor checks (estimators.faults.ram_checks) both measure steps of that staircase between two plateau
+per-support stroke check (estimators.faults.ram_strokes) both measure steps of that staircase between two plateau
 levels. A level is taken next to the event that bounds its plateau (a drop, the start or end of the record), from
 the readings within a tolerance of it, cut at the most significant level change among them, so that a short last
 step of a push is neither averaged with the pause before it nor lost.

@@ -29,6 +29,11 @@ import pyarrow as pa
 import pytest
 
 from estimators.faults import ram_checks as rc
+from estimators.faults.ram_grid import _grid
+from estimators.faults.ram_levels import CHANGE_SIGMAS
+from estimators.faults.ram_neighbours import NEIGHBOUR_WINDOW
+from estimators.faults.ram_self_checks import BURST_WINDOW, _flat_run, _self_checks
+from estimators.faults.ram_strokes import _advances, _stroke_checks, _stroke_threshold
 from estimators.io.logformat import PUSHRAM, make_table
 from tests.conftest import simulated
 from twin.config.scenario import parse_scenario
@@ -99,7 +104,7 @@ def test_dropout_is_its_invalid_readings():
 def test_noise_burst_within_half_a_window():
     f = only(findings(faults=[fault("ram_noise_burst", 600.0, 700.0, 0.01)])[1], "noise_burst")
     assert abs(f.t_start - 600.0) <= 3 and abs(f.t_end - 699.0) <= 3
-    assert f.t_detect - 600.0 <= rc.BURST_WINDOW // 2 + 3
+    assert f.t_detect - 600.0 <= BURST_WINDOW // 2 + 3
     assert f.value == pytest.approx(0.01, rel=0.3)
 
 
@@ -107,7 +112,7 @@ def test_stuck_ram_is_flat_through_its_push():
     """Frozen at rest before its push, through the push and the advance: the flat run names it after 30
     readings (noise = resolution: a reading stays in its quantum with p = 0.38)."""
     scn, found = findings(faults=[fault("ram_stuck", 250.0, 700.0)])
-    run = rc._flat_run(ram_layout(scn))
+    run = _flat_run(ram_layout(scn))
     assert run == 30
     f = only(found, "stuck")
     assert (f.t_start, f.t_end) == (250.0, 699.0)
@@ -118,7 +123,7 @@ def test_stuck_fine_sensor_stops_following_its_neighbours():
     """A sensor without noise reads constant at rest anyway: the neighbour check names it once the neighbours
     push and it does not follow."""
     scn, found = findings(faults=[fault("ram_stuck", 250.0, 700.0)], sensor={"noise_m": 0.0})
-    assert rc._flat_run(ram_layout(scn)) is None
+    assert _flat_run(ram_layout(scn)) is None
     f = only(found, "stuck")
     assert 250.0 <= f.t_detect <= 360.0
     assert f.t_start <= 250.0 and f.t_end >= 699.0  # the whole frozen stretch
@@ -127,7 +132,7 @@ def test_stuck_fine_sensor_stops_following_its_neighbours():
 def test_offset_mid_push():
     f = only(findings(faults=[fault("ram_offset", 300.0, 700.0, 0.05)])[1], "offset")
     assert abs(f.t_start - 300.0) <= 2 and abs(f.t_end - 699.0) <= 2
-    assert f.t_detect - 300.0 <= rc.NEIGHBOUR_WINDOW // 2 + 1
+    assert f.t_detect - 300.0 <= NEIGHBOUR_WINDOW // 2 + 1
     assert f.value == pytest.approx(0.05, abs=0.005)
 
 
@@ -136,7 +141,7 @@ def test_drift_found_when_it_passes_the_threshold():
     f = only(found, "drift")
     tau = f.threshold
     assert tau < 0.03
-    assert f.t_detect - 600.0 <= tau / 5e-4 + rc.NEIGHBOUR_WINDOW
+    assert f.t_detect - 600.0 <= tau / 5e-4 + NEIGHBOUR_WINDOW
     assert abs(f.t_start - 600.0) <= 10 and abs(f.t_end - 1099.0) <= 2  # the start from the fitted line
     assert f.value == pytest.approx(5e-4, rel=0.1)
 
@@ -144,7 +149,7 @@ def test_drift_found_when_it_passes_the_threshold():
 def test_scale_over_a_push_and_advance():
     f = only(findings(faults=[fault("ram_scale", 250.0, 700.0, 0.1)])[1], "scale")
     assert abs(f.t_start - 250.0) <= 2 and abs(f.t_end - 699.0) <= 2
-    assert f.t_detect - 250.0 <= rc.NEIGHBOUR_WINDOW // 2 + 1
+    assert f.t_detect - 250.0 <= NEIGHBOUR_WINDOW // 2 + 1
     assert f.value == pytest.approx(0.1, abs=0.01)
 
 
@@ -152,10 +157,10 @@ def test_commanded_stroke_check_alone_sees_a_scale_error():
     """Check (a) on its own: the stroke of the push and the retraction of the advance are 10 % long."""
     scn, ram = pushram(faults=[fault("ram_scale", 250.0, 700.0, 0.1)])
     layout = ram_layout(scn)
-    tg, x = rc._grid(ram["t"], ram["support"], ram["extension"], ram["valid"], layout.n_supports)
-    usable = ~rc._self_checks(tg, x, layout)[1]
-    idxs, candidates, _ = rc._advances(x, usable, layout)
-    strokes = rc._stroke_checks(x, idxs, candidates, layout)
+    tg, x = _grid(ram["t"], ram["support"], ram["extension"], ram["valid"], layout.n_supports)
+    usable = ~_self_checks(tg, x, layout)[1]
+    idxs, candidates, _ = _advances(x, usable, layout)
+    strokes = _stroke_checks(x, idxs, candidates, layout)
     assert {s.support for s in strokes} == {SUPPORT}
     drop = [s for s in strokes if s.first == s.last - 1]  # the advance: a one-reading step
     assert len(drop) == 1 and drop[0].relative == pytest.approx(0.1, abs=0.01)
@@ -195,12 +200,12 @@ def test_thresholds_follow_the_ram_noise():
     quiet = rc.RamLayout(44, 1.75, 0.8, 1e-4, 1e-4, bend_limit_deg=1.0)
     noisy = rc.RamLayout(44, 1.75, 0.8, 0.02, 1e-4, bend_limit_deg=1.0)
     assert quiet.sigma_m == pytest.approx(math.sqrt(1e-8 + 1e-8 / 12))
-    assert rc._flat_run(quiet) == 30 and rc._flat_run(noisy) == 6
-    assert rc._flat_run(rc.RamLayout(44, 1.75, 0.8, 0.0, 1e-4)) is None
+    assert _flat_run(quiet) == 30 and _flat_run(noisy) == 6
+    assert _flat_run(rc.RamLayout(44, 1.75, 0.8, 0.0, 1e-4)) is None
     assert quiet.bend_m == pytest.approx(1.75 * math.tan(math.radians(1.0)))
     # stroke check: 3 % of the stroke + the step a change test can miss + 5 sigma of two plateau medians
-    tau = rc._stroke_threshold(noisy, np.array([15]), np.array([15]))[0]
-    hidden = rc.CHANGE_SIGMAS * 0.02 * math.sqrt(1 + 1 / 14)
+    tau = _stroke_threshold(noisy, np.array([15]), np.array([15]))[0]
+    hidden = CHANGE_SIGMAS * 0.02 * math.sqrt(1 + 1 / 14)
     assert tau == pytest.approx(0.024 + hidden + 5 * noisy.sigma_m * 1.2533 * math.sqrt(2 / 15))
 
 
