@@ -16,8 +16,11 @@ import time
 import numpy as np
 
 from estimators.io import metrics
-from estimators.shearer import federated as fp
-from estimators.shearer import positioning as sp
+from estimators.io.log import log_from_columns
+from estimators.shearer.adaptive_federated_mag import run_mag
+from estimators.shearer.positioning import run_kf
+from estimators.shearer.prepare import prepare
+from estimators.shearer.solution import estimate_columns
 from twin.cli import default_scenario
 from twin.config.scenario import load_scenario
 from twin.pipeline.estimate import positioning_config
@@ -46,21 +49,21 @@ def run_trials(name: str, trials: int) -> tuple[dict[str, np.ndarray], dict[str,
     n_imu = 0
     for trial in range(trials):
         s = sensor_streams(scn, result.tables, ideal, trial)
-        log = sp.log_from_columns(s["imu"], s["odometer"], s["survey"], mag=s["mag"])
+        log = log_from_columns(s["imu"], s["odometer"], s["survey"], mag=s["mag"])
         n_imu += log.imu_t.size if trial > 0 or trials == 1 else 0
-        prep = sp.prepare(log, cfg)
+        prep = prepare(log, cfg)
         for m in METHODS:
             t0 = time.perf_counter()
             timed = trial > 0 or trials == 1  # trial 0 compiles the kernels
             if m == "kf":
-                sol = sp.run_kf(log, cfg, prep, cpoem=False, smooth=False)[0]
+                sol = run_kf(log, cfg, prep, cpoem=False, smooth=False)[0]
             else:
-                sol = fp.run_mag(log, cfg, prep, federated=m == "afkf")
+                sol = run_mag(log, cfg, prep, federated=m == "afkf")
             if timed:
                 seconds[m] += time.perf_counter() - t0
             if not (np.isfinite(sol.llh).all() and np.isfinite(sol.sd).all()):
                 continue  # stays NaN: counted as a failure
-            _, err = metrics.position_errors(sp.estimate_columns(sol), truth)
+            _, err = metrics.position_errors(estimate_columns(sol), truth)
             out[m][trial] = np.abs(err[:, 0]).max(), np.abs(err[:, 1]).max(), np.hypot(err[:, 0], err[:, 1]).max()
     return out, {m: n_imu / seconds[m] for m in METHODS}
 

@@ -16,7 +16,10 @@ import time
 import numpy as np
 
 from estimators.io import metrics
-from estimators.shearer import positioning as sp
+from estimators.io.log import Log, load_log, log_from_columns
+from estimators.kalman.error_state import CAL_MOUNT, CAL_SCALE
+from estimators.shearer.methods import estimate
+from estimators.shearer.solution import Solution, estimate_columns
 from twin.cli import default_scenario
 from twin.config.scenario import load_scenario, parse_scenario
 from twin.pipeline.estimate import positioning_config, true_states
@@ -30,12 +33,12 @@ OURS = {"dr": "traditional without compensation", "dr_compensated": "traditional
         "rts_offline": "offline RTS over the run"}
 
 
-def log_of(streams: dict) -> sp.Log:
-    return sp.log_from_columns(streams["imu"], streams["odometer"], streams["survey"], streams["pushram"])
+def log_of(streams: dict) -> Log:
+    return log_from_columns(streams["imu"], streams["odometer"], streams["survey"], streams["pushram"])
 
 
-def sep_row(sol: sp.Solution, truth: dict, cycles: dict) -> list[float]:
-    cols = sp.estimate_columns(sol)
+def sep_row(sol: Solution, truth: dict, cycles: dict) -> list[float]:
+    cols = estimate_columns(sol)
     t, err = metrics.position_errors(cols, truth)
     return [c["sep"] for c in metrics.cycle_metrics(t, err, cycles)]
 
@@ -53,9 +56,9 @@ def figures(sweep: bool = True) -> dict:
     ideal = imu_truth(scn, truth)
     log = log_of(sensor_streams(scn, result.tables, ideal, 0))
     cfg = positioning_config(scn)
-    sp.estimate(log, cfg, ("kf_cpoem_rts",))  # compile
+    estimate(log, cfg, ("kf_cpoem_rts",))  # compile
     t0 = time.perf_counter()
-    sols = sp.estimate(log, cfg, tuple(OURS))  # the methods of 001 (the mag and rail filters need other streams)
+    sols = estimate(log, cfg, tuple(OURS))  # the methods of 001 (the mag and rail filters need other streams)
     wall = time.perf_counter() - t0
     print(f"\nSEP per cutting cycle [m], {scn.sensors.imu.grade}, CPOEM spacing {cfg.cpoem_spacing_m} m, survey of "
           f"the face ends: {scn.sensors.survey.face_ends}")
@@ -69,21 +72,22 @@ def figures(sweep: bool = True) -> dict:
     data = scn.model_dump()
     data["sensors"]["survey"]["face_ends"] = "first_cut"
     first = parse_scenario(data, "seed001-first-cut")
-    sol = sp.estimate(log_of(sensor_streams(first, result.tables, ideal, 0)), cfg, ("kf_cpoem_rts",))["kf_cpoem_rts"]
+    sol = estimate(log_of(sensor_streams(first, result.tables, ideal, 0)), cfg, ("kf_cpoem_rts",))["kf_cpoem_rts"]
     figs["sep_first_cut"] = sep_row(sol, truth, cycles)[:4]
     print(f"{'same, face ends of the 1st cut only':36s} " + " ".join(f"{v:6.3f}" for v in figs["sep_first_cut"])
           + "   | (001's survey: both ends of the first cut)")
     e, st = sols["kf_cpoem_rts"], true_states(scn)
-    print(f"odometer scale error: estimated {e.cal[-1, 9]:+.4f}, true {st['odo_scale']:+.4f}; "
-          f"mounting x, z [deg]: estimated {np.degrees(e.cal[-1, 6]):+.3f}, {np.degrees(e.cal[-1, 8]):+.3f}, true "
+    mount = e.cal[-1, CAL_MOUNT]
+    print(f"odometer scale error: estimated {e.cal[-1, CAL_SCALE]:+.4f}, true {st['odo_scale']:+.4f}; "
+          f"mounting x, z [deg]: estimated {np.degrees(mount[0]):+.3f}, {np.degrees(mount[2]):+.3f}, true "
           f"{np.degrees(st['odo_mount_x']):+.3f}, {np.degrees(st['odo_mount_z']):+.3f}")
     print("\nCPOEM point spacing Delta (001 section 4: 2, 6, 10 m), KF + CPOEM + RTS, SEP per cycle [m]")
     for delta in (2.0, 6.0, 10.0):
-        sol = sp.estimate(log, dataclasses.replace(cfg, cpoem_spacing_m=delta), ("kf_cpoem_rts",))["kf_cpoem_rts"]
+        sol = estimate(log, dataclasses.replace(cfg, cpoem_spacing_m=delta), ("kf_cpoem_rts",))["kf_cpoem_rts"]
         figs["sep_delta"][delta] = sep_row(sol, truth, cycles)[:4]
         print(f"Delta {delta:4.0f} m " + " ".join(f"{v:6.3f}" for v in figs["sep_delta"][delta]))
     t0 = time.perf_counter()
-    sp.estimate(log, cfg, ("kf_cpoem_rts",))
+    estimate(log, cfg, ("kf_cpoem_rts",))
     one = time.perf_counter() - t0
     figs["throughput"] = log.imu_t.size / one
     print(f"\nthroughput: KF + CPOEM + online RTS {log.imu_t.size / one:,.0f} IMU samples/s "
@@ -95,8 +99,8 @@ def figures(sweep: bool = True) -> dict:
         data = scn.model_dump()
         data["sensors"]["imu"]["grade"] = f"par{k}"
         s_k = parse_scenario(data, f"seed001-par{k}")
-        sol = sp.estimate(log_of(sensor_streams(s_k, result.tables, ideal, 0)), positioning_config(s_k),
-                          ("kf_cpoem_rts",))["kf_cpoem_rts"]
+        sol = estimate(log_of(sensor_streams(s_k, result.tables, ideal, 0)), positioning_config(s_k),
+                       ("kf_cpoem_rts",))["kf_cpoem_rts"]
         figs["sweep"][k] = sep_row(sol, truth, cycles)[:4]
         print(f"Par {k:2d} " + " ".join(f"{v:6.3f}" for v in figs["sweep"][k]))
     return figs
@@ -111,10 +115,10 @@ def throughput(run_dir: str) -> None:
     from pathlib import Path
 
     scn = load_scenario(Path(run_dir) / "scenario.toml")
-    log = sp.load_log(Path(run_dir))
+    log = load_log(Path(run_dir))
     cfg = positioning_config(scn)
     t0 = time.perf_counter()
-    sp.estimate(log, cfg, ("kf_cpoem_rts",))
+    estimate(log, cfg, ("kf_cpoem_rts",))
     wall = time.perf_counter() - t0
     print(f"{scn.name}: KF + CPOEM + online RTS {log.imu_t.size / wall:,.0f} IMU samples/s ({log.imu_t.size:,} "
           f"samples, {log.imu_t[-1] / 3600:.2f} h, in {wall:.1f} s); target >= 100,000")

@@ -23,7 +23,11 @@ import time
 import numpy as np
 
 from estimators.io import metrics
-from estimators.shearer import positioning as sp
+from estimators.io.log import log_from_columns
+from estimators.kalman.error_state import CAL_MOUNT, CAL_SCALE
+from estimators.shearer.config import PositioningError
+from estimators.shearer.methods import estimate
+from estimators.shearer.solution import SD_ATT, SD_POS, estimate_columns
 from twin.cli import default_scenario
 from twin.config import imu_grades
 from twin.config.scenario import load_scenario
@@ -87,18 +91,20 @@ def main(trials: int = 20, methods: tuple[str, ...] = ("kf_cpoem", "kf_cpoem_rts
     t0 = time.perf_counter()
     for trial in range(trials):
         s = sensor_streams(scn, result.tables, ideal, trial)
-        sols = sp.estimate(sp.log_from_columns(s["imu"], s["odometer"], s["survey"], s["pushram"]), cfg, methods)
+        sols = estimate(log_from_columns(s["imu"], s["odometer"], s["survey"], s["pushram"]), cfg, methods)
         for m, sol in sols.items():
-            cols = sp.estimate_columns(sol)
+            cols = estimate_columns(sol)
             t, err = metrics.position_errors(cols, truth)
             _, att = metrics.attitude_errors(cols, truth)
             seps[m].append([c["sep"] for c in metrics.cycle_metrics(t, err, cycles)])
-            nees_pos[m].append(metrics.nees(err, sol.sd[:, 0:3]))
-            nees_att[m].append(metrics.nees(att, sol.sd[:, 6:9]))
+            nees_pos[m].append(metrics.nees(err, sol.sd[:, SD_POS]))
+            nees_att[m].append(metrics.nees(att, sol.sd[:, SD_ATT]))
             att_err[m].append(att)
-            att_sd[m].append(sol.sd[:, 6:9])
+            att_sd[m].append(sol.sd[:, SD_ATT])
             if sol.cal is not None:
-                final[m].append([sol.cal[-1, 9], sol.cal[-1, 6], sol.cal[-1, 8], sol.sd_cal[-1, 8]])
+                mount_x, mount_z = CAL_MOUNT.start, CAL_MOUNT.start + 2
+                final[m].append([sol.cal[-1, CAL_SCALE], sol.cal[-1, mount_x], sol.cal[-1, mount_z],
+                                 sol.sd_cal[-1, mount_z]])
     wall = time.perf_counter() - t0
     lo, hi = metrics.nees_band(3, trials)
     figs["band"] = (lo, hi)
@@ -149,5 +155,5 @@ if __name__ == "__main__":
     args = args[:args.index("--off")] if "--off" in args else args
     try:
         main(n, tuple(args) or ("kf_cpoem", "kf_cpoem_rts"), off=off, axes=axes)
-    except (ValueError, sp.PositioningError) as exc:
+    except (ValueError, PositioningError) as exc:
         sys.exit(f"bench_positioning_mc: error: {exc}")

@@ -16,9 +16,17 @@ import time
 import numpy as np
 
 from estimators.io import metrics
+from estimators.io.log import Log, log_from_columns
 from estimators.io.logformat import FLAG_ISOLATED
-from estimators.shearer import federated as fp
-from estimators.shearer import positioning as sp
+from estimators.shearer.positioning import run_kf
+from estimators.shearer.prepare import Prepared, prepare
+from estimators.shearer.rail_kinematics import (
+    ARM_FIXES,
+    DETECTORS,
+    detector_chi2,
+    run_rail,
+)
+from estimators.shearer.solution import Solution, estimate_columns
 from twin.cli import default_scenario
 from twin.config.scenario import load_scenario
 from twin.pipeline.estimate import positioning_config
@@ -33,14 +41,14 @@ CLEAR_MARGIN_S = 60.0
 """Isolation that ends within this time after the fault counts as the fault's, not as a false alarm."""
 
 
-def _log(scn, tables, ideal, trial: int) -> sp.Log:
+def _log(scn, tables, ideal, trial: int) -> Log:
     s = sensor_streams(scn, tables, ideal, trial)
-    return sp.log_from_columns(s["imu"], s["odometer"], s["survey"], s["pushram"], face_survey=s["face_survey"])
+    return log_from_columns(s["imu"], s["odometer"], s["survey"], s["pushram"], face_survey=s["face_survey"])
 
 
-def _cycle_rmse(sol: sp.Solution, tables) -> np.ndarray:
+def _cycle_rmse(sol: Solution, tables) -> np.ndarray:
     """(cycles, 2) RMSE east, north."""
-    _, err = metrics.position_errors(sp.estimate_columns(sol), tables["truth_shearer"])
+    _, err = metrics.position_errors(estimate_columns(sol), tables["truth_shearer"])
     rows = metrics.cycle_metrics(sol.t, err, tables["truth_cycles"])[:-1]
     return np.array([[r["rmse_e"], r["rmse_n"]] for r in rows])
 
@@ -60,19 +68,19 @@ def fsprt_alarms(detectors: dict[str, np.ndarray], t_on: float) -> np.ndarray:
     return detectors["t"][tested][raised]
 
 
-def armed_fsprt(detectors: dict[str, np.ndarray], prep: sp.Prepared) -> np.ndarray:
+def armed_fsprt(detectors: dict[str, np.ndarray], prep: Prepared) -> np.ndarray:
     """The FSPRT statistic at the fixes where it can raise an alarm: from each pass's (ARM_FIXES + 1)-th tested
-    fix on (federated_kf._fix_update counts the tested fixes per pass, prep.segments)."""
+    fix on (estimators.shearer.rail_fix_update counts the tested fixes per pass, prep.segments)."""
     tested = np.isfinite(detectors["fsprt"])
     t_tested = detectors["t"][tested]
     starts = prep.t_kf[[a for a, _ in prep.segments]]
     pass_of = np.searchsorted(starts, t_tested, side="left")  # a pass holds the fixes after its first epoch
     first = np.searchsorted(pass_of, pass_of, side="left")  # index of the pass's first tested fix
     rank = np.arange(t_tested.size) - first + 1
-    return detectors["fsprt"][tested][rank > fp.ARM_FIXES]
+    return detectors["fsprt"][tested][rank > ARM_FIXES]
 
 
-def detector_figures(sol: sp.Solution, name: str, threshold: float, t0: float, t1: float, hours: float,
+def detector_figures(sol: Solution, name: str, threshold: float, t0: float, t1: float, hours: float,
                      t_on: float) -> dict[str, float]:
     """Delay to the first alarm after t0, delay of the clearing after t1, fault fixes not flagged, false alarms
     per hour (alarms outside [t0, t1 + CLEAR_MARGIN_S]). An FSPRT alarm is its statistic crossing T1 (004 eq.
@@ -120,12 +128,12 @@ def figures(trials: int = 20) -> dict:
     hours = float(tables["truth_shearer"]["t"][-1]) / 3600
 
     log = _log(scn, tables, ideal, 0)
-    prep = sp.prepare(log, cfg)
+    prep = prepare(log, cfg)
     t0 = time.perf_counter()
-    kf_sol = sp.run_kf(log, cfg, prep, cpoem=False, smooth=False)[0]
+    kf_sol = run_kf(log, cfg, prep, cpoem=False, smooth=False)[0]
     t_kf = time.perf_counter() - t0
     t0 = time.perf_counter()
-    rail = fp.run_rail(log, cfg, prep)
+    rail = run_rail(log, cfg, prep)
     t_rail = time.perf_counter() - t0
     rmse = {"kf": _cycle_rmse(kf_sol, tables), "fkf_rail": _cycle_rmse(rail, tables)}
     figs["rmse"] = rmse
@@ -140,8 +148,8 @@ def figures(trials: int = 20) -> dict:
 
     fault = scn_fault.faults[0]
     f_log = _log(scn_fault, tables, ideal, 0)
-    f_prep = sp.prepare(f_log, cfg)
-    thr = dict(zip(("residual", "dual_state"), fp.detector_chi2(cfg.detector)))
+    f_prep = prepare(f_log, cfg)
+    thr = dict(zip(("residual", "dual_state"), detector_chi2(cfg.detector)))
     print(f"\nseed004_fault, trial 0: rail deviation {fault.value:g} deg per two chutes, {fault.t_start_s:g}-"
           f"{fault.t_end_s:g} s; detectors (thresholds: residual chi-square {thr['residual']:.1f}, dual-state "
           f"{thr['dual_state']:.1f}, FSPRT {cfg.detector.t_on:g} / "
@@ -150,14 +158,14 @@ def figures(trials: int = 20) -> dict:
     figs["clean_error_in_fault"] = clean_err
     print(f"{'isolating detector':20s} {'delay [s]':>9s} {'clear [s]':>9s} {'missed':>8s} {'false/h':>8s} "
           f"{'max horiz. error in fault [m]':>30s}  (fault-free {clean_err:.3f}; target <= +0.05)")
-    for name in fp.DETECTORS:
-        sol = fp.run_rail(f_log, cfg, f_prep, isolate_by=name)
+    for name in DETECTORS:
+        sol = run_rail(f_log, cfg, f_prep, isolate_by=name)
         fig = detector_figures(sol, name, thr.get(name, np.nan), fault.t_start_s, fault.t_end_s, hours, cfg.detector.t_on)
         fig["error_in_fault"] = _window_error(sol, tables, fault)
         figs["detectors"][name] = fig
         print(f"{name:20s} {fig['delay']:9.1f} {fig['clear']:9.1f} {fig['missed']:4d}/{fig['fixes']:<3d} "
               f"{fig['false_per_h']:8.2f} {fig['error_in_fault']:30.3f}")
-    none = fp.run_rail(f_log, cfg, f_prep, isolate_by=None)
+    none = run_rail(f_log, cfg, f_prep, isolate_by=None)
     figs["none_error_in_fault"] = _window_error(none, tables, fault)
     print(f"{'none (no isolation)':20s} {'':9s} {'':9s} {'':8s} {'':8s} {figs['none_error_in_fault']:30.3f}")
     print("targets: FSPRT delay <= 60 s, clear <= 60 s after the fault ends")
@@ -165,8 +173,8 @@ def figures(trials: int = 20) -> dict:
     alarms, worst, mc_rmse, peak = [], [], [], []
     for trial in range(1, trials + 1):
         tlog = _log(scn, tables, ideal, trial)
-        tprep = sp.prepare(tlog, cfg)
-        sol = fp.run_rail(tlog, cfg, tprep)
+        tprep = prepare(tlog, cfg)
+        sol = run_rail(tlog, cfg, tprep)
         alarms.append(int(fsprt_alarms(sol.detectors, cfg.detector.t_on).size))
         peak.append(float(armed_fsprt(sol.detectors, tprep).max()))
         mc_rmse.append(_cycle_rmse(sol, tables))
@@ -186,9 +194,9 @@ def figures(trials: int = 20) -> dict:
     return figs
 
 
-def _window_error(sol: sp.Solution, tables, fault) -> float:
+def _window_error(sol: Solution, tables, fault) -> float:
     """Largest horizontal error while the fault acts and a minute after."""
-    _, err = metrics.position_errors(sp.estimate_columns(sol), tables["truth_shearer"])
+    _, err = metrics.position_errors(estimate_columns(sol), tables["truth_shearer"])
     w = (sol.t >= fault.t_start_s) & (sol.t <= fault.t_end_s + CLEAR_MARGIN_S)
     return float(np.hypot(err[w, 0], err[w, 1]).max())
 
@@ -201,17 +209,17 @@ def _long_run() -> None:
     ideal = imu_truth(scn, result.tables["truth_shearer"])
     cfg = positioning_config(scn)
     log = _log(scn, result.tables, ideal, 0)
-    prep = sp.prepare(log, cfg)
+    prep = prepare(log, cfg)
     t_sim = time.perf_counter() - t_start
-    sols = {"kf": sp.run_kf(log, cfg, prep, cpoem=False, smooth=False)[0]}
+    sols = {"kf": run_kf(log, cfg, prep, cpoem=False, smooth=False)[0]}
     t0 = time.perf_counter()
-    sols["fkf_rail"] = fp.run_rail(log, cfg, prep)
+    sols["fkf_rail"] = run_rail(log, cfg, prep)
     t_rail = time.perf_counter() - t0
     hours = float(result.tables["truth_shearer"]["t"][-1]) / 3600
     print(f"seed004_20cycles ({hours:.1f} h, simulated in {t_sim:.0f} s): RMSE per cycle E / N [m]")
     for m, sol in sols.items():
         r = _cycle_rmse(sol, result.tables)
-        _, err = metrics.position_errors(sp.estimate_columns(sol), result.tables["truth_shearer"])
+        _, err = metrics.position_errors(estimate_columns(sol), result.tables["truth_shearer"])
         print(f"{m:9s} E " + " ".join(f"{v:.2f}" for v in r[:, 0]))
         print(f"{'':9s} N " + " ".join(f"{v:.2f}" for v in r[:, 1]))
         print(f"{'':9s} max horizontal error {np.nanmax(np.hypot(err[:, 0], err[:, 1])):.2f} m, finite "

@@ -293,19 +293,19 @@ def pyins_feedback_time(log, cfg, seconds: float) -> tuple[int, float]:
 def stage_filter(scn, streams, pyins_seconds: float, have_pyins: bool) -> dict:
     from bench_positioning import log_of
 
-    from estimators.shearer import positioning as sp
+    from estimators.shearer.methods import estimate
     from twin.pipeline.estimate import positioning_config
 
     log = log_of(streams)
     cfg = positioning_config(scn)
     out: dict = {"samples": int(log.imu_t.size), "hours": float(log.imu_t[-1] - log.imu_t[0]) / 3600}
     try:  # compile (numba's cache) outside the timing, on the first two minutes
-        sp.estimate(head(log, 120.0), cfg, ("kf_cpoem_rts",))
+        estimate(head(log, 120.0), cfg, ("kf_cpoem_rts",))
         out["warm"] = True
     except Exception as err:  # noqa: BLE001 - a warm-up that cannot run leaves the compile inside the timing
         out["warm"] = f"warm-up failed ({type(err).__name__}: {err}); compile time included"
     start = time.perf_counter()
-    sp.estimate(log, cfg, ("kf_cpoem_rts",))
+    estimate(log, cfg, ("kf_cpoem_rts",))
     out["wall"] = time.perf_counter() - start
     if have_pyins:
         secs = min(pyins_seconds, float(log.imu_t[-1] - log.imu_t[0])) if pyins_seconds > 0 else np.inf
@@ -343,8 +343,8 @@ def stage_support(seconds: float, ahrs_supports: int, ahrs_seconds: float, have_
     import numba
     from bench_support_attitude import RATE_HZ, SUPPORTS, face_readings
 
-    from estimators.support.attitude_002 import ukf
     from estimators.support.error_state import ours
+    from estimators.support.filters_002 import ukf
     from twin.pipeline.support_estimate import UNTUNED_VAR_DEG2_S2
 
     w, f, m, model, settings = face_readings(seconds, np.random.default_rng(0))

@@ -7,7 +7,7 @@ dynamic < 1 deg pitch and roll; yaw < 2 deg under the face's disturbance) and th
 (<= 0.1 static, <= 0.3 dynamic, yaw <= 1 deg). The GD-UKF's Q is tuned on an independent, undisturbed reference
 run (002 tuned in the lab) and evaluated on the test run (held out). Optionally over several seeds.
 
-Part 2: the throughput of ours (estimators.support.error_state), 002's UKF and KF (estimators.support.attitude_002)
+Part 2: the throughput of ours (estimators.support.error_state), 002's UKF and KF (estimators.support.filters_002)
 for 200 supports at 100 Hz, each one batched kernel call over all supports with seed002_face's settings
 (twin.pipeline.support_estimate.unit_model, ours_settings), as a multiple of real time (target >= 100x for ours): the best of
 three wall-clock runs on all the cores numba uses, and per core from the process's CPU time (the figure that does
@@ -31,10 +31,11 @@ import numba
 import numpy as np
 
 from estimators.nav.rotations import euler_to_quat, quat_conj, quat_rotate
-from estimators.support.attitude_002 import kf, ukf
 from estimators.support.error_state import ours
+from estimators.support.filters_002 import kf, ukf
 from twin.config.scenario import load_scenario
-from twin.papers.turntable import FILTERS, load_turntable, run_turntable
+from twin.config.turntable import load_turntable
+from twin.papers.turntable import FILTERS, run_turntable
 from twin.pipeline.support_estimate import (
     UNTUNED_VAR_DEG2_S2,
     ours_settings,

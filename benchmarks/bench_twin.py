@@ -13,7 +13,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from twin.cli import run
+import twin
 
 TARGET_RTF = 400.0
 TARGET_PEAK_GB = 4.0
@@ -24,7 +24,7 @@ def main() -> None:
     scenario = Path(sys.argv[1]) if len(sys.argv) > 1 else root / "scenarios" / "seed004.toml"
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        out = run(scenario, Path(tmp) / "run", seed=None, force=True, quiet=True, sensors=False)
+        out = twin.run(scenario, Path(tmp) / "run", force=True, sensors=False).dir
         wall = time.perf_counter() - start
         summary = json.loads((out / "metrics.json").read_text())["twin"]
         size_mb = sum(f.stat().st_size for f in out.iterdir()) / 1e6

@@ -236,10 +236,9 @@ SOURCES: dict[str, tuple[str, Callable[[int], object]]] = {
 
 
 def _rows_000() -> list[RowSpec]:
-    from twin.papers import sins_experiments as experiment
-
-    PAPER_CONING, PAPER_SCULLING = experiment.PAPER_CONING, experiment.PAPER_SCULLING
-    PAPER_LEVER_ARM, PAPER_TABLE1 = experiment.PAPER_LEVER_ARM, experiment.PAPER_TABLE1
+    from twin.papers.alignment import PAPER_TABLE1
+    from twin.papers.coning_sculling import PAPER_CONING, PAPER_SCULLING
+    from twin.papers.lever_arm import PAPER_LEVER_ARM
 
     src = "000 experiments"
     rows = [

@@ -1,0 +1,37 @@
+"""Navigation estimators for a longwall face, run on a sensor log (estimators.io.logformat): the shearer
+positioning of 001, 003 and 004 (estimators.shearer), the SINS and its alignment (estimators.sins), the supports'
+attitude (estimators.support) and the push-ram fault checks (estimators.faults).
+
+    import estimators
+    sol = estimators.estimate("runs/default", "kf_cpoem_rts")         # one method -> Solution
+    sols = estimators.estimate(log, ("kf", "afkf"), config)          # several -> {name: Solution}
+
+The subpackages are imported when first used: ``import estimators`` stays fast.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from os import PathLike
+from pathlib import Path
+
+
+def estimate(log, method: str | Sequence[str], config=None):
+    """Run shearer positioning method(s) (estimators.shearer.methods.METHODS) on a log.
+
+    log: an estimators.io.log.Log, or a run directory (str or path) read with estimators.io.log.load_log;
+    method: one name (returns its estimators.shearer.solution.Solution) or a sequence of names (returns a dict
+    name -> Solution, in the given order); config: an estimators.shearer.config.Config, by default 001's
+    Appendix A tuning (Config.appendix_a(): an MTi-G-700 class IMU, 2 mm odometer pulses, no supports along the
+    face). An unknown method raises PositioningError naming the methods."""
+    from estimators.io.log import Log, load_log
+    from estimators.shearer.config import Config
+    from estimators.shearer.methods import estimate as run_methods
+
+    if isinstance(log, (str, PathLike)):
+        log = load_log(Path(log))
+    elif not isinstance(log, Log):
+        raise TypeError(f"log: an estimators.io.log.Log or a run directory, not {type(log).__name__}")
+    names = (method,) if isinstance(method, str) else tuple(method)
+    sols = run_methods(log, config if config is not None else Config.appendix_a(), names)
+    return sols[method] if isinstance(method, str) else sols

@@ -14,9 +14,9 @@ from types import ModuleType
 
 import pytest
 
+from twin.config.experiments import is_experiment
 from twin.config.scenario import Scenario, load_scenario, parse_scenario
-from twin.papers.sins_experiments import is_experiment
-from twin.papers.turntable import is_turntable
+from twin.config.turntable import is_turntable
 from twin.pipeline.simulate import SimResult, simulate
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"

@@ -1,4 +1,4 @@
-"""`longwall` command line: run a scenario, view a recording.
+"""`longwall` command line: a thin layer over the Python API (twin.pipeline.api) and the readers and writers.
 
 Errors are one line on stderr ("longwall: error: ...") with exit code 2; no tracebacks for bad input.
 """
@@ -6,127 +6,20 @@ Errors are one line on stderr ("longwall: error: ...") with exit code 2; no trac
 from __future__ import annotations
 
 import argparse
-import json
 import sys
-import time
-from importlib import resources
 from pathlib import Path
 
-from tqdm import tqdm
-
-from estimators.io.csvio import export_csv, import_csv
-from estimators.io.logformat import STREAMS, LogError, make_table, write_stream
-from estimators.shearer.positioning import PositioningError
-from twin.config.scenario import ScenarioError, load_scenario, scenario_to_toml
-from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
+from estimators.io.csv_import import import_csv
+from estimators.io.csvio import export_csv
+from estimators.io.logformat import LogError
+from estimators.shearer.config import PositioningError
+from twin.config.scenario import ScenarioError
+from twin.pipeline import api
+from twin.pipeline.api import default_scenario
 from twin.pipeline.montecarlo import MonteCarloError
-from twin.pipeline.rundir import RunDirError, atomic_run_dir, check_target
+from twin.pipeline.rundir import RunDirError
 
 EXIT_BAD_INPUT = 2
-
-
-def default_scenario() -> Path:
-    return Path(str(resources.files("twin.scenarios") / "default.toml"))
-
-
-def run(scenario: Path, out: Path | None, seed: int | None, force: bool, quiet: bool = False,
-        trials: int = 1, sensors: bool = True, workers: int = 1, ray_address: str | None = None) -> Path:
-    """Simulate a scenario into a run directory (sensor trial 0 at the top, trials 1.. in trials/NNN/, each with
-    its estimates; their metrics gathered in trials.parquet), the trials on `workers` local processes or on
-    the Ray cluster at `ray_address` (twin.pipeline.montecarlo)."""
-    from twin.papers.sins_experiments import is_experiment, run_experiment_file
-    if is_experiment(scenario):  # a SINS experiment file (kind = "sins_experiment"): twin.papers.sins_experiments
-        return run_experiment_file(scenario, out, seed, force, quiet)
-    from twin.papers.turntable import is_turntable, run_turntable_file
-    if is_turntable(scenario):  # 002's turntable (kind = "support_turntable"): twin.papers.turntable
-        return run_turntable_file(scenario, out, seed, force, quiet)
-    from twin.face.haulage import Timeline
-    from twin.pipeline.montecarlo import (
-        TrialResult,
-        format_monte_carlo,
-        trial_context,
-        trial_runner,
-        write_monte_carlo,
-        write_sensors,
-    )
-    from twin.pipeline.simulate import simulate
-    from twin.sensors.faults import check_faults_in_run
-    from twin.view.recording import write_recording
-    from twin.view.summary import format_summary, twin_summary
-
-    scn = load_scenario(scenario, seed)
-    try:
-        check_faults_in_run(scn, Timeline(scn).duration)
-    except ScenarioError as err:
-        raise ScenarioError(f"{scenario}: {err}") from None
-    out = Path(out) if out is not None else Path("runs") / f"{scn.name}-seed{scn.seed}"
-    check_target(out, force)
-    start = time.perf_counter()
-    mc_trials = range(1, trials if sensors else 1)  # trial 0 is the run itself
-    stages = {"face": 0.45, "shearer": 0.2, "sensors": 0.1, "write": 0.05, "recording": 0.05, "estimators": 0.15,
-              "trials": 0.25 * len(mc_trials)}
-    total = sum(stages.values())
-    bar = tqdm(total=100, desc=f"longwall run {scn.name}", disable=quiet, leave=False,
-               bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}")
-    done = {k: 0.0 for k in stages}
-
-    def progress(stage: str, frac: float) -> None:
-        done[stage] = frac
-        bar.n = round(100 * sum(stages[k] * v for k, v in done.items()) / total)
-        bar.set_description(f"longwall run {scn.name} ({stage})")
-
-    monte_carlo = None
-    with atomic_run_dir(out, force) as staging, trial_runner(workers, ray_address) as runner:
-        result = simulate(scn, progress)
-        tables = {name: make_table(STREAMS[name], cols) for name, cols in result.tables.items()}
-        for name, table in tables.items():
-            write_stream(staging, STREAMS[name], table)
-        if sensors:
-            ctx = trial_context(scn, tables, staging)
-            runner.submit(ctx, staging, mc_trials)  # runs beside trial 0 unless sequential
-            tables.update(write_sensors(ctx, 0, staging))
-            progress("sensors", 1.0)
-        (staging / "scenario.toml").write_text(scenario_to_toml(scn))
-        progress("write", 1.0)
-        write_recording(staging / "run.rrd", scn, {k: v for k, v in tables.items() if k.startswith("truth_")},
-                        result.floor_grid.mesh_t(result.frame),
-                        sensors={k: v for k, v in tables.items() if not k.startswith("truth_")})
-        progress("recording", 1.0)
-        summary = twin_summary(scn, result.tables, time.perf_counter() - start)
-        (staging / "metrics.json").write_text(json.dumps({"twin": summary, "estimators": {}}, indent=2) + "\n")
-        estimated = run_estimators(staging, scn) if sensors else {}
-        write_metrics(staging, estimated)
-        progress("estimators", 1.0)
-        if mc_trials:
-            results = [TrialResult(0, estimated), *runner.gather(lambda n: progress("trials", n / len(mc_trials)))]
-            monte_carlo = write_monte_carlo(staging, results, list(scn.estimators.shearer.methods),
-                                            runner.description)
-        bar.close()
-    if not quiet:
-        print(format_summary(summary))
-        print(format_estimators(estimated, scn.name))
-        if monte_carlo:
-            print(format_monte_carlo(monte_carlo))
-        print(f"\nrun directory: {out}")
-    if monte_carlo and monte_carlo["failed"]:
-        print(f"longwall: warning: {monte_carlo['failed']} of {monte_carlo['trials']} Monte Carlo trials failed "
-              f"(trial {monte_carlo['failures'][0]['trial']}: {monte_carlo['failures'][0]['error']}); "
-              f"see {out / 'trials.csv'}", file=sys.stderr)
-    return out
-
-
-def estimate(run_dir: Path, quiet: bool = False) -> dict:
-    """Re-run the estimators the run's scenario.toml names on an existing (simulated or imported) run directory."""
-    scenario = Path(run_dir) / "scenario.toml"
-    if not scenario.is_file():
-        raise ScenarioError(f"{scenario}: not found; the estimators take their configuration (IMU grade, lever arm, "
-                            f"odometer pulse length, supports) from the run's scenario.toml")
-    scn = load_scenario(scenario)
-    estimated = run_estimators(Path(run_dir), scn)
-    write_metrics(Path(run_dir), estimated)
-    if not quiet:
-        print(format_estimators(estimated, scn.name))
-    return estimated
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -171,10 +64,10 @@ def main(argv: list[str] | None = None) -> int:
             if args.ray is not None and args.workers > 1:
                 raise ScenarioError("--workers and --ray exclude each other: Ray runs the trials on the "
                                     "cluster's CPUs")
-            run(args.scenario or default_scenario(), args.out, args.seed, args.force, args.quiet, args.trials,
-                not args.twin_only, args.workers, args.ray)
+            api.run(args.scenario or default_scenario(), args.out, args.seed, args.trials, force=args.force,
+                    quiet=args.quiet, sensors=not args.twin_only, workers=args.workers, ray_address=args.ray)
         elif args.command == "estimate":
-            estimate(args.run_dir, args.quiet)
+            api.estimate(args.run_dir, args.quiet)
         elif args.command == "view":
             from twin.view.recording import open_viewer
             open_viewer(args.run_dir)

@@ -252,8 +252,9 @@ class DetectorConfig:
     p_false_alarm: per-epoch false-alarm probability of the residual chi-square test; 1e-6 is 0.04 false alarms an
     hour at 10 Hz.
     window: 0 judges each innovation by the variance its filter gives it (004 eq. 16); N > 0 scales that variance
-    by the innovations' mean square over its mean over the last N accepted ones (estimators.shearer.federated_filter.
-    _fix_update), for a measurement whose error the filter shares, where eq. 16 overstates it. The scale from N
+    by the innovations' mean square over its mean over the last N accepted ones
+    (estimators.shearer.rail_fix_update.rail_fix_update), for a measurement whose error the filter shares, where
+    eq. 16 overstates it. The scale from N
     samples is itself noisy: with N = 30 and fading 0.6, scalar fault-free innovations took lambda above 12 0.1
     (white) to 0.35 (lag-one correlation 0.5) times per 14,000, above 14 at most 0.1 times; with the exact
     variance, above 10 at most 0.75 times and never above 12.

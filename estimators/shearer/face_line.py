@@ -15,7 +15,7 @@ chutes, more at the face ends where the window is one-sided). The fit takes a 0.
 0.021 m, and bends with a 0.2 m, 40 m undulation to within 3 mm. The weights let a point enter and leave the
 window gradually, so neighbouring smoothed points' errors differ by 8 mm rms (an unweighted fit over +-9 m, of
 the same bias: 12 mm): a rail-model fix from the survey then changes little from one chute to the next, and its
-innovations stay small where the filter follows it (estimators.shearer.federated_filter._fix_update).
+innovations stay small where the filter follows it (estimators.shearer.rail_fix_update.rail_fix_update).
 """
 
 from __future__ import annotations

@@ -1,1 +1,2 @@
-"""Strapdown inertial navigation: mechanization, coning/sculling, coarse and fine alignment, installation errors, the linear error model (000)."""
+"""Strapdown inertial navigation (000): mechanization, coning/sculling, coarse and fine alignment, installation errors
+and the closed-loop alignment at rest, the linear error model."""

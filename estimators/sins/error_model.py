@@ -10,7 +10,10 @@ Error state x = [phi (attitude error of the computed n frame, C_n^n' = I - [phi 
     dh/dt   = dv_U
 
 with dw_ie = [0, -w sin L dlat, w cos L dlat], dw_en from the errors of the transport rate, and the free-air
-gravity error dg_U = 2 g dh / R. The named slices below address the blocks.
+gravity error dg_U = 2 g dh / R. The named slices below address the blocks. The filters' 22-state layout
+(estimators.kalman.error_state) holds the same navigation error in 001 eq. 12's order (velocity first, position in
+ENU metres, the partials of the Earth and transport rates dropped); this model keeps the attitude-first order and the
+geodetic position whose partials the Schuler check (stationary_day) needs.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ def system_matrix(lat: float, h: float, v_n: np.ndarray, f_n: np.ndarray) -> np.
     rm, rn = r_m + h, r_n + h
     w = earth.OMEGA_IE
     sl, cl, tl = np.sin(lat), np.cos(lat), np.tan(lat)
-    ve, vn, vu = v_n
+    ve, vn, _vu = v_n
     w_ie = earth.earth_rate_n(lat)
     w_en = earth.transport_rate_n(lat, h, v_n)
     # Partial derivatives of w_ie and w_en with respect to (dv, dlat, dh).

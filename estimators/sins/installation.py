@@ -99,12 +99,12 @@ def _model(x, up_b, gamma, fit_yaw, fit_bias):
     return pred, jac
 
 
-def mounting_calibration(f_s_mean, c_bn=None, gamma=None, fit_yaw: bool = False, fit_bias: bool = False,
+def mounting_calibration(f_s_mean, c_nb=None, gamma=None, fit_yaw: bool = False, fit_bias: bool = False,
                          iterations: int = 20) -> dict:
     """Static mounting calibration (000 eqs. 31-34, section 6.1) from stationary accelerometer means.
 
     f_s_mean (K, 3) or (3,): mean specific force [m/s^2] in the sensor frame at K stationary positions;
-    c_bn (K, 3, 3): the known body attitudes C_b^n at them (None: the body level, C_b^n = I); gamma: local
+    c_nb (K, 3, 3): the known body attitudes C_b^n at them (None: the body level, C_b^n = I); gamma: local
     gravity [m/s^2] (None: the mean of |f_s_mean|). Model (eq. 31 with the stationary f^b = C_n^b gamma e_z):
 
         f^s_k = gamma M^T C_n^b,k e_z (+ b_a),   M = C_s^b = Rz(dyaw) Rx(dpitch) Ry(droll).
@@ -122,12 +122,12 @@ def mounting_calibration(f_s_mean, c_bn=None, gamma=None, fit_yaw: bool = False,
     k = f.shape[0]
     if f.shape[1] != 3 or not np.all(np.isfinite(f)):
         raise ValueError(f"f_s_mean must be finite (K, 3); got shape {f.shape}")
-    if c_bn is None:
+    if c_nb is None:
         c = np.broadcast_to(np.eye(3), (k, 3, 3))
     else:
-        c = np.asarray(c_bn, float).reshape(-1, 3, 3)
+        c = np.asarray(c_nb, float).reshape(-1, 3, 3)
         if c.shape[0] != k:
-            raise ValueError(f"c_bn has {c.shape[0]} attitudes for {k} specific-force means")
+            raise ValueError(f"c_nb has {c.shape[0]} attitudes for {k} specific-force means")
     up_b = c[:, 2, :]  # C_n^b e_z = third row of C_b^n
     g = float(np.mean(np.linalg.norm(f, axis=1))) if gamma is None else float(gamma)
     # Start: the closed form of the first position's sensor tilt minus its body tilt (exact when level).
@@ -136,7 +136,7 @@ def mounting_calibration(f_s_mean, c_bn=None, gamma=None, fit_yaw: bool = False,
     n_par = 2 + int(fit_yaw) + 3 * int(fit_bias)
     x = np.zeros(n_par)
     x[0], x[1] = sp - bp, sr - br
-    if c_bn is None and k == 1 and not fit_yaw and not fit_bias:
+    if c_nb is None and k == 1 and not fit_yaw and not fit_bias:
         pred, _ = _model(x, up_b, g, False, False)
         return {"pitch": float(x[0]), "roll": float(x[1]), "yaw": 0.0, "bias": np.zeros(3),
                 "mat_sb": euler_to_mat(x[0], x[1], 0.0), "residual": f - pred}
@@ -186,9 +186,9 @@ def lever_arm_acceleration(w_ib_b, w_dot_b, r_p):
     return np.cross(w_dot_b, r) + np.cross(w, np.cross(w, r))
 
 
-def estimate_lever_arm(c_bn, a_b, w_ib_b, w_dot_b):
+def estimate_lever_arm(c_nb, a_b, w_ib_b, w_dot_b):
     """r_p [m] (3,) from the accelerometer outputs a_b (K, 3) of a stationary (pivoting) shearer at K >= 2
-    epochs with attitudes c_bn (K, 3, 3) = C_b^n, rates w_ib_b and rate derivatives w_dot_b (K, 3).
+    epochs with attitudes c_nb (K, 3, 3) = C_b^n, rates w_ib_b and rate derivatives w_dot_b (K, 3).
 
     With a^b = C_n^b g^n + Q r_p (eq. 42-44) and g^n the same at the epochs, two epochs give eq. 45:
 
@@ -196,7 +196,7 @@ def estimate_lever_arm(c_bn, a_b, w_ib_b, w_dot_b):
 
     K > 2 epochs: the least-squares solution of the same equations for all epochs against their mean
     (g^n eliminated). Raises ValueError when the system is singular (too little rotation)."""
-    c = np.asarray(c_bn, float).reshape(-1, 3, 3)
+    c = np.asarray(c_nb, float).reshape(-1, 3, 3)
     a = np.asarray(a_b, float).reshape(-1, 3)
     q = lever_arm_q(np.asarray(w_ib_b, float).reshape(-1, 3), np.asarray(w_dot_b, float).reshape(-1, 3))
     cq = c @ q

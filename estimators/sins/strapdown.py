@@ -11,7 +11,10 @@ Per interval, in the fixed order velocity, position, attitude, each with mid-int
 * position: latitude, longitude, height from the mean velocity;
 * attitude: q_nb(k) = Exp(-zeta) (x) q_nb(k-1) (x) Exp(phi).
 
-The kernel is numba; `mechanize` validates input and converts between arrays and the kernel.
+One step kernel (`strapdown_step`, numba) takes the point the Earth and transport rates, gravity and Coriolis
+are evaluated at from its caller: `mechanize` extrapolates the mid-interval state from the last two epochs, the
+odometer filter (estimators.shearer.odometer_filter) takes the interval's start. `mechanize` validates input and
+converts between arrays and the kernel.
 """
 
 from __future__ import annotations
@@ -69,10 +72,40 @@ def body_attitude(q0: np.ndarray, phi: np.ndarray) -> np.ndarray:
 
 
 @nb.njit(cache=True)
+def strapdown_step(lat, lon, h, v, q, phi, dv_b, dt, lat_e, h_e, v_e, hold_height):
+    """One update over dt (000 eqs. 3-5) of the state (lat, lon, h, v_n, q_nb) with the compensated increments phi,
+    dv_b; the Earth and transport rates, gravity and Coriolis of the velocity update evaluated at the caller's
+    point (lat_e, h_e, v_e) (`_mechanize_kernel`: the extrapolated mid-interval state; the odometer filter's
+    epochs: the interval's start). hold_height zeroes the new vertical velocity.
+
+    Returns (lat, lon, h, v_n, q_nb) after the update, the specific-force increment in n (dv_n) and the mean
+    velocity over the interval."""
+    w_ie, w_en = nav_rates(lat_e, h_e, v_e)
+    zeta = (w_ie + w_en) * dt
+    dv_n = qrot(q, dv_b)
+    dv_n = dv_n - 0.5 * cross3(zeta, dv_n)
+    g_n = np.array([0.0, 0.0, -gravity_nb(lat_e, h_e)])
+    v_new = v + dv_n + (g_n - cross3(2.0 * w_ie + w_en, v_e)) * dt
+    if hold_height:  # the vertical channel held (an altitude aid or a known floor): no vertical motion
+        v_new[2] = 0.0
+    v_bar = 0.5 * (v + v_new)
+    h_new = h + v_bar[2] * dt
+    h_bar = 0.5 * (h + h_new)
+    r_m, r_n = radii_nb(lat)
+    lat_new = lat + v_bar[1] * dt / (r_m + h_bar)
+    lat_bar = 0.5 * (lat + lat_new)
+    r_m, r_n = radii_nb(lat_bar)
+    lon_new = lon + v_bar[0] * dt / ((r_n + h_bar) * np.cos(lat_bar))
+    # Attitude with the n-frame rotation re-evaluated at the new mid-interval state.
+    w_ie, w_en = nav_rates(lat_bar, h_bar, v_bar)
+    q_new = qmul(qmul(qexp(-(w_ie + w_en) * dt), q), qexp(phi))
+    return lat_new, lon_new, h_new, v_new, q_new / np.sqrt(np.sum(q_new * q_new)), dv_n, v_bar
+
+
+@nb.njit(cache=True)
 def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height):
     """Update u (over (t_upd[u-1], t_upd[u]]) with the compensated phi[u-1], dv_b[u-1]; outputs at index u."""
     for u in range(1, lat.size):
-        dt = t_upd[u] - t_upd[u - 1]
         # Mid-interval position and velocity, extrapolated from the last two epochs.
         if u >= 2:
             lat_m = lat[u - 1] + 0.5 * (lat[u - 1] - lat[u - 2])
@@ -80,26 +113,9 @@ def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height):
             v_m = vel[u - 1] + 0.5 * (vel[u - 1] - vel[u - 2])
         else:
             lat_m, h_m, v_m = lat[0], hgt[0], vel[0].copy()
-        w_ie, w_en = nav_rates(lat_m, h_m, v_m)
-        zeta = (w_ie + w_en) * dt
-        dv_n = qrot(quat[u - 1], dv_b[u - 1])
-        dv_n = dv_n - 0.5 * cross3(zeta, dv_n)
-        g_n = np.array([0.0, 0.0, -gravity_nb(lat_m, h_m)])
-        vel[u] = vel[u - 1] + dv_n + (g_n - cross3(2.0 * w_ie + w_en, v_m)) * dt
-        if hold_height:  # the vertical channel held (an altitude aid or a known floor): no vertical motion
-            vel[u, 2] = 0.0
-        v_bar = 0.5 * (vel[u] + vel[u - 1])
-        hgt[u] = hgt[u - 1] + v_bar[2] * dt
-        h_bar = 0.5 * (hgt[u] + hgt[u - 1])
-        r_m, r_n = radii_nb(lat[u - 1])
-        lat[u] = lat[u - 1] + v_bar[1] * dt / (r_m + h_bar)
-        lat_bar = 0.5 * (lat[u] + lat[u - 1])
-        r_m, r_n = radii_nb(lat_bar)
-        lon[u] = lon[u - 1] + v_bar[0] * dt / ((r_n + h_bar) * np.cos(lat_bar))
-        # Attitude with the n-frame rotation re-evaluated at the new mid-interval state.
-        w_ie, w_en = nav_rates(lat_bar, h_bar, v_bar)
-        q = qmul(qmul(qexp(-(w_ie + w_en) * dt), quat[u - 1]), qexp(phi[u - 1]))
-        quat[u] = q / np.sqrt(np.sum(q * q))
+        lat[u], lon[u], hgt[u], vel[u], quat[u], _dv_n, _v_bar = strapdown_step(
+            lat[u - 1], lon[u - 1], hgt[u - 1], vel[u - 1], quat[u - 1], phi[u - 1], dv_b[u - 1],
+            t_upd[u] - t_upd[u - 1], lat_m, h_m, v_m, hold_height)
 
 
 def compensated_increments(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray,

@@ -38,17 +38,23 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from estimators.support.attitude_002 import (
-    FASTMATH,
-    UnitModel,
-    _inputs,
-    _inv3,
-    _normalize_continuous,
-    body_rate,
-    exp_half,
-    initial_attitude,
-    wrap,
+from estimators.nav.rotations_scalar import (
+    add_rotated,
+    mul_exp,
+    normalize_continuous,
+    quat_mat_into,
+    sub_rotated_back,
 )
+from estimators.support.batch import batch_inputs
+from estimators.support.kernel_math import FASTMATH, inv3
+from estimators.support.unit_model import UnitModel, start_attitude, wrap
+
+THETA = 0
+"""Error state: dtheta, the body-frame attitude error [rad] (3), C_true = C_est (I + [dtheta x])."""
+BIAS = 3
+"""Error state: db_g, the gyro bias error [rad/s] (3)."""
+N_ERR = 6
+"""Size of the error state."""
 
 FLAG_NORM = 1
 """Magnetometer sample rejected: its norm differs from the model's."""
@@ -82,52 +88,21 @@ class OursSettings:
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def _mul_exp(q, a0, a1, a2):
-    """q <- q (x) exp(a / 2) in place, unnormalised (002 eq. 12 for the increment a [rad])."""
-    c, s = exp_half(a0, a1, a2)
-    r1, r2, r3 = s * a0, s * a1, s * a2
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    q[0] = w * c - x * r1 - y * r2 - z * r3
-    q[1] = w * r1 + x * c + y * r3 - z * r2
-    q[2] = w * r2 - x * r3 + y * c + z * r1
-    q[3] = w * r3 + x * r2 - y * r1 + z * c
-
-
-@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def _add_rotated(q, v, acc):
-    """acc += C(q) v (q scalar first, Hamilton, unit)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    tx = 2.0 * (y * v[2] - z * v[1])
-    ty = 2.0 * (z * v[0] - x * v[2])
-    tz = 2.0 * (x * v[1] - y * v[0])
-    acc[0] += v[0] + w * tx + (y * tz - z * ty)
-    acc[1] += v[1] + w * ty + (z * tx - x * tz)
-    acc[2] += v[2] + w * tz + (x * ty - y * tx)
-
-
-@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
-def _mat(q, c):
-    """C_b^n of the unit quaternion q into c (3x3)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    c[0, 0], c[0, 1], c[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
-    c[1, 0], c[1, 1], c[1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
-    c[2, 0], c[2, 1], c[2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
-
-
-@nb.njit(cache=True, inline="always", fastmath=FASTMATH)
 def _propagate_covariance(p, crel, t_int, qd, fp):
     """P <- F P F^T + diag(qd) for F = [[C_rel^T, -T I], [0, I]]: dtheta_end = C_rel^T dtheta_start - T db."""
-    for j in range(6):
+    for j in range(N_ERR):
         for i in range(3):
-            fp[i, j] = crel[0, i] * p[0, j] + crel[1, i] * p[1, j] + crel[2, i] * p[2, j] - t_int * p[3 + i, j]
-        for i in range(3, 6):
+            fp[THETA + i, j] = (crel[0, i] * p[THETA, j] + crel[1, i] * p[THETA + 1, j] + crel[2, i] * p[THETA + 2, j]
+                                - t_int * p[BIAS + i, j])
+        for i in range(BIAS, BIAS + 3):
             fp[i, j] = p[i, j]
-    for i in range(6):
+    for i in range(N_ERR):
         for j in range(3):
-            p[i, j] = fp[i, 0] * crel[0, j] + fp[i, 1] * crel[1, j] + fp[i, 2] * crel[2, j] - t_int * fp[i, 3 + j]
-        for j in range(3, 6):
+            p[i, THETA + j] = (fp[i, THETA] * crel[0, j] + fp[i, THETA + 1] * crel[1, j] + fp[i, THETA + 2] * crel[2, j]
+                               - t_int * fp[i, BIAS + j])
+        for j in range(BIAS, BIAS + 3):
             p[i, j] = fp[i, j]
-    for i in range(6):
+    for i in range(N_ERR):
         p[i, i] += qd[i]
         for j in range(i):
             v = 0.5 * (p[i, j] + p[j, i])
@@ -137,12 +112,12 @@ def _propagate_covariance(p, crel, t_int, qd, fp):
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
 def _innovation(p, dx, h, y, ph):
-    """(innovation y - h dx against the correction dx made so far, h P h^T) of a scalar measurement row h (6,);
+    """(innovation y - h dx against the correction dx made so far, h P h^T) of a scalar measurement row h (N_ERR,);
     fills ph = P h^T."""
     hph, innov = 0.0, y
-    for i in range(6):
+    for i in range(N_ERR):
         v = 0.0
-        for j in range(6):
+        for j in range(N_ERR):
             v += p[i, j] * h[j]
         ph[i] = v
         hph += h[i] * v
@@ -153,9 +128,9 @@ def _innovation(p, dx, h, y, ph):
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
 def _scalar_update(p, dx, ph, innov, s):
     """Kalman update of the error state dx and P by one scalar measurement: K = P h^T / s, s = h P h^T + r."""
-    for i in range(6):
+    for i in range(N_ERR):
         dx[i] += ph[i] / s * innov
-    for i in range(6):
+    for i in range(N_ERR):
         for j in range(i + 1):
             v = p[i, j] - ph[i] * ph[j] / s
             p[i, j] = v
@@ -168,15 +143,15 @@ def _tilt_update(p, dx, ph, innov, s, up, k):
     `up` (attitude and bias): gravity says nothing of a rotation about the vertical, and without the magnetometer
     the yaw's variance grows large, so a null space of H moved by the last correction would leak noise into the
     yaw (the EKF's spurious observability). Joseph form, the gain being suboptimal."""
-    for i in range(6):
+    for i in range(N_ERR):
         k[i] = ph[i] / s
-    for blk in (0, 3):
+    for blk in (THETA, BIAS):
         along = k[blk] * up[0] + k[blk + 1] * up[1] + k[blk + 2] * up[2]
         for i in range(3):
             k[blk + i] -= along * up[i]
-    for i in range(6):
+    for i in range(N_ERR):
         dx[i] += k[i] * innov
-    for i in range(6):
+    for i in range(N_ERR):
         for j in range(i + 1):
             v = p[i, j] - k[i] * ph[j] - ph[i] * k[j] + k[i] * k[j] * s
             p[i, j] = v
@@ -199,37 +174,37 @@ def _ours_kernel(gyro, accel, mag, dt, m_upd, q0, p0, qd, field_n, w_ie_n, g_nor
         q = q0[f].copy()
         b = np.zeros(3)
         p = p0.copy()
-        fp = np.empty((6, 6))
+        fp = np.empty((N_ERR, N_ERR))
         w = np.empty(3)
         qrel = np.empty(4)
         sf, sm, sw = np.zeros(3), np.zeros(3), np.zeros(3)
         c, crel, s3, s3i = np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3))
         yw = np.empty(3)
         fb, mb, mn = np.empty(3), np.empty(3), np.empty(3)
-        h, ph, dx, gain = np.zeros(6), np.empty(6), np.zeros(6), np.empty(6)
+        h, ph, dx, gain = np.zeros(N_ERR), np.empty(N_ERR), np.zeros(N_ERR), np.empty(N_ERR)
         rejected = 0
         u = 0
         qrel[0], qrel[1], qrel[2], qrel[3] = 1.0, 0.0, 0.0, 0.0
         for k in range(nk):
             # Per sample: propagate with the bias-corrected rate; accumulate f and m in the interval's start frame.
-            body_rate(gyro[f, k], q, w_ie_n, w)
+            sub_rotated_back(gyro[f, k], q, w_ie_n, w)  # gyro minus C_n^b w_ie
             for i in range(3):
                 sw[i] += w[i]
             a0, a1, a2 = (w[0] - b[0]) * dt, (w[1] - b[1]) * dt, (w[2] - b[2]) * dt
-            _mul_exp(q, a0, a1, a2)
-            _mul_exp(qrel, a0, a1, a2)
-            _add_rotated(qrel, accel[f, k], sf)
-            _add_rotated(qrel, mag[f, k], sm)
+            mul_exp(q, a0, a1, a2)
+            mul_exp(qrel, a0, a1, a2)
+            add_rotated(qrel, accel[f, k], sf)
+            add_rotated(qrel, mag[f, k], sm)
             if (k + 1) % m_upd != 0:
                 continue
-            _normalize_continuous(q, q)
-            _normalize_continuous(qrel, qrel)
-            _mat(qrel, crel)
+            normalize_continuous(q, q)
+            normalize_continuous(qrel, qrel)
+            quat_mat_into(qrel, crel)
             _propagate_covariance(p, crel, t_int, qd, fp)
             for i in range(3):  # interval means in the end frame: C_rel^T s / m
                 fb[i] = (crel[0, i] * sf[0] + crel[1, i] * sf[1] + crel[2, i] * sf[2]) / m_upd
                 mb[i] = (crel[0, i] * sm[0] + crel[1, i] * sm[1] + crel[2, i] * sm[2]) / m_upd
-            _mat(q, c)
+            quat_mat_into(q, c)
             flag = 0
             dx[:] = 0.0
             fn = np.sqrt(fb[0] ** 2 + fb[1] ** 2 + fb[2] ** 2)
@@ -240,9 +215,9 @@ def _ours_kernel(gyro, accel, mag, dt, m_upd, q0, p0, qd, field_n, w_ie_n, g_nor
                 for i in range(3):
                     yw[i] = sw[i] / m_upd - b[i]
                     for j in range(3):
-                        s3[i, j] = p[3 + i, 3 + j]
+                        s3[i, j] = p[BIAS + i, BIAS + j]
                     s3[i, i] += var_zaru
-                _inv3(s3, s3i)
+                inv3(s3, s3i)
                 chi2 = 0.0
                 for i in range(3):
                     chi2 += yw[i] * (s3i[i, 0] * yw[0] + s3i[i, 1] * yw[1] + s3i[i, 2] * yw[2])
@@ -250,7 +225,7 @@ def _ours_kernel(gyro, accel, mag, dt, m_upd, q0, p0, qd, field_n, w_ie_n, g_nor
                     flag |= FLAG_STATIC
                     for i in range(3):
                         h[:] = 0.0
-                        h[3 + i] = 1.0
+                        h[BIAS + i] = 1.0
                         innov, hph = _innovation(p, dx, h, yw[i], ph)
                         _scalar_update(p, dx, ph, innov, hph + var_zaru)
             h[:] = 0.0
@@ -261,11 +236,11 @@ def _ours_kernel(gyro, accel, mag, dt, m_upd, q0, p0, qd, field_n, w_ie_n, g_nor
                 up0, up1, up2 = up[0], up[1], up[2]
                 for i in range(3):
                     if i == 0:
-                        h[0], h[1], h[2] = 0.0, -up2, up1
+                        h[THETA], h[THETA + 1], h[THETA + 2] = 0.0, -up2, up1
                     elif i == 1:
-                        h[0], h[1], h[2] = up2, 0.0, -up0
+                        h[THETA], h[THETA + 1], h[THETA + 2] = up2, 0.0, -up0
                     else:
-                        h[0], h[1], h[2] = -up1, up0, 0.0
+                        h[THETA], h[THETA + 1], h[THETA + 2] = -up1, up0, 0.0
                     innov, hph = _innovation(p, dx, h, fb[i] / fn - c[2, i], ph)
                     _tilt_update(p, dx, ph, innov, hph + r_acc, up, gain)
             # Magnetic heading, with the disturbance tests.
@@ -277,7 +252,7 @@ def _ours_kernel(gyro, accel, mag, dt, m_upd, q0, p0, qd, field_n, w_ie_n, g_nor
                 flag |= FLAG_DIP
             if flag & (FLAG_NORM | FLAG_DIP) == 0:
                 for j in range(3):
-                    h[j] = hmag_n[0] * c[0, j] + hmag_n[1] * c[1, j] + hmag_n[2] * c[2, j]
+                    h[THETA + j] = hmag_n[0] * c[0, j] + hmag_n[1] * c[1, j] + hmag_n[2] * c[2, j]
                 innov, hph = _innovation(p, dx, h, wrap(np.arctan2(mn[0], mn[1]) - a_ref), ph)
                 r_mag = var_mag_angle_t2 / (bh2 * m_upd)
                 if innov * innov <= gate * (hph + r_mag):
@@ -290,14 +265,14 @@ def _ours_kernel(gyro, accel, mag, dt, m_upd, q0, p0, qd, field_n, w_ie_n, g_nor
                     rejected += 1
                     flag |= FLAG_GATE
             # Reset: fold the error into q and b.
-            _mul_exp(q, dx[0], dx[1], dx[2])
-            _normalize_continuous(q, q)
+            mul_exp(q, dx[THETA], dx[THETA + 1], dx[THETA + 2])
+            normalize_continuous(q, q)
             for i in range(3):
-                b[i] += dx[3 + i]
+                b[i] += dx[BIAS + i]
             out_q[f, u] = q
             out_b[f, u] = b
             out_flag[f, u] = flag
-            for i in range(6):
+            for i in range(N_ERR):
                 out_sigma[f, u, i] = np.sqrt(p[i, i])
             u += 1
             qrel[0], qrel[1], qrel[2], qrel[3] = 1.0, 0.0, 0.0, 0.0
@@ -314,27 +289,26 @@ class OursResult:
     q_nb: np.ndarray  # (N, U, 4)
     gyro_bias: np.ndarray  # (N, U, 3) [rad/s]
     flags: np.ndarray  # (N, U) FLAG_* bits
-    sigma: np.ndarray  # (N, U, 6) one-sigma of dtheta [rad] and the bias [rad/s]
+    sigma: np.ndarray  # (N, U, N_ERR) one-sigma of dtheta [rad] and the bias [rad/s]
 
 
 def ours(gyro, accel, mag, dt: float, model: UnitModel, settings: OursSettings = OursSettings(),
          q0=None) -> OursResult:
     """Run the filter on a batch of units: gyro [rad/s], accel [m/s^2], mag [T] of shape (K, 3) or (N, K, 3)."""
-    gyro, accel, mag = _inputs(gyro, accel, mag)
+    gyro, accel, mag = batch_inputs(gyro, accel, mag)
     s = settings
     n, k = gyro.shape[:2]
     m = int(s.samples_per_update)
     if m < 1:
         raise ValueError(f"samples_per_update must be >= 1, got {m}")
-    q0 = initial_attitude(accel, mag, model) if q0 is None else np.broadcast_to(np.asarray(q0, float), (n, 4))
     p0 = np.diag([s.attitude_sigma0 ** 2] * 3 + [s.gyro_bias_sigma0 ** 2] * 3)
     t_int = m * dt
     qd = np.array([s.gyro_arw ** 2 * t_int] * 3 + [s.gyro_bias_walk ** 2 * t_int] * 3)
     g_norm = np.median(np.linalg.norm(accel[:, :: max(1, k // 1000)], axis=-1), axis=1)  # |g| each unit reads
     u = k // m
     out_q, out_b = np.empty((n, u, 4)), np.empty((n, u, 3))
-    out_flag, out_sigma = np.empty((n, u), np.int8), np.empty((n, u, 6))
-    _ours_kernel(gyro, accel, mag, float(dt), m, np.ascontiguousarray(q0), p0, qd,
+    out_flag, out_sigma = np.empty((n, u), np.int8), np.empty((n, u, N_ERR))
+    _ours_kernel(gyro, accel, mag, float(dt), m, start_attitude(q0, accel, mag, model), p0, qd,
                  np.asarray(model.field_n, float), np.asarray(model.earth_rate_n, float), g_norm,
                  float(s.accel_sigma ** 2), float(s.mag_sigma ** 2), float(s.accel_gate), float(s.norm_tol),
                  float(s.dip_tol), float(s.gate), int(s.relock_updates), float(s.zaru_gate),
@@ -342,5 +316,5 @@ def ours(gyro, accel, mag, dt: float, model: UnitModel, settings: OursSettings =
     return OursResult(np.arange(1, u + 1) * m - 1, out_q, out_b, out_flag, out_sigma)
 
 
-__all__ = ["FLAG_ACCEL", "FLAG_DIP", "FLAG_GATE", "FLAG_NORM", "FLAG_STATIC", "OursResult", "OursSettings", "ours",
-           "wrap"]
+__all__ = ["BIAS", "FLAG_ACCEL", "FLAG_DIP", "FLAG_GATE", "FLAG_NORM", "FLAG_STATIC", "N_ERR", "THETA", "OursResult",
+           "OursSettings", "ours"]

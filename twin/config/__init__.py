@@ -1,1 +1,2 @@
-"""Scenario files: the TOML reader, validated sections, IMU grades."""
+"""Scenario files of every kind: the section base and the TOML reader, face scenarios and the one loader, the
+instrument sections, 000's SINS experiments, 002's turntable, IMU grades."""

@@ -1,48 +1,46 @@
-"""Scenario files: TOML in, validated and unit-converted `Scenario` out.
+"""Face scenarios (TOML in, validated `Scenario` out), and the one loader of every kind of scenario file.
 
 A scenario file is the single description of a run. Units at this edge are the ones a mining engineer
 writes (degrees, m/min, Hz); `Scenario` keeps them as written so the resolved file reads like the input,
 and the `*_rad` / `*_m_s` properties convert once for the code. Any problem is a `ScenarioError` whose
 message is one line naming the file and the key.
+
+`load_scenario` reads any scenario file and dispatches on its top-level `kind`: absent for a face scenario,
+"sins_experiment" for 000's experiments (twin.config.experiments), "support_turntable" for 002's turntable
+(twin.config.turntable); `scenario_to_toml` writes any of them back.
 """
+# ruff: noqa: RUF012 -- the list defaults are pydantic fields (Section is a BaseModel; pydantic copies defaults)
 
 from __future__ import annotations
 
 import math
-import tomllib
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, Field, model_validator
 
+from twin.config.experiments import EXPERIMENT_KIND, Experiment, parse_experiment
 from twin.config.imu_grades import GRADES
-from twin.config.sensors import Fault, Sensors, Vector3
+from twin.config.section import (
+    Finite,
+    NonNegativeFloat,
+    PositiveFloat,
+    ScenarioError,
+    Section,
+    Site,
+    Vector3,
+    validate,
+)
+from twin.config.sensors import Fault, Sensors
+from twin.config.tomlfile import read_scenario
+from twin.config.turntable import TURNTABLE_KIND, Turntable, parse_turntable
 from twin.face import snake
 from twin.face.layout import floor_pitch_change
 
-PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-Finite = Annotated[float, Field(allow_inf_nan=False)]
 BendLimit = Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)]
 
 
-class ScenarioError(ValueError):
-    """A scenario that cannot be run; the message is one line: file, key, what is wrong."""
-
-
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
-
-
-class Site(_Section):
-    """Reference geodetic point: origin of the MuJoCo world (ENU tangent plane)."""
-
-    lat_deg: Annotated[float, Field(ge=-89, le=89, allow_inf_nan=False)] = 34.27
-    lon_deg: Annotated[float, Field(ge=-180, le=180, allow_inf_nan=False)] = 117.18
-    height_m: Annotated[float, Field(ge=-5000, le=9000, allow_inf_nan=False)] = 36.0
-
-
-class Face(_Section):
+class Face(Section):
     """The armoured face conveyor line, the floor it lies on and the coal to be cut."""
 
     azimuth_deg: Annotated[float, Field(ge=0, lt=360, allow_inf_nan=False)] = 0.0
@@ -69,7 +67,7 @@ class Face(_Section):
     """Extent of coal (and floor) in the advance direction; cycles * web_depth_m must fit in it."""
 
 
-class Supports(_Section):
+class Supports(Section):
     """Hydraulic roof supports (shields) and their push rams."""
 
     pans_per_support: Annotated[int, Field(ge=1, le=4)] = 1
@@ -87,7 +85,7 @@ class Supports(_Section):
     """How far the canopy is lowered from the roof while the support advances."""
 
 
-class Shearer(_Section):
+class Shearer(Section):
     length_m: Annotated[float, Field(ge=3, le=20, allow_inf_nan=False)] = 8.0
     shoe_spacing_m: Annotated[float, Field(ge=1, le=15, allow_inf_nan=False)] = 5.0
     body_height_m: Annotated[float, Field(gt=0, le=3, allow_inf_nan=False)] = 0.9
@@ -96,7 +94,7 @@ class Shearer(_Section):
     suspension_damping_ratio: Annotated[float, Field(gt=0, le=2, allow_inf_nan=False)] = 1.0
 
 
-class Stop(_Section):
+class Stop(Section):
     """A scripted stop of the shearer during a straight cut."""
 
     cycle: Annotated[int, Field(ge=0)]
@@ -105,7 +103,7 @@ class Stop(_Section):
     duration_s: PositiveFloat
 
 
-class Haulage(_Section):
+class Haulage(Section):
     cutting_speed_m_min: Annotated[float, Field(ge=1, le=30, allow_inf_nan=False)] = 8.0
     return_speed_m_min: Annotated[float, Field(ge=1, le=40, allow_inf_nan=False)] = 18.0
     """Speed through coal already cut (the start of a pass over the previous sump)."""
@@ -117,7 +115,7 @@ class Haulage(_Section):
     stops: list[Stop] = []
 
 
-class Pattern(_Section):
+class Pattern(Section):
     kind: Literal["bidirectional"] = "bidirectional"
     snake_length_pans: Annotated[int, Field(ge=2, le=40)] = 12
     push_lag_pans: Annotated[int, Field(ge=0, le=20)] = 2
@@ -126,7 +124,7 @@ class Pattern(_Section):
     """The push-advance controller acts each time the shearer has travelled this many pans."""
 
 
-class Rates(_Section):
+class Rates(Section):
     truth_hz: Annotated[float, Field(ge=50, le=2000, allow_inf_nan=False)] = 200.0
     """Rate of the published shearer truth (samples of the truth splines)."""
     ride_hz: Annotated[float, Field(ge=50, le=2000, allow_inf_nan=False)] = 100.0
@@ -134,7 +132,7 @@ class Rates(_Section):
     face_timestep_s: Annotated[float, Field(ge=0.001, le=0.02, allow_inf_nan=False)] = 0.01
 
 
-class ShearerPositioning(_Section):
+class ShearerPositioning(Section):
     """The shearer positioning estimators of 001 that `longwall run` / `longwall estimate` run on the log."""
 
     methods: list[Literal["dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag",
@@ -160,11 +158,11 @@ class ShearerPositioning(_Section):
     """The calibration's S^-1 (rows): calibrated field = S^-1 (reading - hard iron)."""
 
 
-class Estimators(_Section):
+class Estimators(Section):
     shearer: ShearerPositioning = ShearerPositioning()
 
 
-class Scenario(_Section):
+class Scenario(Section):
     name: Annotated[str, Field(min_length=1)]
     seed: Annotated[int, Field(ge=0)] = 0
     cycles: Annotated[int, Field(ge=1, le=200)] = 1
@@ -180,7 +178,7 @@ class Scenario(_Section):
     estimators: Estimators = Estimators()
 
     @model_validator(mode="after")
-    def _consistent(self) -> "Scenario":
+    def _consistent(self) -> Scenario:
         f, sh, p = self.face, self.shearer, self.pattern
         length = f.pan_count * f.pan_length_m
         if f.face_length_m is not None and abs(f.face_length_m - length) > 1e-3:
@@ -248,42 +246,40 @@ def travel_length_m(scn: Scenario) -> float:
     return scn.face.pan_count * scn.face.pan_length_m - scn.shearer.length_m
 
 
-def _format_error(source: str, err: ValidationError) -> str:
-    first = err.errors()[0]
-    loc = ".".join(str(x) for x in first["loc"] if not str(x).startswith("function-after"))
-    msg = first["msg"].removeprefix("Value error, ")
-    if first["type"] == "extra_forbidden":
-        msg = "unknown key (check the spelling; see scenarios/default.toml for the keys)"
-    got = first.get("input")
-    detail = f" (got {got!r})" if first["type"] not in ("extra_forbidden", "value_error") and not isinstance(
-        got, dict) else ""
-    where = f"{loc}: " if loc else ""
-    return f"{source}: {where}{msg}{detail}"
-
-
 def parse_scenario(data: dict, source: str = "<scenario>") -> Scenario:
-    try:
-        return Scenario.model_validate(data)
-    except ValidationError as err:
-        raise ScenarioError(_format_error(source, err)) from None
+    """Validate a face scenario's data (the TOML as a dict); one-line ScenarioError naming `source` and the key."""
+    return validate(Scenario, data, source)
 
 
-def load_scenario(path: str | Path, seed: int | None = None) -> Scenario:
-    """Read and validate a scenario TOML file; `seed` overrides the file's seed."""
-    path = Path(path)
-    if not path.is_file():
-        raise ScenarioError(f"{path}: scenario file not found")
-    try:
-        data = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise ScenarioError(f"{path}: not valid TOML: {err}") from None
-    if seed is not None:
-        data["seed"] = seed
+SCENARIO_KINDS = {None: parse_scenario, EXPERIMENT_KIND: parse_experiment, TURNTABLE_KIND: parse_turntable}
+"""The parser of each kind of scenario file, by its top-level `kind` (None: absent, a face scenario)."""
+
+
+def parse_any(data: dict, source: str = "<scenario>") -> Scenario | Experiment | Turntable:
+    """Validate a scenario file's data of any kind (its top-level `kind`)."""
+    kind = data.get("kind")
+    if kind not in SCENARIO_KINDS:
+        raise ScenarioError(f"{source}: kind: must be one of {', '.join(k for k in SCENARIO_KINDS if k)} or absent "
+                            f"(a face scenario); got {kind!r}")
+    return SCENARIO_KINDS[kind](data, source)
+
+
+def load_scenario(path: str | Path, seed: int | None = None) -> Scenario | Experiment | Turntable:
+    """Read and validate a scenario file of any kind (face scenario, SINS experiment, turntable); `seed`
+    overrides the file's seed."""
+    return parse_any(read_scenario(path, seed), str(path))
+
+
+def load_face_scenario(path: str | Path, seed: int | None = None) -> Scenario:
+    """`load_scenario` where only a face scenario will do (estimating or reporting a face run)."""
+    data = read_scenario(path, seed)
+    if "kind" in data:
+        raise ScenarioError(f"{path}: kind: a face scenario is needed here, not a {data['kind']!r} file")
     return parse_scenario(data, str(path))
 
 
-def scenario_to_toml(scn: Scenario) -> str:
-    """The resolved scenario (every default made visible) as TOML text."""
+def scenario_to_toml(scn: BaseModel) -> str:
+    """A resolved scenario of any kind (every default made visible) as TOML text."""
     data = scn.model_dump(exclude_none=True)
     lines: list[str] = []
 

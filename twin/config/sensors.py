@@ -3,25 +3,26 @@
 Units as written in the file (deg, Hz, T, m); the sensor models convert once. Every field has the default a
 mining engineer would expect for a modern face; `grade` names a preset of twin.config.imu_grades.
 """
+# ruff: noqa: RUF012 -- the list defaults are pydantic fields (Section is a BaseModel; pydantic copies defaults)
 
 from __future__ import annotations
 
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import Field
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-NonNegative = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-Positive = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+from twin.config.section import (
+    Finite,
+    NonNegativeFloat,
+    PositiveFloat,
+    Section,
+    Vector3,
+)
+
 Rate = Annotated[float, Field(gt=0, le=2000, allow_inf_nan=False)]
-Vector3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 
 
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
-
-
-class Imu(_Section):
+class Imu(Section):
     """The shearer's strapdown IMU."""
 
     grade: str = "mti-g-700"
@@ -33,7 +34,7 @@ class Imu(_Section):
     """Small rotation of the IMU axes relative to b (about x, y, z): C_s^b = I + [m]x to first order."""
 
 
-class VibrationState(_Section):
+class VibrationState(Section):
     """Vibration of the IMU in one machine state: a drum-rotation tone and a pick-impact band, with phase.
 
     The drum tone is slow (the drums turn at 0.5-1 Hz), so it is specified by how far it moves the machine:
@@ -52,7 +53,7 @@ class VibrationState(_Section):
     """RMS angular rate of the pick band, per axis."""
 
 
-class Vibration(_Section):
+class Vibration(Section):
     enabled: bool = True
     idle: VibrationState = VibrationState(drum_displacement_mm=0.1, drum_angle_deg=0.001, accel_rms_g=0.02,
                                           angular_rms_deg_s=0.02)
@@ -60,15 +61,15 @@ class Vibration(_Section):
                                                   angular_rms_deg_s=0.3)
     cutting_rock: VibrationState = VibrationState(drum_displacement_mm=2.0, drum_angle_deg=0.02, accel_rms_g=0.8,
                                                   angular_rms_deg_s=0.8, pick_hz=38.0)
-    rock_zones_m: list[Annotated[list[NonNegative], Field(min_length=2, max_length=2)]] = []
+    rock_zones_m: list[Annotated[list[NonNegativeFloat], Field(min_length=2, max_length=2)]] = []
     """Arc-length intervals [from, to] along the face where the drums cut rock (floor or roof bands)."""
 
 
-class Odometer(_Section):
+class Odometer(Section):
     """The haulage encoder: pulses of the drive sprocket on the rack."""
 
     rate_hz: Rate = 50.0
-    metres_per_pulse: Positive = 0.002
+    metres_per_pulse: PositiveFloat = 0.002
     scale_error: Annotated[float, Field(ge=-0.1, le=0.1, allow_inf_nan=False)] = 0.003
     """Relative error of the nominal metres per pulse (0.003 = 3 per mille)."""
     mounting_deg: Vector3 = [0.2, 0.0, -0.3]
@@ -77,22 +78,22 @@ class Odometer(_Section):
     machine moves in, are [sensors.imu] misalignment_deg here: the machine moves along b."""
 
 
-class PushRam(_Section):
+class PushRam(Section):
     """Stroke sensors on the push rams."""
 
     rate_hz: Rate = 1.0
-    noise_m: NonNegative = 1e-4
+    noise_m: NonNegativeFloat = 1e-4
     """Standard deviation of the reading (0.02 m for the sensors of 004 Table 1)."""
-    resolution_m: NonNegative = 1e-4
+    resolution_m: NonNegativeFloat = 1e-4
 
 
-class Magnetometer(_Section):
+class Magnetometer(Section):
     """The shearer's three-axis magnetometer."""
 
     rate_hz: Rate = 50.0
     date: Annotated[str, Field(pattern=r"^\d{4}-\d{2}-\d{2}$")] = "2026-06-01"
     """Date for the geomagnetic model (declination, inclination, intensity at the site)."""
-    noise_t: NonNegative = 1.0e-7
+    noise_t: NonNegativeFloat = 1.0e-7
     hard_iron_t: Vector3 = [2.0e-6, -1.0e-6, 0.5e-6]
     soft_iron: Annotated[list[Vector3], Field(min_length=3, max_length=3)] = [[1.02, 0.01, 0.0], [0.01, 0.98, 0.0],
                                                                               [0.0, 0.0, 1.0]]
@@ -101,25 +102,25 @@ class Magnetometer(_Section):
     """Field of the haulage and cutting motors in b while the shearer moves (scaled by speed / cutting speed)."""
 
 
-class SupportImu(_Section):
+class SupportImu(Section):
     """9-axis MEMS units on the canopies of selected supports (002 section 2)."""
 
     supports: list[Annotated[int, Field(ge=0)]] = []
     rate_hz: Rate = 50.0
     grade: str = "icm-42605"
-    shearer_disturbance_t: NonNegative = 5.0e-6
+    shearer_disturbance_t: NonNegativeFloat = 5.0e-6
     """Peak magnetic disturbance at a support while the shearer passes it (falls off over a pan length)."""
 
 
-class Survey(_Section):
+class Survey(Section):
     """Surveyed fixes of the shearer: the start pose at face end A and face end B of the first cut (001 section
     2.2: the face ends are measured in advance). Defaults are 001 Table 1's initial position and heading errors."""
 
-    sd_horizontal_m: NonNegative = 0.05
+    sd_horizontal_m: NonNegativeFloat = 0.05
     """One-sigma error of each horizontal coordinate (east, north) of a fix."""
-    sd_vertical_m: NonNegative = 0.05
+    sd_vertical_m: NonNegativeFloat = 0.05
     """One-sigma error of the height of a fix."""
-    sd_yaw_deg: NonNegative = 1.0
+    sd_yaw_deg: NonNegativeFloat = 1.0
     """One-sigma error of the surveyed yaw of the start pose (the face-end fix B carries no heading)."""
     face_ends: Literal["first_cut", "every_cut"] = "every_cut"
     """first_cut: only the ends of the first straight cut are fixed (001's experiment); every_cut: both ends of
@@ -128,7 +129,7 @@ class Survey(_Section):
     """Survey the installed face line before the first cut (the FACE_SURVEY stream: one point per chute)."""
 
 
-class Sensors(_Section):
+class Sensors(Section):
     imu: Imu = Imu()
     vibration: Vibration = Vibration()
     odometer: Odometer = Odometer()
@@ -142,7 +143,7 @@ FaultKind = Literal["ram_stuck", "ram_offset", "ram_drift", "ram_scale", "ram_dr
                     "push_shortfall", "rail_deviation", "mag_interference", "odometer_slip"]
 
 
-class Fault(_Section):
+class Fault(Section):
     """A fault injected on a sensor (or, for push_shortfall and rail_deviation, on the face) in a window.
 
     value: ram_stuck (ignored: the reading freezes), ram_offset [m], ram_drift [m/s], ram_scale (relative
@@ -153,8 +154,8 @@ class Fault(_Section):
     """
 
     kind: FaultKind
-    t_start_s: NonNegative
-    t_end_s: NonNegative
+    t_start_s: NonNegativeFloat
+    t_end_s: NonNegativeFloat
     target: Annotated[int, Field(ge=0)] | None = None
     """Support index for ram faults and push_shortfall; for mag_interference, a support whose canopy unit is
     disturbed (None: the shearer magnetometer); None for the others."""

@@ -1,7 +1,8 @@
 """002 section 4.1's two-axis turntable as a scenario file: the support attitude unit's filters beside 002's figures.
 
 A third kind of scenario file, marked by the top-level key `kind = "support_turntable"` (scenarios/
-seed002_turntable.toml); `longwall run FILE` dispatches it here (twin.cli). Every parameter is a key of the file.
+seed002_turntable.toml, read by twin.config.turntable); `longwall run FILE` dispatches it here (twin.cli). Every
+parameter is a key of the file.
 
 Motion (002 section 4.1): each angle ramps linearly from its first to its second value between the two times
 of its `*_s` pair and is held outside them. The file gives 002's angles: pitch (nose up), roll (left side up)
@@ -28,14 +29,11 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
-import tomllib
 from pathlib import Path
-from typing import Annotated
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from estimators.nav import earth
 from estimators.nav.rotations import (
@@ -45,148 +43,38 @@ from estimators.nav.rotations import (
     quat_rotate,
     quat_to_rotvec,
 )
-from estimators.support.attitude_002 import (
-    SigmaSettings,
-    UnitModel,
-    euler_errors,
-    kf,
-    tune_q,
-    ukf,
-)
 from estimators.support.error_state import OursSettings, ours
-from twin.config.scenario import ScenarioError, _format_error, scenario_to_toml
+from estimators.support.filters_002 import SigmaSettings, kf, ukf
+from estimators.support.tuning import tune_q
+from estimators.support.unit_model import UnitModel, euler_errors
+from twin.config.scenario import scenario_to_toml
+from twin.config.turntable import (
+    TURNTABLE_KIND,
+    Motion,
+    Turntable,
+    is_turntable,
+)
 
-KIND = "support_turntable"
+__all__ = [
+    "FILTERS",
+    "PAPER",
+    "TARGETS",
+    "Readings",
+    "is_turntable",
+    "ours_settings",
+    "ramp",
+    "readings",
+    "run_filters",
+    "run_turntable",
+    "segment_rmse",
+    "table",
+    "truth_attitude",
+    "unit_grade",
+    "unit_model",
+    "write_run",
+]
+
 DEG = np.pi / 180
-
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-Pair = Annotated[list[Finite], Field(min_length=2, max_length=2)]
-Vector3 = Annotated[list[PositiveFloat], Field(min_length=3, max_length=3)]
-
-
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
-
-
-class TurntableSite(_Section):
-    lat_deg: Annotated[float, Field(ge=-89, le=89, allow_inf_nan=False)]
-    lon_deg: Annotated[float, Field(ge=-180, le=180, allow_inf_nan=False)]
-    height_m: Finite
-    mag_date: str
-
-
-class Motion(_Section):
-    """002 section 4.1: each angle ramps from its first to its second value over its time pair."""
-
-    duration_s: PositiveFloat
-    pitch_deg: Pair
-    pitch_s: Pair
-    roll_deg: Pair
-    roll_s: Pair
-    heading_deg: Pair
-    """002's yaw, clockwise from north."""
-    heading_s: Pair
-
-
-class Unit(_Section):
-    """The 9-axis unit: the grade's errors with the residuals of a factory calibration for its constant terms."""
-
-    rate_hz: PositiveFloat
-    grade: str
-    accel_bias_mg: NonNegativeFloat
-    accel_scale: NonNegativeFloat
-    accel_nonorth_rad: NonNegativeFloat
-    gyro_scale: NonNegativeFloat
-    gyro_nonorth_rad: NonNegativeFloat
-    mag_noise_t: PositiveFloat
-
-
-class Disturbance(_Section):
-    peak_t: NonNegativeFloat
-    pass_times_s: list[Finite]
-    speed_m_s: PositiveFloat
-    range_m: PositiveFloat
-
-
-class PaperFilters(_Section):
-    """002's KF, UKF and GD-UKF."""
-
-    untuned_var_deg2_s2: Vector3
-    sigma_alpha: PositiveFloat
-    sigma_beta: NonNegativeFloat
-    sigma_kappa: Finite
-    p0_sigma: PositiveFloat
-    gd_iterations: Annotated[int, Field(ge=0)]
-    gd_reference_disturbed: bool
-    """Whether the reference run for the tuning has the disturbance (false: a lab run, as 002's)."""
-    gd_tol: PositiveFloat
-
-
-class Ours(_Section):
-    update_hz: PositiveFloat
-    gyro_arw_deg_sqrt_h: PositiveFloat
-    gyro_bias_walk_deg_h_sqrt_h: PositiveFloat
-    attitude_sigma0_deg: PositiveFloat
-    gyro_bias_sigma0_deg_s: PositiveFloat
-    accel_sigma_mg: PositiveFloat
-    accel_gate_mg: PositiveFloat
-    mag_sigma_t: PositiveFloat
-    norm_tol_t: PositiveFloat
-    dip_tol_deg: PositiveFloat
-    gate_chi2: PositiveFloat
-    relock_s: PositiveFloat
-
-
-class Turntable(_Section):
-    kind: str
-    name: str
-    seed: int
-    site: TurntableSite
-    motion: Motion
-    unit: Unit
-    disturbance: Disturbance
-    paper_filters: PaperFilters
-    ours: Ours
-
-
-def _read(path: Path) -> dict:
-    try:
-        return tomllib.loads(Path(path).read_text())
-    except (OSError, tomllib.TOMLDecodeError) as err:
-        raise ScenarioError(f"{path}: {err}") from None
-
-
-def is_turntable(path: str | Path) -> bool:
-    """Whether a scenario file is a support turntable (its top-level `kind`); unreadable files are not."""
-    try:
-        return _read(Path(path)).get("kind") == KIND
-    except ScenarioError:
-        return False
-
-
-def parse_turntable(data: dict, source: str = "<turntable>") -> Turntable:
-    """Validate the file's data; a one-line ScenarioError naming `source` and the key."""
-    from twin.config.imu_grades import GRADES
-
-    if data.get("kind") != KIND:
-        raise ScenarioError(f"{source}: kind: must be \"{KIND}\" (got {data.get('kind')!r})")
-    try:
-        tt = Turntable.model_validate(data)
-    except ValidationError as err:
-        raise ScenarioError(_format_error(source, err)) from None
-    if tt.unit.grade not in GRADES:
-        raise ScenarioError(f"{source}: unit.grade: no IMU preset '{tt.unit.grade}' (presets: "
-                            f"{', '.join(sorted(GRADES))})")
-    return tt
-
-
-def load_turntable(path: str | Path, seed: int | None = None) -> Turntable:
-    data = _read(Path(path))
-    if seed is not None:
-        data["seed"] = seed
-    return parse_turntable(data, str(path))
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -392,28 +280,16 @@ def _errors_table(res: dict) -> pa.Table:
     return pa.table(cols, metadata={"units": "t [s]; pitch, roll, yaw errors [rad] (estimate - truth)"})
 
 
-def run_turntable_file(scenario: Path, out: Path | None, seed: int | None, force: bool,
-                       quiet: bool = False) -> Path:
-    """`longwall run` for a turntable file: metrics.json (ours and 002's), errors.parquet, flags.parquet."""
-    from twin.pipeline.rundir import atomic_run_dir, check_target
-
-    tt = load_turntable(scenario, seed)
-    out = Path(out) if out is not None else Path("runs") / f"{tt.name}-seed{tt.seed}"
-    check_target(out, force)
-    start = time.perf_counter()
-    res, rows = run_turntable(tt)
-    with atomic_run_dir(out, force) as staging:
-        (staging / "scenario.toml").write_text(scenario_to_toml(tt))
-        metrics = {"experiment": {"name": tt.name, "kind": KIND, "seed": tt.seed}, "ours": res["metrics"],
-                   "tuning": res["tuning"], "detection": res["detection"], "seconds": res["seconds"],
-                   "paper": PAPER, "targets": TARGETS}
-        (staging / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-        pq.write_table(_errors_table(res), staging / "errors.parquet")
-        t, flags = res["ours_flags"]
-        pq.write_table(pa.table({"t": t, "flags": flags.astype(np.int8),
-                                 **{f"gyro_bias_{a}": res["ours_bias"][:, i] for i, a in enumerate("xyz")}}),
-                       staging / "ours_states.parquet")
-    if not quiet:
-        print("\n".join(rows))
-        print(f"\n{time.perf_counter() - start:.1f} s; run directory: {out}")
-    return out
+def write_run(staging: Path, tt: Turntable, res: dict) -> None:
+    """The turntable's run directory: scenario.toml, metrics.json (ours and 002's), errors.parquet, the states of
+    ours (flags, gyro bias)."""
+    (staging / "scenario.toml").write_text(scenario_to_toml(tt))
+    metrics = {"experiment": {"name": tt.name, "kind": TURNTABLE_KIND, "seed": tt.seed}, "ours": res["metrics"],
+               "tuning": res["tuning"], "detection": res["detection"], "seconds": res["seconds"],
+               "paper": PAPER, "targets": TARGETS}
+    (staging / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    pq.write_table(_errors_table(res), staging / "errors.parquet")
+    t, flags = res["ours_flags"]
+    pq.write_table(pa.table({"t": t, "flags": flags.astype(np.int8),
+                             **{f"gyro_bias_{a}": res["ours_bias"][:, i] for i, a in enumerate("xyz")}}),
+                   staging / "ours_states.parquet")

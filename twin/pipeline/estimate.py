@@ -1,6 +1,6 @@
 """Run the shearer positioning estimators on a run directory: estimates Parquet, metrics, estimates.rrd.
 
-The estimators read only the log (estimators.shearer.positioning.load_log); what they are told about the machine
+The estimators read only the log (estimators.io.log.load_log); what they are told about the machine
 (IMU error budget, lever arm, odometer pulse length, where the supports sit along the face) comes from the
 scenario, as a mining engineer would enter it from the datasheets and the face layout. The truth is used only to
 score the result (estimators.io.metrics) and to give the true sensor states beside the estimated ones.
@@ -16,6 +16,7 @@ import numpy as np
 
 from estimators.faults.ram_checks import RamLayout
 from estimators.io import metrics
+from estimators.io.log import load_log
 from estimators.io.logformat import (
     ESTIMATE_DETECTORS,
     ESTIMATE_FUSION,
@@ -25,8 +26,11 @@ from estimators.io.logformat import (
     read_stream,
     write_estimate,
 )
-from estimators.shearer import positioning as sp
-from estimators.shearer.federated import detector_chi2
+from estimators.kalman.error_state import CAL_MOUNT, CAL_SCALE
+from estimators.shearer.config import Config, ImuNoise, MagSettings
+from estimators.shearer.methods import estimate
+from estimators.shearer.rail_kinematics import detector_chi2
+from estimators.shearer.solution import estimate_columns, state_columns
 from twin.config.imu_grades import grade
 from twin.config.scenario import Scenario
 from twin.face.layout import support_stations
@@ -37,7 +41,7 @@ def _psd(sigma: float, tau: float) -> float:
     return 2 * sigma ** 2 / tau if sigma > 0 and tau > 0 else 0.0
 
 
-def positioning_config(scn: Scenario) -> sp.Config:
+def positioning_config(scn: Scenario) -> Config:
     """The filter configuration a user would write for this face and machine."""
     est = scn.estimators.shearer
     g = grade(scn.sensors.imu.grade)
@@ -54,19 +58,19 @@ def positioning_config(scn: Scenario) -> sp.Config:
           "chute_length_m": scn.face.pan_length_m,
           "end_zone_m": scn.shearer.length_m + (scn.pattern.push_lag_pans + scn.pattern.snake_length_pans + 2)
           * scn.face.pan_length_m,
-          "mag": sp.MagSettings(date=scn.sensors.mag.date, noise_t=max(scn.sensors.mag.noise_t, 1e-9),
-                                extra_sigma=math.radians(est.mag_extra_sigma_deg), field_check=est.mag_field_check,
-                                hard_iron_t=tuple(est.mag_hard_iron_t),
-                                soft_iron_correction=tuple(map(tuple, est.mag_soft_iron_correction)))}
+          "mag": MagSettings(date=scn.sensors.mag.date, noise_t=max(scn.sensors.mag.noise_t, 1e-9),
+                             extra_sigma=math.radians(est.mag_extra_sigma_deg), field_check=est.mag_field_check,
+                             hard_iron_t=tuple(est.mag_hard_iron_t),
+                             soft_iron_correction=tuple(map(tuple, est.mag_soft_iron_correction)))}
     if est.tuning == "appendix_a":
-        return sp.Config.appendix_a(**kw)
-    imu = sp.ImuNoise(gyro_arw=max(g.gyro_arw, 1e-6), accel_vrw=max(g.accel_vrw, 1e-5),
-                      gyro_bias=max(g.gyro_bias, g.gyro_bias_instability, 1e-7),
-                      accel_bias=max(g.accel_bias, g.accel_bias_instability, 1e-5),
-                      gyro_bias_psd=_psd(g.gyro_bias_instability, g.gyro_bias_tau),
-                      accel_bias_psd=_psd(g.accel_bias_instability, g.accel_bias_tau),
-                      accel_nonorth=max(g.accel_nonorth, 1e-6))
-    return sp.Config(imu=imu, **kw)
+        return Config.appendix_a(**kw)
+    imu = ImuNoise(gyro_arw=max(g.gyro_arw, 1e-6), accel_vrw=max(g.accel_vrw, 1e-5),
+                   gyro_bias=max(g.gyro_bias, g.gyro_bias_instability, 1e-7),
+                   accel_bias=max(g.accel_bias, g.accel_bias_instability, 1e-5),
+                   gyro_bias_psd=_psd(g.gyro_bias_instability, g.gyro_bias_tau),
+                   accel_bias_psd=_psd(g.accel_bias_instability, g.accel_bias_tau),
+                   accel_nonorth=max(g.accel_nonorth, 1e-6))
+    return Config(imu=imu, **kw)
 
 
 def ram_layout(scn: Scenario) -> RamLayout:
@@ -94,7 +98,7 @@ def true_states(scn: Scenario) -> dict[str, float]:
 
 def detector_thresholds(scn: Scenario) -> dict[str, float]:
     """Thresholds of the rail model's detectors as the filter runs them: the residual and dual-state chi-square
-    tests at the false-alarm probability (estimators.shearer.federated.detector_chi2), T1/T0 of the fading
+    tests at the false-alarm probability (estimators.shearer.rail_kinematics.detector_chi2), T1/T0 of the fading
     SPRT."""
     detector = positioning_config(scn).detector
     residual, dual = detector_chi2(detector)
@@ -115,15 +119,15 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
     methods = tuple(scn.estimators.shearer.methods)
     if not methods:
         return out
-    log = sp.load_log(run_dir)
-    sols = sp.estimate(log, positioning_config(scn), methods)
+    log = load_log(run_dir)
+    sols = estimate(log, positioning_config(scn), methods)
     truth = read_stream(run_dir, STREAMS["truth_shearer"])
     cycles = read_stream(run_dir, STREAMS["truth_cycles"])
     states_truth = true_states(scn)
     for name, sol in sols.items():
-        write_estimate(run_dir, name, sp.estimate_columns(sol))
+        write_estimate(run_dir, name, estimate_columns(sol))
         if sol.cal is not None:
-            write_estimate(run_dir, name, sp.state_columns(sol), ESTIMATE_STATES)
+            write_estimate(run_dir, name, state_columns(sol), ESTIMATE_STATES)
         if sol.fusion is not None:
             write_estimate(run_dir, name, sol.fusion, ESTIMATE_FUSION)
         if sol.detectors is not None:
@@ -132,8 +136,8 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
         t, err = metrics.position_errors(table, truth)
         entry = {"cycles": metrics.cycle_metrics(t, err, cycles), "notes": sol.notes}
         if sol.cal is not None:
-            entry["odo_scale"] = {"estimate": float(sol.cal[-1, 9]), "truth": states_truth["odo_scale"]}
-            entry["odo_mount_deg"] = {a: {"estimate": float(np.degrees(sol.cal[-1, 6 + i])),
+            entry["odo_scale"] = {"estimate": float(sol.cal[-1, CAL_SCALE]), "truth": states_truth["odo_scale"]}
+            entry["odo_mount_deg"] = {a: {"estimate": float(np.degrees(sol.cal[-1, CAL_MOUNT.start + i])),
                                           "truth": math.degrees(states_truth[f"odo_mount_{a}"])}
                                       for i, a in enumerate("xyz")}
         out[name] = entry

@@ -1,5 +1,5 @@
 """Canopy attitude of every instrumented support in a face run (issue 8): 002's KF, UKF and GD-UKF and ours, each
-method one batched call over all supports (estimators.support.attitude_002.support_batch), scored against the
+method one batched call over all supports (estimators.support.batch.support_batch), scored against the
 support truth; run by twin.pipeline.estimate.run_estimators, drawn by twin.view.estimate_recording."""
 
 from __future__ import annotations
@@ -21,16 +21,8 @@ from estimators.io.logformat import (
     write_estimate,
 )
 from estimators.nav import earth
-from estimators.support.attitude_002 import (
-    SupportBatch,
-    UnitModel,
-    kf,
-    quat_euler,
-    support_batch,
-    tune_q,
-    ukf,
-    wrap,
-)
+from estimators.nav.rotations_scalar import quat_euler
+from estimators.support.batch import SupportBatch, support_batch
 from estimators.support.error_state import (
     FLAG_DIP,
     FLAG_GATE,
@@ -38,6 +30,9 @@ from estimators.support.error_state import (
     OursSettings,
     ours,
 )
+from estimators.support.filters_002 import kf, ukf
+from estimators.support.tuning import tune_q
+from estimators.support.unit_model import UnitModel, wrap
 from twin.config.imu_grades import G0, grade
 from twin.config.scenario import Scenario
 from twin.face.layout import support_stations
@@ -180,7 +175,7 @@ def support_attitude(run_dir: Path, scn: Scenario) -> SupportAttitude | None:
     tunes the GD-UKF's Q on a reference segment (002 step 1: truth_supports) and scores every method against the
     true canopy attitude, with the shearer's proximity (truth_shearer) marking the disturbed samples; without it
     the GD-UKF and the scores are left out with a note. Supports the filters cannot use are skipped with their
-    reason (estimators.support.attitude_002.support_batch); a stream with none left raises LogError (one line).
+    reason (estimators.support.batch.support_batch); a stream with none left raises LogError (one line).
     """
     if not scn.sensors.support_imu.supports:
         return None

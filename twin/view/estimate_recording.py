@@ -67,14 +67,8 @@ from estimators.support.error_state import FLAG_ACCEL, FLAG_DIP, FLAG_GATE, FLAG
 from twin.config.imu_grades import DEG, DEG_PER_H, MG
 from twin.config.scenario import Scenario
 from twin.pipeline.support_estimate import ANGLES, SupportAttitude
-from twin.view.recording import (
-    APPLICATION_ID,
-    _series,
-    _time_column,
-    blueprint,
-    decimate,
-    run_recording_id,
-)
+from twin.view.recording import blueprint, run_recording_id
+from twin.view.rerun_columns import APPLICATION_ID, decimate, series, time_column
 
 PLOT_RATE_HZ = 10.0
 """Largest rate of the logged plots and the moving estimate point."""
@@ -109,7 +103,7 @@ def plot_rows(table: pa.Table, rate_hz: float) -> tuple[pa.Table, np.ndarray]:
 def _log_band(rec: rr.RecordingStream, entity: str, t: np.ndarray, sd: np.ndarray, label: str) -> None:
     """+- one-sigma of (K,) values as two series, unless there is no sigma at all (NaN throughout)."""
     if np.isfinite(sd).any():
-        _series(rec, entity, t, np.column_stack([sd, -sd]), [f"+1 sigma {label}", f"-1 sigma {label}"])
+        series(rec, entity, t, np.column_stack([sd, -sd]), [f"+1 sigma {label}", f"-1 sigma {label}"])
 
 
 def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method: str, table: pa.Table,
@@ -127,15 +121,15 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method:
     rec.log(f"world/estimates/{method}/path", rr.LineStrips3D(np.split(p_t, breaks), radii=0.03, colors=color),
             static=True)
     rec.log(f"world/estimates/{method}/position", rr.Points3D.from_fields(radii=0.15, colors=color), static=True)
-    rec.send_columns(f"world/estimates/{method}/position", indexes=[_time_column(t)],
+    rec.send_columns(f"world/estimates/{method}/position", indexes=[time_column(t)],
                      columns=rr.Points3D.columns(positions=p_t))
 
     _, err = position_errors(sub, truth_shearer)
     _, phi = attitude_errors(sub, truth_shearer)
     sd_pos, sd_att = columns(sub, "sd_pos"), np.degrees(columns(sub, "sd_att"))
     for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
-        _series(rec, f"plots/errors/{method}/{axis}", t, err[:, i:i + 1], [f"{method} {axis} [m]"])
-        _series(rec, f"plots/attitude_errors/{method}/{a}", t, np.degrees(phi[:, i:i + 1]),
+        series(rec, f"plots/errors/{method}/{axis}", t, err[:, i:i + 1], [f"{method} {axis} [m]"])
+        series(rec, f"plots/attitude_errors/{method}/{a}", t, np.degrees(phi[:, i:i + 1]),
                 [f"{method} phi_{a} [deg]"])
         _log_band(rec, f"plots/sigma/{method}/position/{axis}", t, sd_pos[:, i], f"{method} {axis} [m]")
         _log_band(rec, f"plots/sigma/{method}/attitude/{a}", t, sd_att[:, i], f"{method} phi_{a} [deg]")
@@ -143,33 +137,34 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method:
     _log_flags(rec, f"plots/flags/{method}", table, "flags", FLAG_SERIES, method, rate_hz)
 
 
-def _log_flags(rec: rr.RecordingStream, entity: str, table: pa.Table, name: str, series, method: str,
+def _log_flags(rec: rr.RecordingStream, entity: str, table: pa.Table, name: str, bits, method: str,
                rate_hz: float) -> None:
-    """Flags are events: OR them over each plot interval so a single-sample fix is not decimated away."""
+    """Flags are events: OR them over each plot interval so a single-sample fix is not decimated away; `bits`
+    pairs a label with its flag bit."""
     t_all = column(table, "t")
     keep = decimate(t_all, rate_hz)
     flags = np.bitwise_or.reduceat(np.asarray(table.column(name).to_numpy(), np.int64), keep)
-    _series(rec, entity, t_all[keep], np.column_stack([(flags & bit) != 0 for _, bit in series]).astype(float),
-            [f"{method} {label}" for label, _ in series])
+    series(rec, entity, t_all[keep], np.column_stack([(flags & bit) != 0 for _, bit in bits]).astype(float),
+           [f"{method} {label}" for label, _ in bits])
 
 
 def _log_fusion(rec: rr.RecordingStream, truth_shearer, method: str, estimate: pa.Table, fusion: pa.Table,
                 rate_hz: float) -> None:
     sub, t = plot_rows(fusion, rate_hz)
     root = f"plots/fusion/{method}"
-    _series(rec, f"{root}/r_yaw", t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None], [f"{method} sd yaw [deg]"])
-    _series(rec, f"{root}/yaw_innovation", t, np.degrees(column(sub, "yaw_innovation"))[:, None],
+    series(rec, f"{root}/r_yaw", t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None], [f"{method} sd yaw [deg]"])
+    series(rec, f"{root}/yaw_innovation", t, np.degrees(column(sub, "yaw_innovation"))[:, None],
             [f"{method} yaw innovation [deg]"])
     _log_flags(rec, f"{root}/magnetometer", fusion, "mag_flags", MAG_SERIES, method, rate_hz)
     beta = np.column_stack([column(sub, f"beta_{s}") for s in SUBFILTERS])
     if not np.isfinite(beta).any():
         return  # a centralized filter: no sub-filters
-    _series(rec, f"{root}/beta", t, beta, [f"{method} beta {s}" for s in SUBFILTERS])
+    series(rec, f"{root}/beta", t, beta, [f"{method} beta {s}" for s in SUBFILTERS])
     est, _ = plot_rows(estimate, rate_hz)
     _, err = position_errors(est, truth_shearer)
     for i, axis in enumerate(POSITION_AXES[:2]):
         d = np.column_stack([np.zeros(t.size)] + [column(sub, f"{s}_d_pos_{'en'[i]}") for s in SUBFILTERS])
-        _series(rec, f"{root}/subfilter_errors/{axis}", t, err[:, i:i + 1] + d,
+        series(rec, f"{root}/subfilter_errors/{axis}", t, err[:, i:i + 1] + d,
                 [f"{method} global {axis} [m]"] + [f"{method} {s} sub-filter {axis} [m]" for s in SUBFILTERS])
 
 
@@ -187,9 +182,9 @@ def _log_states(rec: rr.RecordingStream, method: str, table: pa.Table, truth: di
             flat = np.broadcast_to(np.array([truth[n] for n in known]) / per_unit, (t.size, len(known)))
             values = np.column_stack([values, flat])
             labels += [f"{n} true [{unit}]" for n in known]
-        _series(rec, f"plots/states/{method}/{group}", t, values, labels)
+        series(rec, f"plots/states/{method}/{group}", t, values, labels)
         sd = np.column_stack([column(sub, f"sd_{n}") for n in names]) / per_unit
-        _series(rec, f"plots/sigma/{method}/{group}", t, np.column_stack([sd, -sd]),
+        series(rec, f"plots/sigma/{method}/{group}", t, np.column_stack([sd, -sd]),
                 [f"{sign}1 sigma {n} [{unit}]" for sign in "+-" for n in names])
 
 
@@ -200,12 +195,12 @@ def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, table: p
     t = column(table, "t")
     root = f"plots/detectors/{method}"
     for name in ("residual", "dual_state"):
-        _series(rec, f"{root}/{name}", t, np.column_stack([column(table, name), np.full(t.size, thresholds[name])]),
+        series(rec, f"{root}/{name}", t, np.column_stack([column(table, name), np.full(t.size, thresholds[name])]),
                 [f"{method} {name}", f"{name} threshold"])
-    _series(rec, f"{root}/fsprt", t, np.column_stack([column(table, "fsprt"), np.full(t.size, thresholds["t_on"]),
+    series(rec, f"{root}/fsprt", t, np.column_stack([column(table, "fsprt"), np.full(t.size, thresholds["t_on"]),
                                                       np.full(t.size, thresholds["t_off"])]),
             [f"{method} fsprt", "fsprt T1 (fault)", "fsprt T0 (clear)"])
-    _series(rec, f"{root}/isolated", t, column(table, "isolated")[:, None].astype(float), [f"{method} isolated"])
+    series(rec, f"{root}/isolated", t, column(table, "isolated")[:, None].astype(float), [f"{method} isolated"])
     site = scn.site
     p_t = earth.lla_to_enu(column(table, "lat"), column(table, "lon"), column(table, "h"), np.radians(site.lat_deg),
                            np.radians(site.lon_deg), site.height_m).astype(np.float32)
@@ -275,14 +270,14 @@ def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, ra
         truth = np.degrees(supports.truth_euler[name][:, keep]) if supports.truth_euler else None
         for i, j in enumerate(supports.supports):
             for a, angle in enumerate(ANGLES):
-                _series(rec, f"{root}/angles/{angle}/{j}/{name}", t[keep], est[i, :, a:a + 1],
+                series(rec, f"{root}/angles/{angle}/{j}/{name}", t[keep], est[i, :, a:a + 1],
                         [f"support {j} {name} [deg]"])
                 if truth is not None:
-                    _series(rec, f"{root}/errors/{angle}/{j}/{name}", t[keep],
+                    series(rec, f"{root}/errors/{angle}/{j}/{name}", t[keep],
                             ((est[i, :, a] - truth[i, :, a] + 180.0) % 360.0 - 180.0)[:, None],
                             [f"support {j} {name} [deg]"])
                     if name == "ours":
-                        _series(rec, f"{root}/angles/{angle}/{j}/truth", t[keep], truth[i, :, a:a + 1],
+                        series(rec, f"{root}/angles/{angle}/{j}/truth", t[keep], truth[i, :, a:a + 1],
                                 [f"support {j} truth [deg]"])
     t = supports.t["ours"]
     keep = decimate(t, rate_hz)
@@ -293,7 +288,7 @@ def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, ra
         if supports.near is not None:
             values.append(np.maximum.reduceat(supports.near[i], keep))
             labels.append(f"support {j} shearer's field / peak")
-        _series(rec, f"{root}/magnetometer/{j}", t[keep], np.column_stack(values).astype(float), labels)
+        series(rec, f"{root}/magnetometer/{j}", t[keep], np.column_stack(values).astype(float), labels)
     if supports.objective:
         rec.log(f"{root}/gd_objective", rr.BarChart(np.degrees(supports.objective)), static=True)
 

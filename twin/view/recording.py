@@ -38,9 +38,19 @@ from estimators.nav.earth import mat_en
 from estimators.nav.rotations import mat_to_quat, quat_mul, quat_rotate
 from twin.config.scenario import Scenario
 from twin.face.layout import PAN_HEIGHT_M, PAN_WIDTH_M, SUPPORT_BASE_LENGTH_M
+from twin.view.rerun_columns import (
+    APPLICATION_ID,
+    col,
+    decimate,
+    latest_rows,
+    mean_rate,
+    send_bar_chart,
+    series,
+    time_column,
+    vec,
+    xyzw,
+)
 
-TIMELINE = "sim_time"
-APPLICATION_ID = "longwall-twin"
 RUN_RRD = "run.rrd"
 ESTIMATES_RRD = "estimates.rrd"
 """The estimators' recording beside run.rrd: same application and recording id, so the viewer merges the two."""
@@ -55,96 +65,6 @@ _GREY = np.array([150, 150, 150], float)
 _RED = np.array([230, 30, 30], float)
 _SET_RGBA = np.array([70, 110, 170, 255], np.uint8)
 _LOWERED_RGBA = np.array([240, 160, 40, 255], np.uint8)
-
-
-# --------------------------------------------------------------------------------------------------------------
-# Helpers
-
-
-def _col(table: pa.Table, name: str) -> np.ndarray:
-    return table.column(name).to_numpy()
-
-
-def _vec(table: pa.Table, prefix: str, axes: str = "enu") -> np.ndarray:
-    return np.column_stack([_col(table, f"{prefix}_{a}") for a in axes]).astype(float)
-
-
-def _time_column(t: np.ndarray) -> rr.TimeColumn:
-    """Seconds as a duration timeline, rounded to whole nanoseconds (no truncation of 0.1 -> 99999999 ns)."""
-    ns = np.round(np.asarray(t, float) * 1e9).astype(np.int64)
-    return rr.TimeColumn(TIMELINE, duration=ns.astype("timedelta64[ns]"))
-
-
-def _xyzw(q_wxyz: np.ndarray) -> np.ndarray:
-    """Scalar-first (w, x, y, z) to Rerun's (x, y, z, w)."""
-    return np.ascontiguousarray(q_wxyz[..., [1, 2, 3, 0]], dtype=np.float32)
-
-
-def _latest_rows(t: np.ndarray, ident: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Forward-filled row index of every id at every distinct time of a (t, id)-keyed stream.
-
-    Returns (times (n_t,), ids (n_id,), rows (n_t, n_id)): rows[k, j] is the table row holding the latest
-    state of ids[j] at times[k]. An id that first appears after times[0] takes its first state before that.
-    """
-    order = np.lexsort((ident, t))  # by t, then id; later rows win for duplicates
-    times, t_idx = np.unique(t[order], return_inverse=True)
-    ids, id_idx = np.unique(ident[order], return_inverse=True)
-    # Sorted positions increase with time, so the running maximum of the position is the latest update.
-    pos = np.full((times.size, ids.size), -1, np.int64)
-    pos[t_idx, id_idx] = np.arange(order.size)
-    pos = np.maximum.accumulate(pos, axis=0)
-    first = np.where(pos >= 0, pos, np.iinfo(np.int64).max).min(axis=0)
-    pos = np.where(pos >= 0, pos, first[None, :])
-    return times, ids, order[pos]
-
-
-class _TensorColumn:
-    """A column of 1-D float32 tensors (one per row) in Rerun's TensorData arrow layout.
-
-    The Python TensorData batch accepts a single tensor only; this builds the same struct array for n rows
-    so a BarChart history goes out in one `send_columns` call.
-    """
-
-    def __init__(self, values: np.ndarray) -> None:
-        values = np.ascontiguousarray(values, np.float32)
-        n_rows, n_vals = values.shape
-        data_type = rr.BarChart(values=np.zeros(1, np.float32)).values.as_arrow_array().type
-        shape_type = data_type.field("shape").type
-        names_type = data_type.field("names").type
-        union_type = data_type.field("buffer").type
-        row_offsets = pa.array(np.arange(n_rows + 1, dtype=np.int32))
-        shape = pa.ListArray.from_arrays(row_offsets, pa.array(np.full(n_rows, n_vals, np.uint64)), type=shape_type)
-        names = pa.nulls(n_rows, names_type)
-        # Dense union: every row is the F32 member, row k at offset k of the F32 child.
-        children = [pa.nulls(0, type=f.type) for f in union_type]
-        f32 = [f.name for f in union_type].index("F32")
-        value_offsets = pa.array(np.arange(0, n_rows * n_vals + 1, n_vals, dtype=np.int32))
-        children[f32] = pa.ListArray.from_arrays(value_offsets, pa.array(values.ravel())).cast(
-            union_type[f32].type, safe=False)
-        type_ids = pa.array(np.full(n_rows, union_type.type_codes[f32], np.int8))
-        row_index = pa.array(np.arange(n_rows, dtype=np.int32))
-        buffer = pa.Array.from_buffers(union_type, n_rows, [None, type_ids.buffers()[1], row_index.buffers()[1]],
-                                       children=children)
-        self._array = pa.StructArray.from_arrays([shape, names, buffer], fields=list(data_type)).cast(data_type)
-
-    def as_arrow_array(self) -> pa.Array:
-        return self._array
-
-
-def _send_bar_chart(rec: rr.RecordingStream, entity: str, times: np.ndarray, values: np.ndarray) -> None:
-    column = rr.ComponentColumn(rr.BarChart.descriptor_values(), _TensorColumn(values))
-    rec.send_columns(entity, indexes=[_time_column(times)], columns=[column])
-
-
-def decimate(t: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Indices of the first sample in each 1/rate_hz interval (plus the last sample)."""
-    if t.size == 0:
-        return np.zeros(0, np.int64)
-    bins = np.floor(np.asarray(t, float) * rate_hz + 1e-9)
-    keep = np.flatnonzero(np.r_[True, np.diff(bins) > 0])
-    if keep[-1] != t.size - 1:
-        keep = np.r_[keep, t.size - 1]
-    return keep
 
 
 def _advance_axis(scn: Scenario) -> np.ndarray:
@@ -185,12 +105,12 @@ def _log_floor(rec: rr.RecordingStream, floor_mesh: tuple[np.ndarray, np.ndarray
 def _log_pans(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table) -> None:
     if pans.num_rows == 0:
         return
-    times, _, rows = _latest_rows(_col(pans, "t"), _col(pans, "pan"))
+    times, _, rows = latest_rows(col(pans, "t"), col(pans, "pan"))
     n_t, n_p = rows.shape
-    p = _vec(pans, "p_t")[rows]                       # (n_t, n_p, 3)
-    q = _vec(pans, "q_tp", "wxyz")[rows]              # (n_t, n_p, 4)
-    bend_h = _col(pans, "bend_h")[rows]
-    bend_v = _col(pans, "bend_v")[rows]
+    p = vec(pans, "p_t")[rows]                       # (n_t, n_p, 3)
+    q = vec(pans, "q_tp", "wxyz")[rows]              # (n_t, n_p, 4)
+    bend_h = col(pans, "bend_h")[rows]
+    bend_v = col(pans, "bend_v")[rows]
 
     z_axis = quat_rotate(q, np.array([0.0, 0.0, 1.0]))
     centres = p - 0.5 * PAN_HEIGHT_M * z_axis
@@ -201,11 +121,11 @@ def _log_pans(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table) -> None:
 
     rec.send_columns(
         "world/pans",
-        indexes=[_time_column(times)],
+        indexes=[time_column(times)],
         columns=rr.Boxes3D.columns(
             half_sizes=np.broadcast_to(half, (n_t * n_p, 3)),
             centers=centres.reshape(-1, 3).astype(np.float32),
-            quaternions=_xyzw(q).reshape(-1, 4),
+            quaternions=xyzw(q).reshape(-1, 4),
             colors=rgb.reshape(-1, 3),
         ).partition(np.full(n_t, n_p)),
     )
@@ -214,19 +134,19 @@ def _log_pans(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table) -> None:
     chutes_h = np.nan_to_num(np.degrees(bend_h[:, :-1]), nan=0.0)
     chutes_v = np.nan_to_num(np.degrees(bend_v[:, :-1]), nan=0.0)
     if n_p > 1:
-        _send_bar_chart(rec, "plots/bend_horizontal_deg", times, chutes_h)
-        _send_bar_chart(rec, "plots/bend_vertical_deg", times, chutes_v)
+        send_bar_chart(rec, "plots/bend_horizontal_deg", times, chutes_h)
+        send_bar_chart(rec, "plots/bend_vertical_deg", times, chutes_v)
 
 
 def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table) -> None:
     if supports.num_rows == 0:
         return
-    times, _, rows = _latest_rows(_col(supports, "t"), _col(supports, "support"))
+    times, _, rows = latest_rows(col(supports, "t"), col(supports, "support"))
     n_t, n_s = rows.shape
-    p = _vec(supports, "p_t")[rows]                   # (n_t, n_s, 3) ram connection on the base
-    ram = _col(supports, "ram")[rows]
-    canopy = _col(supports, "canopy")[rows]
-    is_set = _col(supports, "set")[rows] != 0
+    p = vec(supports, "p_t")[rows]                   # (n_t, n_s, 3) ram connection on the base
+    ram = col(supports, "ram")[rows]
+    canopy = col(supports, "canopy")[rows]
+    is_set = col(supports, "set")[rows] != 0
     x_t = _advance_axis(scn)
 
     centres = p - 0.5 * SUPPORT_BASE_LENGTH_M * x_t + (0.5 * canopy)[..., None] * np.array([0.0, 0.0, 1.0])
@@ -238,7 +158,7 @@ def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table) ->
     lengths = np.full(n_t, n_s)
     rec.send_columns(
         "world/supports",
-        indexes=[_time_column(times)],
+        indexes=[time_column(times)],
         columns=rr.Boxes3D.columns(
             half_sizes=half.reshape(-1, 3).astype(np.float32),
             centers=centres.reshape(-1, 3).astype(np.float32),
@@ -249,11 +169,11 @@ def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table) ->
     strips = np.stack([p, p + ram[..., None] * x_t], axis=2)  # (n_t, n_s, 2, 3)
     rec.send_columns(
         "world/rams",
-        indexes=[_time_column(times)],
+        indexes=[time_column(times)],
         columns=rr.LineStrips3D.columns(strips=strips.reshape(-1, 2, 3).astype(np.float32)).partition(lengths),
     )
     rec.log("world/rams", rr.LineStrips3D.from_fields(radii=0.05, colors=[200, 200, 60]), static=True)
-    _send_bar_chart(rec, "plots/ram_length", times, ram)
+    send_bar_chart(rec, "plots/ram_length", times, ram)
 
 
 def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate_hz: float) -> None:
@@ -274,47 +194,31 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate
     if shearer.num_rows == 0:
         return
 
-    t_all = _col(shearer, "t")
+    t_all = col(shearer, "t")
     keep = decimate(t_all, rate_hz)
     sub = shearer.take(pa.array(keep))
     t = t_all[keep]
-    p = _vec(sub, "p_t")
-    q_nb = _vec(sub, "q_nb", "wxyz")
+    p = vec(sub, "p_t")
+    q_nb = vec(sub, "q_nb", "wxyz")
     # n (ENU at the shearer) to t (ENU at the site origin): C_n^t = (C_t^e)^T C_n^e.
     c_te = mat_en(np.radians(scn.site.lat_deg), np.radians(scn.site.lon_deg))
-    c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(_col(sub, "lat"), _col(sub, "lon"))
+    c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(col(sub, "lat"), col(sub, "lon"))
     q_tb = quat_mul(mat_to_quat(c_nt), q_nb)
-    index = [_time_column(t)]
+    index = [time_column(t)]
     rec.send_columns("world/shearer", indexes=index,
-                     columns=rr.Transform3D.columns(translation=p.astype(np.float32), quaternion=_xyzw(q_tb)))
+                     columns=rr.Transform3D.columns(translation=p.astype(np.float32), quaternion=xyzw(q_tb)))
 
-    cycle = _col(sub, "cycle")
+    cycle = col(sub, "cycle")
     order = np.argsort(cycle, kind="stable")
     _, counts = np.unique(cycle[order], return_counts=True)
     strips = np.split(p[order].astype(np.float32), np.cumsum(counts)[:-1])
     rec.log("world/shearer_path", rr.LineStrips3D(strips, radii=0.03, colors=[240, 120, 40]), static=True)
 
-    speed = np.hypot(_col(sub, "v_n_e"), _col(sub, "v_n_n"))
+    speed = np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n"))
     rec.log("plots/shearer_speed", rr.SeriesLines(names="horizontal speed [m/s]"), static=True)
     rec.send_columns("plots/shearer_speed", indexes=index, columns=rr.Scalars.columns(scalars=speed))
     rec.log("plots/cycle", rr.SeriesLines(names="cycle"), static=True)
     rec.send_columns("plots/cycle", indexes=index, columns=rr.Scalars.columns(scalars=cycle.astype(float)))
-
-
-def _mean_rate(t: np.ndarray, values: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """Block means of increments per second at about rate_hz (sums over blocks / their duration)."""
-    if t.size < 2:
-        return t, values
-    dt = float(np.median(np.diff(t)))
-    step = max(1, int(round(1.0 / (rate_hz * dt))))
-    n = (t.size // step) * step
-    blocks = values[:n].reshape(n // step, step, -1).sum(axis=1)
-    return t[step - 1:n:step], blocks / (step * dt)
-
-
-def _series(rec: rr.RecordingStream, entity: str, t: np.ndarray, values: np.ndarray, names: list[str]) -> None:
-    rec.log(entity, rr.SeriesLines(names=names), static=True)
-    rec.send_columns(entity, indexes=[_time_column(t)], columns=rr.Scalars.columns(scalars=values))
 
 
 def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz: float) -> None:
@@ -322,42 +226,42 @@ def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz:
     0/1 steps, the ram readings as a bar chart per support."""
     if "imu" in sensors:
         imu = sensors["imu"]
-        t = _col(imu, "t")
+        t = col(imu, "t")
         for name, prefix, label in (("gyro", "dtheta", "rad/s"), ("accel", "dv", "m/s^2")):
-            tt, rate = _mean_rate(t, _vec(imu, prefix, "xyz"), rate_hz)
-            _series(rec, f"sensors/imu/{name}", tt, rate, [f"{a} [{label}]" for a in "xyz"])
+            tt, rate = mean_rate(t, vec(imu, prefix, "xyz"), rate_hz)
+            series(rec, f"sensors/imu/{name}", tt, rate, [f"{a} [{label}]" for a in "xyz"])
     if "odometer" in sensors:
         odo = sensors["odometer"]
-        _series(rec, "sensors/odometer/distance", _col(odo, "t"), _col(odo, "distance")[:, None], ["distance [m]"])
+        series(rec, "sensors/odometer/distance", col(odo, "t"), col(odo, "distance")[:, None], ["distance [m]"])
     if "mag" in sensors:
         mag = sensors["mag"]
-        keep = decimate(_col(mag, "t"), rate_hz)
-        _series(rec, "sensors/mag", _col(mag, "t")[keep], _vec(mag, "b", "xyz")[keep] * 1e6,
+        keep = decimate(col(mag, "t"), rate_hz)
+        series(rec, "sensors/mag", col(mag, "t")[keep], vec(mag, "b", "xyz")[keep] * 1e6,
                 [f"{a} [uT]" for a in "xyz"])
     if "support_imu" in sensors:
         units = sensors["support_imu"]
-        for j in np.unique(_col(units, "support")):
+        for j in np.unique(col(units, "support")):
             rows = units.filter(pa.compute.equal(units.column("support"), int(j)))
-            keep = decimate(_col(rows, "t"), rate_hz)
+            keep = decimate(col(rows, "t"), rate_hz)
             sub = rows.take(pa.array(keep))
-            _series(rec, f"sensors/support_imu/{j}/accel", _col(sub, "t"), _vec(sub, "accel", "xyz"),
+            series(rec, f"sensors/support_imu/{j}/accel", col(sub, "t"), vec(sub, "accel", "xyz"),
                     [f"{a} [m/s^2]" for a in "xyz"])
-            _series(rec, f"sensors/support_imu/{j}/gyro", _col(sub, "t"), _vec(sub, "gyro", "xyz"),
+            series(rec, f"sensors/support_imu/{j}/gyro", col(sub, "t"), vec(sub, "gyro", "xyz"),
                     [f"{a} [rad/s]" for a in "xyz"])
     if "pushram" in sensors:
         ram = sensors["pushram"]
-        t, support = _col(ram, "t"), _col(ram, "support")
+        t, support = col(ram, "t"), col(ram, "support")
         times, inverse = np.unique(t, return_inverse=True)
         grid = np.full((times.size, int(support.max()) + 1), np.nan)
-        grid[inverse, support] = _col(ram, "extension")
+        grid[inverse, support] = col(ram, "extension")
         keep = decimate(times, min(rate_hz, 0.2))
-        _send_bar_chart(rec, "sensors/pushram", times[keep], grid[keep])
+        send_bar_chart(rec, "sensors/pushram", times[keep], grid[keep])
     if "faults" in sensors and sensors["faults"].num_rows:
         faults = sensors["faults"]
-        for kind, target, t0, t1 in zip(faults.column("kind").to_pylist(), _col(faults, "target"),
-                                       _col(faults, "t_start"), _col(faults, "t_end")):
+        for kind, target, t0, t1 in zip(faults.column("kind").to_pylist(), col(faults, "target"),
+                                       col(faults, "t_start"), col(faults, "t_end")):
             name = f"faults/{kind}" + (f"_{target}" if target >= 0 else "")
-            _series(rec, name, np.array([0.0, t0, t1]), np.array([[0.0], [1.0], [0.0]]), [f"{name} active"])
+            series(rec, name, np.array([0.0, t0, t1]), np.array([[0.0], [1.0], [0.0]]), [f"{name} active"])
 
 
 def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:

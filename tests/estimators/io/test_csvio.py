@@ -10,7 +10,8 @@ import numpy as np
 import pyarrow as pa
 import pytest
 
-from estimators.io.csvio import REPORT_FILE, export_csv, header_name, import_csv
+from estimators.io.csv_import import REPORT_FILE, import_csv
+from estimators.io.csvio import export_csv, header_name
 from estimators.io.logformat import (
     FAULTS,
     IMU,

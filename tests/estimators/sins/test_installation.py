@@ -22,7 +22,7 @@ from estimators.sins.installation import (
     tilt_from_specific_force,
 )
 from estimators.sins.strapdown import mechanize
-from twin.papers.sins_experiments import sway as experiment_sway
+from twin.papers.motions import sway as experiment_sway
 
 LAT, LON, H = np.radians(34.27), np.radians(117.18), 36.0  # 000 section 5.3's site
 AMP = np.radians(10.0)
@@ -37,7 +37,7 @@ PAPER = {
 
 
 def sway(t):
-    """Eq. 54 motion at a fixed point (twin.papers.sins_experiments.sway with this file's amplitudes, periods and site)."""
+    """Eq. 54 motion at a fixed point (twin.papers.motions.sway with this file's amplitudes, periods and site)."""
     return experiment_sway(t, [AMP] * 3, PERIODS, LAT, H)
 
 

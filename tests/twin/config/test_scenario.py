@@ -7,13 +7,18 @@ import tomllib
 
 import pytest
 
-from tests.conftest import SCENARIO_DIR, SCENARIOS, SEED004_VARIANTS
+from tests.conftest import EXPERIMENTS, SCENARIO_DIR, SCENARIOS, SEED004_VARIANTS
+from twin.config.experiments import MODELS
 from twin.config.scenario import (
+    Scenario,
     ScenarioError,
+    load_face_scenario,
     load_scenario,
+    parse_any,
     parse_scenario,
     scenario_to_toml,
 )
+from twin.config.turntable import Turntable
 
 
 @pytest.mark.parametrize("name", SCENARIOS + list(SEED004_VARIANTS))
@@ -106,3 +111,27 @@ def test_missing_and_broken_files(tmp_path):
     broken.write_text("name = \n")
     with pytest.raises(ScenarioError, match="not valid TOML"):
         load_scenario(broken)
+
+
+def test_load_scenario_dispatches_on_the_kind():
+    """One loader for every kind: face scenarios (no `kind`), 000's experiments, 002's turntable; each resolved
+    file reads back as the same object."""
+    files = {name: Scenario for name in SCENARIOS} | {name: MODELS[name.removeprefix("seed000_")]
+                                                       for name in EXPERIMENTS} | {"seed002_turntable": Turntable}
+    for name, model in files.items():
+        scn = load_scenario(SCENARIO_DIR / f"{name}.toml")
+        assert type(scn) is model, name
+        assert parse_any(tomllib.loads(scenario_to_toml(scn))) == scn
+        assert load_scenario(SCENARIO_DIR / f"{name}.toml", seed=5).seed == 5
+
+
+def test_unknown_kind_and_face_only_loading_are_one_line(tmp_path):
+    odd = tmp_path / "odd.toml"
+    odd.write_text('kind = "conveyor"\nname = "x"\n')
+    with pytest.raises(ScenarioError, match=r"odd.toml: kind: must be one of sins_experiment, support_turntable"):
+        load_scenario(odd)
+    assert load_face_scenario(SCENARIO_DIR / "default.toml", seed=3).seed == 3
+    for name in ("seed000_coning", "seed002_turntable"):
+        with pytest.raises(ScenarioError, match=f"{name}.toml: kind: a face scenario is needed here") as err:
+            load_face_scenario(SCENARIO_DIR / f"{name}.toml")
+        assert "\n" not in str(err.value)

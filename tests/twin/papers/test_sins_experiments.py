@@ -1,8 +1,8 @@
-"""SINS experiment files (twin.papers.sins_experiments): the simulations of 000 beside the paper's figures.
+"""SINS experiments (twin.papers.sins_experiments): the simulations of 000 beside the paper's figures.
 
 The figures are checked on the shipped files at full length where that is quick (coning, sculling, the lever-arm
 mechanization); the command-line runs use shortened copies (durations overridden) to check the run directory
-and the recording.
+and the recording. The files themselves (loading, bad input) are tests/twin/config/test_experiments.py's.
 """
 
 from __future__ import annotations
@@ -17,15 +17,9 @@ from rerun.chunk import RrdReader
 
 from tests.conftest import EXPERIMENTS, SCENARIO_DIR, SCENARIOS
 from twin.cli import main
-from twin.config.scenario import ScenarioError
-from twin.papers.sins_experiments import (
-    EXPERIMENT_KIND,
-    experiment_to_toml,
-    is_experiment,
-    load_experiment,
-    parse_experiment,
-    run_experiment,
-)
+from twin.config.experiments import is_experiment, load_experiment, parse_experiment
+from twin.config.scenario import scenario_to_toml
+from twin.papers.sins_experiments import run_experiment
 
 SHORT = {  # per shipped experiment: section overrides for a quick command-line run, and its entities
     "seed000_alignment": ({"alignment": {"duration_s": 10.0, "grades": ["nav-004"]}},
@@ -50,7 +44,7 @@ def shortened(name: str, tmp_path, **extra) -> tuple:
     for section, values in {**SHORT[name][0], **extra}.items():
         data[section].update(values)
     path = tmp_path / f"{name}.toml"
-    path.write_text(experiment_to_toml(parse_experiment(data, name)))
+    path.write_text(scenario_to_toml(parse_experiment(data, name)))
     return path, SHORT[name][1]
 
 
@@ -60,14 +54,6 @@ def test_experiment_files_are_apart_from_face_scenarios():
     assert "default" in SCENARIOS
     assert all(is_experiment(SCENARIO_DIR / f"{n}.toml") for n in EXPERIMENTS)
     assert not is_experiment(SCENARIO_DIR / "default.toml")
-
-
-@pytest.mark.parametrize("name", sorted(SHORT))
-def test_shipped_experiments_load_and_round_trip(name):
-    exp = load_experiment(SCENARIO_DIR / f"{name}.toml")
-    assert exp.kind == EXPERIMENT_KIND and exp.site.lat_deg == 34.27
-    assert parse_experiment(tomllib.loads(experiment_to_toml(exp))) == exp
-    assert load_experiment(SCENARIO_DIR / f"{name}.toml", seed=7).seed == 7
 
 
 def test_coning_figures():
@@ -130,36 +116,3 @@ def test_alignment_converges_from_the_paper_errors(tmp_path):
         assert np.all(np.array(r["sigma_deg"]) < [3.0, 3.0, 5.0])
     sigma = [s.values for s in res.series if s.quantity == "sigma"]
     assert all(np.all(s[-1] < s[0]) for s in sigma)
-
-
-@pytest.mark.parametrize("change, where", [
-    (lambda d: d["coning"].update(half_cone_dg=1.0), "coning.half_cone_dg: unknown key"),
-    (lambda d: d["coning"].pop("samples"), "coning.samples: Field required"),
-    (lambda d: d["coning"].update(samples=9), "coning.samples:"),
-    (lambda d: d.update(experiment="wobble"), "experiment: must be one of"),
-    (lambda d: d.update(colour="red"), "colour: unknown key"),
-])
-def test_bad_experiment_file_is_one_line_exit_2(tmp_path, capsys, change, where):
-    data = tomllib.loads((SCENARIO_DIR / "seed000_coning.toml").read_text())
-    change(data)
-    bad = tmp_path / "bad.toml"
-    bad.write_text("\n".join(f"{k} = {json.dumps(v)}" for k, v in data.items() if not isinstance(v, dict))
-                   + "\n" + "\n".join(f"[{k}]\n" + "\n".join(f"{kk} = {json.dumps(vv)}" for kk, vv in v.items())
-                                      for k, v in data.items() if isinstance(v, dict)) + "\n")
-    assert main(["run", str(bad), "--out", str(tmp_path / "run")]) == 2
-    err = capsys.readouterr().err
-    assert err.count("\n") == 1 and str(bad) in err and where in err, err
-    assert not (tmp_path / "run").exists()
-    with pytest.raises(ScenarioError):
-        load_experiment(bad)
-
-
-def test_bad_lever_arm_samples_and_grade():
-    data = tomllib.loads((SCENARIO_DIR / "seed000_lever_arm.toml").read_text())
-    data["lever_arm"]["samples"] = 3
-    with pytest.raises(ScenarioError, match="lever_arm.samples: must be even"):
-        parse_experiment(data, "x.toml")
-    data = tomllib.loads((SCENARIO_DIR / "seed000_alignment.toml").read_text())
-    data["alignment"]["grades"] = ["tactical-9000"]
-    with pytest.raises(ScenarioError, match=r"x.toml: alignment.grades\[0\]: no IMU preset"):
-        parse_experiment(data, "x.toml")

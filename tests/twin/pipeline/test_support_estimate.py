@@ -17,8 +17,9 @@ from estimators.io.logformat import (
     read_estimate,
     write_stream,
 )
-from estimators.support import attitude_002 as sa
+from estimators.support.batch import support_batch
 from estimators.support.error_state import ours
+from estimators.support.filters_002 import kf, ukf
 from tests.conftest import simulated
 from twin.cli import main
 from twin.config.scenario import scenario_to_toml
@@ -105,16 +106,16 @@ def test_summary_table_is_printed(face):
 def test_batch_equals_one_support_at_a_time(face):
     """Every method run on all supports in one call gives what it gives on each support alone."""
     scn, cols, _ = face
-    batch = sa.support_batch(cols, scn.sensors.support_imu.supports)
+    batch = support_batch(cols, scn.sensors.support_imu.supports)
     sel = slice(0, 6000)  # two minutes keep it quick; the kernels see no difference
     model = unit_model(scn, 1.0 / batch.dt)
     args = (batch.gyro[:, sel], batch.accel[:, sel], batch.mag[:, sel], batch.dt, model)
     var = np.full(3, 3e-6)
-    together = {"kf": sa.kf(*args, var), "ukf": sa.ukf(*args, var),
+    together = {"kf": kf(*args, var), "ukf": ukf(*args, var),
                 "ours": ours(*args, ours_settings(scn, 1.0 / batch.dt)).q_nb}
     for i in range(batch.supports.size):
         one = (batch.gyro[i, sel], batch.accel[i, sel], batch.mag[i, sel], batch.dt, model)
-        alone = {"kf": sa.kf(*one, var), "ukf": sa.ukf(*one, var),
+        alone = {"kf": kf(*one, var), "ukf": ukf(*one, var),
                  "ours": ours(*one, ours_settings(scn, 1.0 / batch.dt)).q_nb}
         for name, q in together.items():
             # fast-math lets the compiler contract a batch's vectorized loop differently from one filter's:
@@ -132,14 +133,14 @@ def test_nan_rows_and_missing_supports_are_skipped_with_their_reason(face):
     keep[gap] = False
     keep[bad["support"] == 50] = False
     bad = {k: v[keep] for k, v in bad.items()}
-    batch = sa.support_batch(bad, scn.sensors.support_imu.supports)
+    batch = support_batch(bad, scn.sensors.support_imu.supports)
     assert set(batch.skipped) == {26, 33, 50}
     assert "NaN" in batch.skipped[26] and "10 of the" in batch.skipped[33] and "no rows" in batch.skipped[50]
     assert 26 not in batch.supports and batch.supports.size == len(scn.sensors.support_imu.supports) - 3
     for arr in (batch.gyro, batch.accel, batch.mag):
         assert np.isfinite(arr).all()
     with pytest.raises(ValueError, match="no support with usable readings") as err:
-        sa.support_batch({k: v[bad["support"] == 26] for k, v in bad.items()}, [26])
+        support_batch({k: v[bad["support"] == 26] for k, v in bad.items()}, [26])
     assert "\n" not in str(err.value)
 
 
@@ -168,7 +169,7 @@ def test_recording_carries_attitude_errors_flags_and_the_tuning_objective(face):
     beside the shearer's field, the GD objective."""
     from rerun.chunk import RrdReader
 
-    from twin.view.recording import TIMELINE
+    from twin.view.rerun_columns import TIMELINE
 
     scn, _, path = face
     metrics = json.loads((path / "metrics.json").read_text())["estimators"][SUPPORT_ATTITUDE]

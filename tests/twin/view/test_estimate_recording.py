@@ -20,7 +20,8 @@ from estimators.shearer.federated_filter import MAG_DISTURBED, MAG_USED
 from tests.conftest import simulated
 from tests.estimators.io.test_metrics import offset_estimate
 from twin.view.estimate_recording import write_estimate_recording
-from twin.view.recording import ESTIMATES_RRD, RUN_RRD, TIMELINE, write_recording
+from twin.view.recording import ESTIMATES_RRD, RUN_RRD, write_recording
+from twin.view.rerun_columns import TIMELINE
 
 OFFSET = np.array([0.3, -0.2, 0.1])  # m east, north, up
 ROTVEC = np.array([1e-3, -2e-3, 5e-3])  # estimate = Exp([rotvec x]) truth: psi-angle error -rotvec

@@ -15,7 +15,8 @@ from estimators.io.logformat import (
     make_table,
 )
 from twin.config.scenario import Face, Scenario
-from twin.view.recording import TIMELINE, decimate, write_recording
+from twin.view.recording import write_recording
+from twin.view.rerun_columns import TIMELINE, decimate
 
 
 def synthetic_truth(n_pans: int = 4, n_supports: int = 4, n_updates: int = 3, shearer_s: float = 5.0,
@@ -163,12 +164,12 @@ def test_open_viewer_errors(tmp_path, monkeypatch):
 
 
 def test_latest_rows_forward_fill():
-    from twin.view.recording import _latest_rows
+    from twin.view.rerun_columns import latest_rows
 
     # Rows: t=0 pans 0..2; t=5 pan 1; t=9 pans 2, 0 (unsorted); pan 3 first seen at t=5.
     t = np.array([0.0, 0.0, 0.0, 5.0, 9.0, 9.0, 5.0])
     ident = np.array([0, 1, 2, 1, 2, 0, 3])
-    times, ids, rows = _latest_rows(t, ident)
+    times, ids, rows = latest_rows(t, ident)
     np.testing.assert_array_equal(times, [0.0, 5.0, 9.0])
     np.testing.assert_array_equal(ids, [0, 1, 2, 3])
     np.testing.assert_array_equal(rows, [[0, 1, 2, 6], [0, 3, 2, 6], [5, 3, 4, 6]])

@@ -15,10 +15,12 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
+import twin
 from estimators.io.logformat import ESTIMATE_DETECTORS, read_estimate, write_estimate
 from estimators.io.metrics import column
-from twin.cli import default_scenario, main, run
-from twin.view.report import REPORT_DIR, REPORT_HTML, build_report, pan_line
+from twin.cli import default_scenario, main
+from twin.view.report import REPORT_DIR, REPORT_HTML, build_report
+from twin.view.report_figures import pan_line
 
 CHROMIUM = Path("/usr/bin/chromium")
 FIGURES = ("top_view.png", "errors.png", "cycle_errors.png", "detectors_fkf_rail.png", "pan_line.png")
@@ -29,7 +31,7 @@ def run_dir(tmp_path_factory) -> Path:
     """A default run, with rail-model detector statistics beside kf_cpoem's path (the default scenario runs no
     rail-model filter): chi-square(3) draws, raised while the model is isolated from 10 to 15 min."""
     out = tmp_path_factory.mktemp("report") / "default"
-    run(default_scenario(), out, None, False, quiet=True)
+    twin.run(default_scenario(), out)
     est = read_estimate(out, "kf_cpoem")
     rows = np.arange(0, est.num_rows, 100)
     t = column(est, "t")[rows]

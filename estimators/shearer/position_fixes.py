@@ -1,0 +1,112 @@
+"""Position fixes of a segment for the shearer filters: the surveyed face ends, and the CPOEM points of the
+last straight cut (001 eqs. 6, 21-22; estimators.shearer.cpoem) moved by the push-ram advance, which 004's rail
+kinematics model uses with a point per chute; and the points a pass records for the next one.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators.io.log import Log
+from estimators.kalman import error_state as es
+from estimators.nav.rotations import quat_to_mat
+from estimators.shearer.config import Config
+from estimators.shearer.cpoem import Points, crossings, predict_fixes, record
+from estimators.shearer.face_line import fit_face_line
+from estimators.shearer.prepare import Prepared
+from estimators.shearer.solution import body_llh
+
+
+@dataclass
+class Fixes:
+    """Position fixes of a segment, in epoch order: epoch, lat/lon/h, ENU covariance, NIS gate, and the advance
+    direction in n (unit; zero for a surveyed face end), along which a push-ram stroke moved a predicted point."""
+
+    epoch: np.ndarray
+    llh: np.ndarray
+    r: np.ndarray
+    gate: np.ndarray
+    advance: np.ndarray
+
+    @classmethod
+    def empty(cls) -> Fixes:
+        return cls(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros(0), np.zeros((0, 3)))
+
+    def take(self, keep: np.ndarray) -> Fixes:
+        """The fixes selected by `keep` (a mask or indices)."""
+        return Fixes(self.epoch[keep], self.llh[keep], self.r[keep], self.gate[keep], self.advance[keep])
+
+
+def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Points | None,
+              notes: list[str], face_ends: bool = True) -> Fixes:
+    """Position fixes of epochs (a, b]: surveyed face ends (trusted: never gated; with `face_ends`), then CPOEM
+    points crossed on a straight cut (gated at cfg.fix_gate)."""
+    sel = np.flatnonzero((prep.survey_epochs > a) & (prep.survey_epochs <= b) & face_ends)
+    j = list(prep.survey_epochs[sel])
+    llh = [log.survey_llh[1 + k] for k in sel]
+    r = [np.diag([log.survey_sd[1 + k, 0] ** 2] * 2 + [log.survey_sd[1 + k, 1] ** 2]) for k in sel]
+    gate = [np.inf] * len(j)
+    advance = [np.zeros(3)] * len(j)
+    if points is not None and points.u.size and prep.rams is not None:
+        u = prep.odo - prep.odo[0]
+        for first, last in prep.cuts:
+            if first > b or last <= a:
+                continue
+            lo, hi = max(first - 1, a), min(last, b)
+            epochs, marks = crossings(u, cfg.cpoem_spacing_m, lo, hi)
+            fj, fllh, fr, skipped, fadv = predict_fixes(points, u, prep.t_kf, epochs, marks, prep.rams,
+                                                        cfg.advance_sd, cfg.path_sd, cfg.path_along_sd)
+            j += list(fj)
+            llh += list(fllh)
+            r += list(fr)
+            gate += [cfg.fix_gate] * fj.size
+            advance += list(fadv)
+            if skipped.size:
+                notes.append(f"CPOEM: no push-ram stroke at u = {', '.join(f'{v:.1f}' for v in skipped)} m "
+                             f"(t {prep.t_kf[lo]:.0f}-{prep.t_kf[hi]:.0f} s): points skipped")
+    if not j:
+        return Fixes.empty()
+    order = np.argsort(j, kind="stable")
+    return Fixes(np.array(j, np.int64), np.array(llh), np.array(r), np.array(gate), np.array(advance)).take(order)
+
+
+def face_survey_points(log: Log, prep: Prepared) -> tuple[Points, np.ndarray]:
+    """The installed face line (FACE_SURVEY) as CPOEM points of the first cut, smoothed by a local quadratic fit
+    along the face (estimators.shearer.face_line: the survey's independent point errors averaged over +-14.5 m with
+    tricube weights), with the fit's covariance; and the line's direction d enu / d u (K, 3) at each point. Its face
+    coordinate is a true distance, the filter's the odometer's: the two part by the odometer's scale error, which
+    the rail-model filter puts in the fix's measurement model
+    (estimators.shearer.rail_fix_update.rail_fix_measurement)."""
+    if log.face_u.size == 0 or not prep.cuts:
+        return Points.empty(), np.zeros((0, 3))
+    first, last = prep.cuts[0]
+    sign = 1.0 if prep.odo[last] >= prep.odo[first - 1] else -1.0  # the odometer counts the first cut this way
+    order = np.argsort(log.face_u, kind="stable")
+    u = sign * log.face_u[order]
+    line = fit_face_line(log.face_llh[order], log.face_u[order])
+    c_bn = np.broadcast_to(quat_to_mat(prep.nav0[es.QUAT]), (u.size, 3, 3))
+    sd_h, sd_v = log.face_sd[order, 0], log.face_sd[order, 1]
+    cov = np.zeros((u.size, 3, 3))
+    cov[:, [0, 1, 2], [0, 1, 2]] = line.gain[:, None] * np.column_stack([sd_h ** 2, sd_h ** 2, sd_v ** 2])
+    points = Points(u, np.full(u.size, prep.t_kf[0]), line.llh(), cov, c_bn.copy())
+    return points, sign * line.direction
+
+
+def segment_points(prep: Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, cov_enu: np.ndarray) -> Points:
+    """CPOEM points of the straight cut inside epochs [a, b] from navigation rows nav and position covariances
+    cov_enu (3, 3) (epochs a..b)."""
+    u = prep.odo - prep.odo[0]
+    lever = np.asarray(cfg.lever_arm_m, float)
+    for first, last in prep.cuts:
+        if first > a and last <= b:
+            llh = np.zeros((prep.t_kf.size, 3))
+            cov = np.zeros((prep.t_kf.size, 3, 3))
+            c_bn = np.zeros((prep.t_kf.size, 3, 3))
+            llh[a:b + 1] = body_llh(nav, lever)
+            cov[a:b + 1] = cov_enu
+            c_bn[a:b + 1] = quat_to_mat(nav[:, es.QUAT])
+            return record(u, prep.t_kf, llh, cov, c_bn, cfg.cpoem_spacing_m, first - 1, last)
+    return Points.empty()
+

@@ -1,0 +1,192 @@
+"""The sensor log prepared for the shearer filters (001, 003, 004): the IMU increments in the body frame and
+coning/sculling-compensated at the mechanization rate, the filter epochs, the odometer at them, the straight
+cuts and the segments (passes), and the start state.
+
+Passes and face ends are found from the odometer alone: a straight cut is a run of travel in one direction
+longer than STRAIGHT_CUT_FRACTION of the face (the distance between the two surveyed face-end points); the pass
+ends when the shearer stands after it. The first cycle has no CPOEM points; its face ends are surveyed (the survey
+stream). The start pose comes from the survey (position, heading) and from levelling the accelerometers while the
+shearer stands before the first cut.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimators.io.log import Log
+from estimators.kalman import error_state as es
+from estimators.nav import earth
+from estimators.nav.rotations import (
+    euler_to_mat,
+    euler_to_quat,
+    quat_rotate,
+    quat_to_euler,
+)
+from estimators.shearer.config import Config, PositioningError
+from estimators.shearer.cpoem import RamLog
+from estimators.sins.fine_alignment import EPS_A, EPS_W, fine_align
+from estimators.sins.strapdown import compensated_increments
+
+
+def _odometer_at(log: Log, t_kf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Odometer distance at the epochs and the mode of each interval (t[j-1], t[j]]: 1 moving, 0 standing, -1 no
+    data. An interval has no data outside the log or where it overlaps a dropout: two consecutive samples more
+    than 2.5 nominal periods apart."""
+    t = log.odo_t
+    dist = np.interp(t_kf, t, log.odo_distance)
+    lo, hi = t_kf[:-1], t_kf[1:]
+    covered = (lo >= t[0]) & (hi <= t[-1])
+    if t.size > 1:
+        step = np.diff(t)
+        gap = np.flatnonzero(step > 2.5 * np.median(step))
+        if gap.size:
+            gap_start, gap_end = t[gap], t[gap + 1]  # disjoint and sorted
+            k = np.searchsorted(gap_end, lo, side="right")  # the first dropout ending after the interval starts
+            covered &= ~((k < gap.size) & (gap_start[np.minimum(k, gap.size - 1)] < hi))
+    moving = np.concatenate([[0], np.cumsum(log.odo_direction != 0)])[np.searchsorted(t, t_kf, side="right")]
+    moved = (np.diff(moving) > 0) | (np.abs(np.diff(dist)) > 0)
+    mode = np.where(covered, np.where(moved, 1, 0), -1)
+    return dist, np.concatenate([[0], mode]).astype(np.int8)
+
+
+STRAIGHT_CUT_FRACTION = 0.8
+"""A run of travel in one direction longer than this fraction of the face is a straight cut (a sump or a cut-out
+into the snake covers the snake and the shearer, up to about half of a short face)."""
+
+
+def straight_cuts(u: np.ndarray, mode: np.ndarray, face_travel: float) -> list[tuple[int, int]]:
+    """(first, last) epochs of each run of travel in one direction longer than STRAIGHT_CUT_FRACTION of the
+    face."""
+    du = np.diff(u, prepend=u[0])
+    moving = np.flatnonzero((mode == 1) & (du != 0))
+    if moving.size == 0:
+        return []
+    sign = np.sign(du[moving])
+    breaks = np.flatnonzero(sign[1:] != sign[:-1]) + 1
+    runs = []
+    for grp in np.split(moving, breaks):
+        if abs(u[grp[-1]] - u[grp[0] - 1]) > STRAIGHT_CUT_FRACTION * face_travel:
+            runs.append((int(grp[0]), int(grp[-1])))
+    return runs
+
+
+def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndarray, steps: int,
+                   cfg: Config) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Navigation vector at t[0] (IMU point) and the start calibration, from the stand before the first cut:
+    survey position and heading, level from the accelerometers (coarse), then the fine alignment of 000
+    (estimators.sins.fine_alignment, EKF) over the stand, whose mean attitude over its last seconds and bias estimates
+    start the filter. A stand the fine alignment finds moving is levelled only (noted)."""
+    notes = []
+    first_move = np.flatnonzero(mode == 1)
+    stand_end = (first_move[0] - 1) * steps if first_move.size else dv_b.shape[0]
+    dt = t_mech[1] - t_mech[0]
+    n = int(min(stand_end, cfg.level_window_s / dt))
+    if n < max(5, int(1.0 / dt)):
+        raise PositioningError(f"odometer: the shearer moves {n * dt:.2f} s after the start; levelling needs at "
+                               f"least 1 s of standing before the first cut")
+    f_b = dv_b[:n].sum(axis=0) / (n * dt)
+    pitch = np.arcsin(np.clip(f_b[1] / np.linalg.norm(f_b), -1, 1))
+    roll = np.arctan2(-f_b[0], f_b[2])
+    if not np.isfinite(log.survey_yaw[0]):
+        raise PositioningError("survey: the first row needs the start heading (yaw); a MEMS gyro cannot find it")
+    q_nb = euler_to_quat(pitch, roll, log.survey_yaw[0])
+    lat, lon, h = log.survey_llh[0]
+    cal = np.zeros(es.N_CAL)
+    imu_dt = float(np.median(np.diff(log.imu_t)))
+    n_imu = round(n * dt / imu_dt)
+    dtheta_s, dv_s = body_increments(log, cfg)
+    res = fine_align(dtheta_s[:n_imu], dv_s[:n_imu], imu_dt, lat, q_nb, (cfg.imu.gyro_arw, cfg.imu.accel_vrw),
+                     np.array([cfg.sd_level0, cfg.sd_level0, log.survey_sd[0, 2]]), "ekf", h=h,
+                     gyro_bias_sigma=cfg.imu.gyro_bias, accel_bias_sigma=cfg.imu.accel_bias,
+                     velocity_sigma=cfg.r_zupt, rate_sigma=cfg.r_zaru, on_motion="flag")
+    if res.motion_t is None:
+        q_nb = res.attitude(min(10.0, 0.5 * n * dt))
+        bias = np.concatenate([np.zeros(EPS_A.start), res.bias[-1]])  # FineAlignment.bias: its states from EPS_A
+        cal[es.CAL_ACCEL.start:es.CAL_ACCEL.start + 2] = bias[EPS_A]
+        cal[es.CAL_GYRO] = bias[EPS_W]
+        p0, r0, _ = quat_to_euler(q_nb)
+        notes.append(f"fine alignment over {n * dt:.1f} s of standing: pitch {np.degrees(p0):.3f} deg, roll "
+                     f"{np.degrees(r0):.3f} deg, gyro bias {np.round(np.degrees(cal[es.CAL_GYRO]) * 3600, 1)} deg/h")
+    else:
+        notes.append(f"the stand looks moving from {res.motion_t:.1f} s: levelled only, pitch "
+                     f"{np.degrees(pitch):.3f} deg, roll {np.degrees(roll):.3f} deg")
+    off = quat_rotate(q_nb, np.asarray(cfg.lever_arm_m, float))
+    r_m, r_n = earth.radii(lat)
+    nav = np.zeros(es.N_NAV)
+    nav[es.LAT], nav[es.LON], nav[es.HGT] = (lat + off[1] / (r_m + h), lon + off[0] / ((r_n + h) * np.cos(lat)),
+                                             h + off[2])
+    nav[es.QUAT] = q_nb
+    return nav, cal, notes
+
+
+@dataclass
+class Prepared:
+    """The log resampled for the filters: mechanization increments, filter epochs, odometer, cuts, segments."""
+
+    t_mech: np.ndarray
+    phi_b: np.ndarray
+    dv_b: np.ndarray
+    steps: int
+    t_kf: np.ndarray
+    odo: np.ndarray
+    mode: np.ndarray
+    cuts: list[tuple[int, int]]
+    segments: list[tuple[int, int]]
+    survey_epochs: np.ndarray
+    rams: RamLog | None
+    nav0: np.ndarray
+    cal0: np.ndarray
+    notes: list[str]
+
+
+def body_increments(log: Log, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
+    """The IMU increments turned from the sensor axes into b with the calibrated mounting."""
+    mat_bs = euler_to_mat(*cfg.imu_mounting_rad)
+    return log.dtheta @ mat_bs.T, log.dv @ mat_bs.T
+
+
+def prepare(log: Log, cfg: Config) -> Prepared:
+    """The log resampled for the filters (Prepared); PositioningError names the stream a log cannot be used for."""
+    if log.survey_t.size == 0:
+        raise PositioningError("survey: no rows; the start position and heading must be surveyed")
+    imu_rate = 1.0 / np.median(np.diff(log.imu_t))
+    steps_f = imu_rate / cfg.n_samples / cfg.filter_rate_hz
+    if abs(steps_f - round(steps_f)) > 1e-6 or round(steps_f) < 1:
+        raise PositioningError(f"imu: {imu_rate:.6g} Hz is not {cfg.n_samples} x {cfg.filter_rate_hz:g} Hz x an "
+                               f"integer; choose filter_rate_hz to divide the mechanization rate")
+    steps = round(steps_f)
+    t = np.concatenate([[log.imu_t[0] - 1.0 / imu_rate], log.imu_t])
+    zero = np.zeros((1, 3))
+    dtheta_b, dv_b = body_increments(log, cfg)
+    try:
+        t_mech, phi_b, dv_b = compensated_increments(t, np.concatenate([zero, dtheta_b]),
+                                                     np.concatenate([zero, dv_b]), cfg.n_samples)
+    except ValueError as err:
+        raise PositioningError(f"imu: {err}") from None
+    n_kf = (t_mech.size - 1) // steps
+    t_mech = t_mech[: n_kf * steps + 1]
+    t_kf = t_mech[::steps]
+    odo, mode = _odometer_at(log, t_kf)
+    nav0, cal0, notes = _initial_state(log, t_mech, dv_b, mode, steps, cfg)
+    u = odo - odo[0]
+    if log.survey_t.size >= 2:
+        d = earth.lla_to_enu(*log.survey_llh[1], *log.survey_llh[0])
+        face_travel = float(np.hypot(d[0], d[1]))
+    else:
+        face_travel = float(np.ptp(u))
+        notes.append("survey has no far face end: face length taken from the odometer")
+    cuts = straight_cuts(u, mode, face_travel)
+    settle = round(cfg.filter_rate_hz)  # one second of the stand after the cut belongs to the pass
+    ends = sorted({min(last + 1 + settle, n_kf) for _, last in cuts})
+    bounds = [0] + [e for e in ends if 0 < e < n_kf] + [n_kf]
+    segments = list(itertools.pairwise(bounds))
+    survey_epochs = np.minimum(np.searchsorted(t_kf, log.survey_t[1:]), n_kf)
+    rams = None
+    if log.ram_t.size and len(cfg.support_u_m) >= 2:
+        rams = RamLog.from_rows(log.ram_t, log.ram_support, log.ram_extension, log.ram_valid, cfg.support_u_m,
+                               cfg.ram_noise_sd)
+    return Prepared(t_mech, phi_b, dv_b, steps, t_kf, odo, mode, cuts, segments, survey_epochs, rams, nav0,
+                     cal0, notes)

@@ -1,0 +1,159 @@
+"""004's rail kinematics model on a prepared log: the federated SINS/odometer + SINS/rail-kinematics-model filter
+(``fkf_rail``; kernel estimators.shearer.federated_filter, run pass by pass by estimators.shearer.federated) with
+the fault detectors of 004 section IV on the rail model's position fixes and its isolation while a fault holds.
+
+Rail kinematics model (004 section II, eqs. 5-8): the straight cut just finished, recorded every chute length
+along the face from the global estimate, moved towards the coal wall by the advance the push rams of the
+supports at each point measured since (estimators.shearer.cpoem), predicts where the shearer will run on the next
+cut; each point is a position fix (004 eq. 9) when the shearer crosses it again, with the chute geometry between
+supports (a rigid chute moves as the straight line between its neighbouring supports' strokes, eqs. 7-8). The
+first cut's points come from the face survey (estimators.shearer.position_fixes.face_survey_points).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from estimators.faults.detectors import DetectorConfig, chi2_threshold
+from estimators.io.log import Log
+from estimators.io.logformat import FLAG_ISOLATED
+from estimators.kalman import error_state as es
+from estimators.shearer import rail_fix_update as rf
+from estimators.shearer.config import Config, PositioningError
+from estimators.shearer.cpoem import Points
+from estimators.shearer.federated import FederatedRun, PassFixes
+from estimators.shearer.position_fixes import (
+    face_survey_points,
+    fixes_for,
+    segment_points,
+)
+from estimators.shearer.prepare import Prepared
+from estimators.shearer.solution import Solution
+
+ARM_FIXES = 3
+"""The detectors judge the rail model from the fourth fix of each pass on: the first ones pull the filter onto the
+rail, from the start stand's solution (a drift of a few decimetres over a long alignment stand) and after the end
+zone and the return run (a few centimetres, several times the innovations' spread on the rail), and are not
+faults. A fault flag raised earlier holds over them."""
+CAP = 1.25
+"""The fading SPRT's statistic is held at or below CAP * t_on: a fault of any size keeps the flag raised, and once
+it has gone the statistic falls to t_off in ln(CAP t_on / t_off) / ln(1 / fading) clean fixes (3 at 12, 5, 0.6)."""
+ALONG_FACE_SD = 1e3
+"""One-sigma [m] along the face of a rail-model fix from an earlier pass's point: none of its information is along
+the face. The point's along-face position is the filter's own of that pass, from the same odometer; taken at
+cpoem's path_along_sd (0.05 m) it held each pass to the last one's along-face error, which the first cut makes
+(seed004 trial 5: 0.2-0.3 m east rms in cycles 2-5 from a first cut's 1.3 m; 0.03-0.06 m without). Along the face
+the shearer is placed by the odometer, its scale calibrated by the face-end fixes of every cut."""
+STROKE_SD_PER_NOISE = 0.5
+"""One-sigma of a measured stroke per unit of the ram reading noise (cfg.ram_noise_sd): each level of a stroke is
+the median of 30-60 readings (estimators.shearer.cpoem.ram_stroke), 7.2 mm for 0.02 m readings; against the truth
+seed004's strokes spread by 10.4-10.8 mm. Each pass measures its strokes anew, so the filter cannot share this
+error: it floors the detectors' variance of every rail fix (at a 5 mm floor a lone 31 mm stroke error read as 5.6
+sigma and raised a fault-free alarm, seed004 trial 21)."""
+DETECTORS = ("residual", "dual_state", "fsprt")
+"""The detectors of 004 section IV in the order of estimators.shearer.rail_fix_update.DET_*: residual chi-square,
+dual-state chi-square, fading SPRT."""
+
+
+def detector_chi2(det: DetectorConfig) -> tuple[float, float]:
+    """Thresholds of the residual and the dual-state chi-square tests at det.p_false_alarm."""
+    return (chi2_threshold(rf.DET_DOF, det.p_false_alarm), chi2_threshold(rf.DUAL_DOF, det.p_false_alarm))
+
+
+def detector_params(det: DetectorConfig, isolate_by: str | None) -> np.ndarray:
+    """The D_* parameter vector of estimators.shearer.rail_fix_update."""
+    if isolate_by is not None and isolate_by not in DETECTORS:
+        raise PositioningError(f"detector {isolate_by!r}: use one of {', '.join(DETECTORS)}")
+    out = np.zeros(rf.N_DET_PARAMS)
+    out[[rf.D_FADING, rf.D_T_ON, rf.D_T_OFF]] = (det.fading, det.t_on, det.t_off)
+    out[rf.D_CHI2], out[rf.D_CHI2_DUAL] = detector_chi2(det)
+    out[rf.D_ISOLATE_BY] = -1 if isolate_by is None else DETECTORS.index(isolate_by)
+    out[rf.D_CAP] = CAP * det.t_on
+    out[rf.D_ARM] = ARM_FIXES
+    out[[rf.D_WINDOW, rf.D_SD_FLOOR]] = (det.window, det.sd_floor)
+    return out
+
+
+def run_rail(log: Log, cfg: Config, prep: Prepared, isolate_by: str | None = "fsprt") -> Solution:
+    """004: the federated SINS/odometer + SINS/rail-kinematics-model filter; the rail model's fixes are left out
+    while the `isolate_by` detector holds a fault (None: never)."""
+    det_params = detector_params(cfg.detector, isolate_by)
+    if prep.rams is None:
+        raise PositioningError("pushram: the rail kinematics model needs the push-ram stream and the support "
+                               "positions along the face")
+    rail_cfg = dataclasses.replace(cfg, cpoem_spacing_m=cfg.chute_length_m or cfg.cpoem_spacing_m,
+                                   advance_sd=cfg.rail_advance_sd or cfg.advance_sd)
+    notes = list(prep.notes)
+    run = FederatedRun(log, cfg, prep, True, det_params=det_params)
+    points, direction = face_survey_points(log, prep)
+    for a, b in prep.segments:
+        fixes, scale_h, var_floor = _rail_fixes(prep, rail_cfg, log, a, b, points, direction, notes)
+        stats = run.run_pass(a, b, (fixes, scale_h, var_floor))
+        cov = np.zeros((b - a + 1, 3, 3))
+        cov[:, [0, 1, 2], [0, 1, 2]] = run.out.sd[a:b + 1, es.DP] ** 2
+        points = next_pass_points(segment_points(prep, rail_cfg, a, b, run.out.nav[a:b + 1], cov),
+                                  prep.t_kf[a:b + 1], run.out.flags[a:b + 1],
+                                  prep.t_kf[fixes.epoch[np.isfinite(stats[:, rf.DET_FSPRT])]])
+        direction = np.zeros((0, 3))
+    sol = run.solution(notes)
+    sol.detectors = detector_columns(prep, run)
+    return sol
+
+
+def next_pass_points(points: Points, t: np.ndarray, flags: np.ndarray, t_tested: np.ndarray) -> Points:
+    """The points of a pass (epochs at t, filter flags) that give the next pass its fixes, t_tested the times of
+    the pass's rail fixes the detectors tested. Left out: points recorded while the filter settles back onto the
+    rail after the end zone (before the pass's detectors are armed, at its ARM_FIXES-th tested fix), which carry
+    the drift it is shedding; and points recorded while the model was isolated, when the push-ram readings were
+    held faulty: the strokes to the next pass would start from them."""
+    if t_tested.size > ARM_FIXES:
+        points = points.take(points.t >= t_tested[ARM_FIXES])
+    held = (flags & FLAG_ISOLATED) > 0
+    return points.take(~held[np.clip(np.searchsorted(t, points.t), 0, t.size - 1)])
+
+
+def _rail_fixes(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Points, direction: np.ndarray,
+                notes: list[str]) -> PassFixes:
+    """The rail kinematics model's fixes over epochs (a, b] (none within cfg.end_zone_m of a face end unless from
+    the face survey, before any push; along the face at ALONG_FACE_SD unless from the face survey) with the surveyed
+    face ends, and each fix's scale_h and var_floor (estimators.shearer.rail_fix_update): for points of the face
+    survey, which come with the line's `direction` d enu / d u at each point (K, 3; empty for points of an earlier
+    pass), that direction times the odometer travel (zero for the others); var_floor, the error the filter does not
+    share: the stroke's (STROKE_SD_PER_NOISE), or the smoothed survey point's variance along the advance direction
+    where that is larger; zero for the surveyed face ends."""
+    surveyed = direction.shape[0] > 0
+    if not surveyed:
+        cfg = dataclasses.replace(cfg, path_along_sd=ALONG_FACE_SD)
+    fixes = fixes_for(prep, cfg, log, a, b, points, notes)
+    u = prep.odo - prep.odo[0]
+    lo, hi = u.min() + cfg.end_zone_m, u.max() - cfg.end_zone_m
+    keep = ((u[fixes.epoch] >= lo) & (u[fixes.epoch] <= hi)) | ~np.isfinite(fixes.gate) | surveyed
+    fixes = fixes.take(keep)
+    scale_h = np.zeros((fixes.epoch.size, 3))
+    rail = np.isfinite(fixes.gate)
+    var_floor = np.where(rail, (STROKE_SD_PER_NOISE * cfg.ram_noise_sd) ** 2, 0.0)
+    if surveyed and points.u.size >= 2 and rail.any():
+        # The direction comes from the survey itself: the fixes carry the ram strokes, and a faulty one bends them.
+        order = np.argsort(points.u)
+        u_fix = u[fixes.epoch[rail]]
+        along = np.column_stack([np.interp(u_fix, points.u[order], direction[order, i]) for i in range(3)])
+        scale_h[rail] = along * u_fix[:, None]
+        across = points.c_bn[order, :, 0]  # the advance direction at each point (cpoem.predict_fixes)
+        var_point = np.einsum("ki,kij,kj->k", across, points.cov[order], across)
+        var_floor[rail] = np.maximum(var_floor[rail], np.interp(u_fix, points.u[order], var_point))
+    return fixes, scale_h, var_floor
+
+
+def detector_columns(prep: Prepared, run: FederatedRun) -> dict[str, np.ndarray]:
+    """ESTIMATE_DETECTORS columns: per rail-model fix its time, predicted point, the three detector statistics
+    and whether it was applied; with the isolation flag of its epoch."""
+    epoch = np.concatenate([f[0] for f in run.fixes]).astype(np.int64)
+    llh = np.concatenate([f[1] for f in run.fixes]).reshape(-1, 3)
+    stats = np.concatenate([f[2] for f in run.fixes]).reshape(-1, 3)
+    applied = np.concatenate([f[3] for f in run.fixes])
+    return {"t": prep.t_kf[epoch], "lat": llh[:, 0], "lon": llh[:, 1], "h": llh[:, 2],
+            **{f"{name}": stats[:, i] for i, name in enumerate(DETECTORS)}, "applied": applied.astype(np.int32),
+            "isolated": ((run.out.flags[epoch] & FLAG_ISOLATED) > 0).astype(np.int32)}
+

@@ -1,0 +1,69 @@
+"""The Python API (twin.run, twin.load_scenario, Run, twin.estimate) gives what the command line gives."""
+
+from __future__ import annotations
+
+import filecmp
+import shutil
+
+import pyarrow as pa
+import pytest
+
+import twin
+from estimators.io.logformat import LogError
+from tests.conftest import SCENARIO_DIR
+from twin.cli import main
+from twin.config.scenario import ScenarioError
+
+STREAM_FILES = ("truth_shearer.parquet", "truth_pans.parquet", "imu.parquet", "odometer.parquet",
+                "pushram.parquet", "estimates/kf_cpoem_rts.parquet", "estimates/dr.parquet")
+
+
+@pytest.fixture(scope="module")
+def short_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("scn") / "short.toml"
+    path.write_text((SCENARIO_DIR / "default.toml").read_text().replace("cycles = 2", "cycles = 1"))
+    return path
+
+
+@pytest.fixture(scope="module")
+def api_run(short_path, tmp_path_factory):
+    """A Scenario object, its seed overridden, run from Python."""
+    return twin.run(twin.load_scenario(short_path), tmp_path_factory.mktemp("api") / "run", seed=11)
+
+
+def test_a_scenario_object_runs_as_the_command_line_runs_its_file(api_run, short_path, tmp_path):
+    out = tmp_path / "cli"
+    assert main(["run", str(short_path), "--out", str(out), "--seed", "11", "--quiet"]) == 0
+    for name in STREAM_FILES:
+        assert filecmp.cmp(api_run.dir / name, out / name, shallow=False), name
+    assert twin.load_scenario(api_run.dir / "scenario.toml").seed == 11
+
+
+def test_run_reads_its_metrics_streams_and_estimates(api_run):
+    assert api_run.metrics["twin"]["scenario"] == "default"
+    assert set(api_run.metrics["estimators"]) >= {"kf", "kf_cpoem_rts", "dr"}
+    imu = api_run.stream("imu")
+    assert isinstance(imu, pa.Table) and {"t", "dtheta_x", "dv_z"} <= set(imu.column_names)
+    sol = api_run.estimate("kf_cpoem_rts")
+    assert sol.num_rows > 0 and sol.column("t").to_numpy()[-1] <= imu.column("t").to_numpy()[-1]
+    with pytest.raises(LogError, match="unknown stream 'imus'"):
+        api_run.stream("imus")
+    with pytest.raises(LogError, match="not found"):
+        api_run.estimate("no_such_method")
+
+
+def test_estimate_again_gives_the_same_estimates(api_run, tmp_path):
+    copy = tmp_path / "copy"
+    shutil.copytree(api_run.dir, copy)
+    for p in (copy / "estimates").glob("*.parquet"):
+        p.unlink()
+    again = twin.estimate(copy)
+    assert again.metrics["estimators"] == api_run.metrics["estimators"]
+    assert filecmp.cmp(copy / "estimates/kf_cpoem_rts.parquet", api_run.dir / "estimates/kf_cpoem_rts.parquet",
+                       shallow=False)
+
+
+def test_bad_arguments_are_one_line_errors(short_path, tmp_path):
+    with pytest.raises(ScenarioError, match="trials: must be >= 1"):
+        twin.run(short_path, tmp_path / "x", trials=0)
+    assert not (tmp_path / "x").exists()

@@ -1,0 +1,230 @@
+"""The Python API under the `longwall` command: run a scenario, re-run the estimators, read a run directory.
+
+    import twin
+    run = twin.run("scenarios/seed001.toml", out="runs/s1", seed=3)   # or a twin.load_scenario(...) object
+    run.metrics["estimators"]["kf_cpoem_rts"]["cycles"][-1]["sep"]
+    run.stream("imu"), run.estimate("kf_cpoem_rts")                   # pyarrow Tables
+
+The command line (twin.cli) parses its flags into these calls and prints what they return.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import pyarrow as pa
+from tqdm import tqdm
+
+from estimators.io.logformat import (
+    ESTIMATE,
+    STREAMS,
+    LogError,
+    make_table,
+    read_estimate,
+    read_stream,
+    write_stream,
+)
+from twin.config.experiments import Experiment
+from twin.config.scenario import (
+    Scenario,
+    ScenarioError,
+    load_face_scenario,
+    load_scenario,
+    parse_any,
+    scenario_to_toml,
+)
+from twin.config.turntable import Turntable
+from twin.pipeline.rundir import RunDirError, atomic_run_dir, check_target
+
+
+@dataclass(frozen=True)
+class Run:
+    """A run directory (simulated, imported or recorded) and what it holds."""
+
+    dir: Path
+
+    @property
+    def metrics(self) -> dict:
+        """metrics.json: the twin's summary, each estimator's accuracy, the Monte Carlo section."""
+        path = self.dir / "metrics.json"
+        if not path.is_file():
+            raise RunDirError(f"{path}: not found; is {self.dir} a run directory?")
+        try:
+            return json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as err:
+            raise RunDirError(f"{path}: not valid JSON ({err}); run `longwall estimate {self.dir}` again") from None
+
+    def stream(self, name: str) -> pa.Table:
+        """One stream of the sensor log (estimators.io.logformat.STREAMS: imu, odometer, truth_shearer, ...)."""
+        if name not in STREAMS:
+            raise LogError(f"unknown stream '{name}' (streams: {', '.join(STREAMS)})")
+        return read_stream(self.dir, STREAMS[name])
+
+    def estimate(self, method: str) -> pa.Table:
+        """Estimator `method`'s solution (estimates/METHOD.parquet): t, position, velocity, attitude, sigma, flags."""
+        return read_estimate(self.dir, method, ESTIMATE)
+
+
+def default_scenario() -> Path:
+    """The shipped scenarios/default.toml, what `longwall run` runs with no argument."""
+    return Path(str(resources.files("twin.scenarios") / "default.toml"))
+
+
+def _seeded(scn, seed: int | None):
+    """A loaded scenario of any kind with its seed replaced (validated again)."""
+    if seed is None:
+        return scn
+    return parse_any({**scn.model_dump(), "seed": seed}, scn.name)
+
+
+def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Path | None = None,
+        seed: int | None = None, trials: int = 1, *, force: bool = False, quiet: bool = True, sensors: bool = True,
+        workers: int = 1, ray_address: str | None = None) -> Run:
+    """Run a scenario (a TOML path, or what twin.load_scenario gave) into a run directory (default
+    runs/NAME-seedN).
+
+    A face scenario is simulated: sensor trial 0 at the top of the directory; with `trials` > 1, trials 1..
+    (sensor errors redrawn from the same truth) go to trials/NNN/ and their metrics to trials.parquet, run on
+    `workers` local processes or on the Ray cluster at `ray_address`; `sensors=False` writes the truth only.
+    000's SINS experiments and 002's turntable run their experiment. `quiet=False` shows the progress bar and
+    prints the summary tables, as `longwall run` does."""
+    if isinstance(scenario, str | Path):
+        source, scenario = str(scenario), load_scenario(scenario, seed)
+    else:
+        source, scenario = scenario.name, _seeded(scenario, seed)
+    out = Path(out) if out is not None else Path("runs") / f"{scenario.name}-seed{scenario.seed}"
+    if not isinstance(scenario, Scenario):
+        return _run_paper(scenario, out, force, quiet)
+    if trials < 1:
+        raise ScenarioError(f"trials: must be >= 1 (got {trials})")
+    if not 1 <= workers <= trials:
+        raise ScenarioError(f"workers: must be >= 1 and <= trials (got {workers} for {trials} trials)")
+    return _run_face(scenario, source, out, force, quiet, trials, sensors, workers, ray_address)
+
+
+def _run_paper(exp: Experiment | Turntable, out: Path, force: bool, quiet: bool) -> Run:
+    """A paper's experiment (000's SINS experiments, 002's turntable): run, write the run directory, print ours
+    beside the paper's."""
+    if isinstance(exp, Turntable):
+        from twin.papers import turntable
+
+        def compute(tt: Turntable):
+            return turntable.run_turntable(tt)  # (result, table rows)
+
+        write = turntable.write_run
+    else:
+        from twin.papers import sins_experiments, sins_rundir
+
+        def compute(e: Experiment):
+            result = sins_experiments.run_experiment(e)
+            return result, result.table
+
+        write = sins_rundir.write_run
+    check_target(out, force)
+    start = time.perf_counter()
+    result, rows = compute(exp)
+    with atomic_run_dir(out, force) as staging:
+        write(staging, exp, result)
+    if not quiet:
+        print("\n".join(rows))
+        print(f"\n{time.perf_counter() - start:.1f} s; run directory: {out}")
+    return Run(out)
+
+
+def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, trials: int, sensors: bool,
+              workers: int, ray_address: str | None) -> Run:
+    from twin.face.haulage import Timeline
+    from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
+    from twin.pipeline.montecarlo import (
+        TrialResult,
+        format_monte_carlo,
+        trial_context,
+        trial_runner,
+        write_monte_carlo,
+        write_sensors,
+    )
+    from twin.pipeline.simulate import simulate
+    from twin.sensors.faults import check_faults_in_run
+    from twin.view.recording import write_recording
+    from twin.view.summary import format_summary, twin_summary
+
+    try:
+        check_faults_in_run(scn, Timeline(scn).duration)
+    except ScenarioError as err:
+        raise ScenarioError(f"{source}: {err}") from None
+    check_target(out, force)
+    start = time.perf_counter()
+    mc_trials = range(1, trials if sensors else 1)  # trial 0 is the run itself
+    stages = {"face": 0.45, "shearer": 0.2, "sensors": 0.1, "write": 0.05, "recording": 0.05, "estimators": 0.15,
+              "trials": 0.25 * len(mc_trials)}
+    total = sum(stages.values())
+    bar = tqdm(total=100, desc=f"longwall run {scn.name}", disable=quiet, leave=False,
+               bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}")
+    done = {k: 0.0 for k in stages}
+
+    def progress(stage: str, frac: float) -> None:
+        done[stage] = frac
+        bar.n = round(100 * sum(stages[k] * v for k, v in done.items()) / total)
+        bar.set_description(f"longwall run {scn.name} ({stage})")
+
+    monte_carlo = None
+    with atomic_run_dir(out, force) as staging, trial_runner(workers, ray_address) as runner:
+        result = simulate(scn, progress)
+        tables = {name: make_table(STREAMS[name], cols) for name, cols in result.tables.items()}
+        for name, table in tables.items():
+            write_stream(staging, STREAMS[name], table)
+        if sensors:
+            ctx = trial_context(scn, tables, staging)
+            runner.submit(ctx, staging, mc_trials)  # runs beside trial 0 unless sequential
+            tables.update(write_sensors(ctx, 0, staging))
+            progress("sensors", 1.0)
+        (staging / "scenario.toml").write_text(scenario_to_toml(scn))
+        progress("write", 1.0)
+        write_recording(staging / "run.rrd", scn, {k: v for k, v in tables.items() if k.startswith("truth_")},
+                        result.floor_grid.mesh_t(result.frame),
+                        sensors={k: v for k, v in tables.items() if not k.startswith("truth_")})
+        progress("recording", 1.0)
+        summary = twin_summary(scn, result.tables, time.perf_counter() - start)
+        (staging / "metrics.json").write_text(json.dumps({"twin": summary, "estimators": {}}, indent=2) + "\n")
+        estimated = run_estimators(staging, scn) if sensors else {}
+        write_metrics(staging, estimated)
+        progress("estimators", 1.0)
+        if mc_trials:
+            results = [TrialResult(0, estimated), *runner.gather(lambda n: progress("trials", n / len(mc_trials)))]
+            monte_carlo = write_monte_carlo(staging, results, list(scn.estimators.shearer.methods),
+                                            runner.description)
+        bar.close()
+    if not quiet:
+        print(format_summary(summary))
+        print(format_estimators(estimated, scn.name))
+        if monte_carlo:
+            print(format_monte_carlo(monte_carlo))
+        print(f"\nrun directory: {out}")
+    if monte_carlo and monte_carlo["failed"]:
+        print(f"longwall: warning: {monte_carlo['failed']} of {monte_carlo['trials']} Monte Carlo trials failed "
+              f"(trial {monte_carlo['failures'][0]['trial']}: {monte_carlo['failures'][0]['error']}); "
+              f"see {out / 'trials.csv'}", file=sys.stderr)
+    return Run(out)
+
+
+def estimate(run_dir: str | Path, quiet: bool = True) -> Run:
+    """Re-run the estimators the run's scenario.toml names on an existing (simulated or imported) run directory;
+    `quiet=False` prints their table."""
+    from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
+
+    run_dir = Path(run_dir)
+    scenario = run_dir / "scenario.toml"
+    if not scenario.is_file():
+        raise ScenarioError(f"{scenario}: not found; the estimators take their configuration (IMU grade, lever arm, "
+                            f"odometer pulse length, supports) from the run's scenario.toml")
+    scn = load_face_scenario(scenario)
+    estimated = run_estimators(run_dir, scn)
+    write_metrics(run_dir, estimated)
+    if not quiet:
+        print(format_estimators(estimated, scn.name))
+    return Run(run_dir)
