@@ -39,7 +39,7 @@ class Points:
     t: np.ndarray  # (P,) time the shearer crossed the point
     llh: np.ndarray  # (P, 3) body-point latitude, longitude, height
     cov: np.ndarray  # (P, 3, 3) ENU covariance of the point [m^2]
-    c_bn: np.ndarray  # (P, 3, 3) attitude at the point (advance direction = body x)
+    c_nb: np.ndarray  # (P, 3, 3) attitude C_b^n at the point (advance direction = body x)
 
     @classmethod
     def empty(cls) -> Points:
@@ -47,7 +47,7 @@ class Points:
 
     def take(self, keep: np.ndarray) -> Points:
         """The points selected by `keep` (a mask or indices)."""
-        return Points(self.u[keep], self.t[keep], self.llh[keep], self.cov[keep], self.c_bn[keep])
+        return Points(self.u[keep], self.t[keep], self.llh[keep], self.cov[keep], self.c_nb[keep])
 
 
 def crossings(u: np.ndarray, spacing: float, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
@@ -72,14 +72,14 @@ def crossings(u: np.ndarray, spacing: float, lo: int, hi: int) -> tuple[np.ndarr
     return j[order], m[order]
 
 
-def record(u: np.ndarray, t: np.ndarray, llh: np.ndarray, cov_enu: np.ndarray, c_bn: np.ndarray,
+def record(u: np.ndarray, t: np.ndarray, llh: np.ndarray, cov_enu: np.ndarray, c_nb: np.ndarray,
            spacing: float, lo: int, hi: int) -> Points:
     """Points crossed between epochs lo and hi, interpolated linearly between the two epochs around each."""
     j, marks = crossings(u, spacing, lo, hi)
     du = u[j] - u[j - 1]
     w = np.where(np.abs(du) > 0, (marks - u[j - 1]) / np.where(du == 0, 1, du), 1.0)[:, None]
     return Points(marks, t[j - 1] + w[:, 0] * (t[j] - t[j - 1]), llh[j - 1] + w * (llh[j] - llh[j - 1]),
-                  cov_enu[j], c_bn[j])
+                  cov_enu[j], c_nb[j])
 
 
 RAM_WINDOW = 3
@@ -191,7 +191,7 @@ def predict_fixes(points: Points, u: np.ndarray, t: np.ndarray, epochs: np.ndarr
         if not np.isfinite(d):
             skipped.append(m)
             continue
-        c = points.c_bn[k]
+        c = points.c_nb[k]
         shift = c[:, 0] * d + c[:, 1] * (u[j] - m)
         lat, lon, h = points.llh[k]
         r_m, r_n = earth.radii(lat)

@@ -141,21 +141,21 @@ class EpochOutput(NamedTuple):
 
 
 @nb.njit(cache=True)
-def field_disturbed(mag_b, c_bn, intensity, inclination, norm_tol, dip_tol):
+def field_disturbed(mag_b, c_nb, intensity, inclination, norm_tol, dip_tol):
     """True when the reading's strength or dip (levelled with the SINS attitude) is off the model's."""
-    b_n = c_bn @ mag_b
+    b_n = c_nb @ mag_b
     norm = np.sqrt(np.sum(b_n * b_n))
     dip = np.arctan2(-b_n[2], np.hypot(b_n[0], b_n[1]))
     return abs(norm / intensity - 1.0) > norm_tol or abs(dip - inclination) > dip_tol
 
 
 @nb.njit(cache=True)
-def yaw_measurement(c_bn, mag_b, mag_params, r_yaw, n):
+def yaw_measurement(c_nb, mag_b, mag_params, r_yaw, n):
     """(z, H, R) of the yaw closing error (003 section 3.2): z = yaw_SINS - yaw_mag of the reading mag_b at the
-    attitude c_bn (estimators.nav.geomagnetic.yaw_closing_error_nb), H on phi (M_H_PHI), R = r_yaw."""
+    attitude c_nb (estimators.nav.geomagnetic.yaw_closing_error_nb), H on phi (M_H_PHI), R = r_yaw."""
     h = np.zeros((1, n))
     h[0, PHI.start:PHI.start + 3] = mag_params[M_H_PHI:M_H_PHI + 3]
-    z = np.array([yaw_closing_error_nb(mag_b, c_bn, mag_params[M_DECLINATION])])
+    z = np.array([yaw_closing_error_nb(mag_b, c_nb, mag_params[M_DECLINATION])])
     return z, h, np.array([[r_yaw]])
 
 
@@ -166,11 +166,11 @@ def mag_update(x, p, nav, mag_b, mag_params, r_yaw, r_buf, r_count, use_check):
     Returns (flag bits, innovation, new window count). With use_check, a disturbed reading is left out
     and not put in the noise window; every other innovation goes into the window (also a gated one, so that R can
     grow to admit a real change)."""
-    c_bn = quat_mat(nav[QUAT])
-    if use_check and field_disturbed(mag_b, c_bn, mag_params[M_INTENSITY], mag_params[M_INCLINATION],
+    c_nb = quat_mat(nav[QUAT])
+    if use_check and field_disturbed(mag_b, c_nb, mag_params[M_INTENSITY], mag_params[M_INCLINATION],
                                      mag_params[M_NORM_TOL], mag_params[M_DIP_TOL]):
         return MAG_READ | MAG_DISTURBED, np.nan, r_count
-    z, h, r = yaw_measurement(c_bn, mag_b, mag_params, r_yaw, x.size)
+    z, h, r = yaw_measurement(c_nb, mag_b, mag_params, r_yaw, x.size)
     v = z[0] - (h @ x)[0]
     r_count = window_push(r_buf, r_count, np.array([v]), h @ p @ h.T)
     _nis, applied = gated_update(x, p, z, h, r, mag_params[M_GATE])

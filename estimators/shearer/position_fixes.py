@@ -86,11 +86,11 @@ def face_survey_points(log: Log, prep: Prepared) -> tuple[Points, np.ndarray]:
     order = np.argsort(log.face_u, kind="stable")
     u = sign * log.face_u[order]
     line = fit_face_line(log.face_llh[order], log.face_u[order])
-    c_bn = np.broadcast_to(quat_to_mat(prep.nav0[es.QUAT]), (u.size, 3, 3))
+    c_nb = np.broadcast_to(quat_to_mat(prep.nav0[es.QUAT]), (u.size, 3, 3))
     sd_h, sd_v = log.face_sd[order, 0], log.face_sd[order, 1]
     cov = np.zeros((u.size, 3, 3))
     cov[:, [0, 1, 2], [0, 1, 2]] = line.gain[:, None] * np.column_stack([sd_h ** 2, sd_h ** 2, sd_v ** 2])
-    points = Points(u, np.full(u.size, prep.t_kf[0]), line.llh(), cov, c_bn.copy())
+    points = Points(u, np.full(u.size, prep.t_kf[0]), line.llh(), cov, c_nb.copy())
     return points, sign * line.direction
 
 
@@ -103,10 +103,10 @@ def segment_points(prep: Prepared, cfg: Config, a: int, b: int, nav: np.ndarray,
         if first > a and last <= b:
             llh = np.zeros((prep.t_kf.size, 3))
             cov = np.zeros((prep.t_kf.size, 3, 3))
-            c_bn = np.zeros((prep.t_kf.size, 3, 3))
+            c_nb = np.zeros((prep.t_kf.size, 3, 3))
             llh[a:b + 1] = body_llh(nav, lever)
             cov[a:b + 1] = cov_enu
-            c_bn[a:b + 1] = quat_to_mat(nav[:, es.QUAT])
-            return record(u, prep.t_kf, llh, cov, c_bn, cfg.cpoem_spacing_m, first - 1, last)
+            c_nb[a:b + 1] = quat_to_mat(nav[:, es.QUAT])
+            return record(u, prep.t_kf, llh, cov, c_nb, cfg.cpoem_spacing_m, first - 1, last)
     return Points.empty()
 

@@ -58,13 +58,13 @@ def initial_covariance(cfg: Config, log: Log, q_nb0: np.ndarray) -> np.ndarray:
     p0 = np.diag((cfg.p0_scale * sd) ** 2)
     if not cfg.level_from_accelerometers:
         return p0
-    c_bn = quat_to_mat(q_nb0)
+    c_nb = quat_to_mat(q_nb0)
     g = float(earth.normal_gravity(log.survey_llh[0, 0], log.survey_llh[0, 2]))
-    tilt_per_error = np.vstack([-c_bn[1], c_bn[0]]) / g  # (phi_E, phi_N) per unit e in b
+    tilt_per_error = np.vstack([-c_nb[1], c_nb[0]]) / g  # (phi_E, phi_N) per unit e in b
     t = np.eye(es.N_STATES)
     level = slice(es.PHI.start, es.PHI.start + 2)
     t[level, es.ACCEL_BIAS] = tilt_per_error
-    t[level, es.ACCEL_NONORTH] = tilt_per_error @ kf.nonorth_matrix(c_bn.T @ np.array([0.0, 0.0, g]))
+    t[level, es.ACCEL_NONORTH] = tilt_per_error @ kf.nonorth_matrix(c_nb.T @ np.array([0.0, 0.0, g]))
     return t @ p0 @ t.T
 
 

@@ -140,7 +140,7 @@ def _rail_fixes(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: P
         u_fix = u[fixes.epoch[rail]]
         along = np.column_stack([np.interp(u_fix, points.u[order], direction[order, i]) for i in range(3)])
         scale_h[rail] = along * u_fix[:, None]
-        across = points.c_bn[order, :, 0]  # the advance direction at each point (cpoem.predict_fixes)
+        across = points.c_nb[order, :, 0]  # the advance direction at each point (cpoem.predict_fixes)
         var_point = np.einsum("ki,kij,kj->k", across, points.cov[order], across)
         var_floor[rail] = np.maximum(var_floor[rail], np.interp(u_fix, points.u[order], var_point))
     return fixes, scale_h, var_floor

@@ -300,7 +300,7 @@ def test_a_fix_from_an_earlier_pass_says_nothing_along_the_face(face):
     earlier, _, floor = rk._rail_fixes(prep, cfg, log, a, b, points, np.zeros((0, 3)), [])
     rail = np.isfinite(earlier.gate)
     assert rail.sum() > 10 and np.allclose(floor, np.where(rail, (rk.STROKE_SD_PER_NOISE * cfg.ram_noise_sd) ** 2, 0.0))
-    body = points.c_bn[0]  # x across the face (the advance), y along it
+    body = points.c_nb[0]  # x across the face (the advance), y along it
 
     def information(fixes, axis):
         r = fixes.r[np.isfinite(fixes.gate)]
