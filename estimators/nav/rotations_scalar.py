@@ -1,4 +1,4 @@
-"""Rotation algebra in scalar form, for the batched (prange) kernels that run many filters at once.
+"""Rotation algebra in scalar form, for the kernels: the batched (prange) support filters and fine alignment.
 
 Conventions are estimators.nav.rotations' (scalar-first Hamilton q_nb, C_b^n = Rz(yaw) Rx(pitch) Ry(roll)). Its
 kernel helpers (qmul, qexp, qrot, quat_mat, ...) take and return arrays, a new one per call; these take quaternion
@@ -14,6 +14,8 @@ The njit helpers are inlined into the calling kernel (inline="always") and so co
 """
 
 from __future__ import annotations
+
+import math
 
 import numba as nb
 import numpy as np
@@ -110,3 +112,25 @@ def normalize_continuous(q, prev):
         n = -n
     for i in range(4):
         q[i] = q[i] / n
+
+
+@nb.njit(cache=True)
+def euler_mat(pitch, roll, yaw):
+    """C = Rz(yaw) Rx(pitch) Ry(roll) of scalar angles (rotations.euler_to_mat, which broadcasts NumPy arrays, in a
+    kernel's form); fine alignment's large-azimuth error matrix E(phi) with (phi_E, phi_N, phi_U)."""
+    sp, cp = math.sin(pitch), math.cos(pitch)
+    sr, cr = math.sin(roll), math.cos(roll)
+    sy, cy = math.sin(yaw), math.cos(yaw)
+    return np.array([[cy * cr - sy * sp * sr, -sy * cp, cy * sr + sy * sp * cr],
+                     [sy * cr + cy * sp * sr, cy * cp, sy * sr - cy * sp * cr],
+                     [-cp * sr, sp, cp * cr]])
+
+
+@nb.njit(cache=True)
+def mat_euler(c):
+    """Inverse of euler_mat (rotations.mat_to_euler in a kernel's form): (pitch, roll, yaw)."""
+    cp = math.hypot(c[2, 0], c[2, 2])
+    pitch = math.atan2(c[2, 1], cp)
+    roll = 0.0 if cp < 1e-12 else math.atan2(-c[2, 0], c[2, 2])
+    sr, cr = math.sin(roll), math.cos(roll)
+    return pitch, roll, math.atan2(c[1, 0] * cr + c[1, 2] * sr, c[0, 0] * cr + c[0, 2] * sr)

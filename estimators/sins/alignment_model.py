@@ -49,12 +49,11 @@ heading sigma is tens of degrees without the zero-rate update, a level 0.8 deg o
 
 from __future__ import annotations
 
-import math
-
 import numba as nb
 import numpy as np
 
 from estimators.nav.rotations import rotvec_mat
+from estimators.nav.rotations_scalar import euler_mat, mat_euler
 
 DV = slice(0, 2)
 PHI = slice(2, 5)
@@ -65,35 +64,12 @@ _DVE, _DVN, _PE, _PN, _PU, _AX, _AY, _WX = 0, 1, 2, 3, 4, 5, 6, 7  # indices for
 
 
 @nb.njit(cache=True)
-def err_mat(pe, pn, pu):
-    """E(phi) = Rz(phi_U) Rx(phi_E) Ry(phi_N) (estimators.nav.rotations euler_to_mat order).
-
-    Kept: euler_to_mat is NumPy (broadcast arrays), not callable from a kernel; this is its scalar numba form."""
-    sp, cp = math.sin(pe), math.cos(pe)
-    sr, cr = math.sin(pn), math.cos(pn)
-    sy, cy = math.sin(pu), math.cos(pu)
-    return np.array([[cy * cr - sy * sp * sr, -sy * cp, cy * sr + sy * sp * cr],
-                     [sy * cr + cy * sp * sr, cy * cp, sy * sr - cy * sp * cr],
-                     [-cp * sr, sp, cp * cr]])
-
-
-@nb.njit(cache=True)
-def err_angles(c):
-    """Inverse of err_mat (estimators.nav.rotations mat_to_euler, on scalars as err_mat): (phi_E, phi_N, phi_U)."""
-    cp = math.hypot(c[2, 0], c[2, 2])
-    pe = math.atan2(c[2, 1], cp)
-    pn = 0.0 if cp < 1e-12 else math.atan2(-c[2, 0], c[2, 2])
-    sr, cr = math.sin(pn), math.cos(pn)
-    return pe, pn, math.atan2(c[1, 0] * cr + c[1, 2] * sr, c[0, 0] * cr + c[0, 2] * sr)
-
-
-@nb.njit(cache=True)
 def propagate(x, c1, r_ie, w_u, gamma, T):
     """The nonlinear error model over one block (module docstring) for one state x."""
-    e0 = err_mat(x[_PE], x[_PN], x[_PU])
+    e0 = euler_mat(x[_PE], x[_PN], x[_PU])
     e1 = r_ie @ e0 @ r_ie.T @ rotvec_mat(-(c1 @ x[_WX:_WX + 3]) * T)
-    pe, pn, pu = err_angles(e1)
-    mid = err_mat(0.5 * (x[_PE] + pe), 0.5 * (x[_PN] + pn), 0.5 * (x[_PU] + pu))
+    pe, pn, pu = mat_euler(e1)
+    mid = euler_mat(0.5 * (x[_PE] + pe), 0.5 * (x[_PN] + pn), 0.5 * (x[_PU] + pu))
     acc_e = gamma * mid[2, 0] + c1[0, 0] * x[_AX] + c1[0, 1] * x[_AY] + 2 * w_u * x[_DVN]  # minus [2 w x dV]
     acc_n = gamma * mid[2, 1] + c1[1, 0] * x[_AX] + c1[1, 1] * x[_AY] - 2 * w_u * x[_DVE]
     out = x.copy()
@@ -169,15 +145,15 @@ def reset(c, v, x, p):
     """Feed phi and dV into the nominal and zero them (the biases stay in the state); P <- G P G^T with G the
     Jacobian (central differences) of the remaining error E(phi) E(phi_hat)^T in phi at phi_hat (module
     docstring, "Reset")."""
-    e_hat = err_mat(x[_PE], x[_PN], x[_PU])
+    e_hat = euler_mat(x[_PE], x[_PN], x[_PU])
     g = np.zeros((3, 3))
     step = 1e-5
     for j in range(3):
         lo, hi = x[_PE:_PU + 1].copy(), x[_PE:_PU + 1].copy()
         lo[j] -= step
         hi[j] += step
-        a = err_angles(err_mat(hi[0], hi[1], hi[2]) @ e_hat.T)
-        b = err_angles(err_mat(lo[0], lo[1], lo[2]) @ e_hat.T)
+        a = mat_euler(euler_mat(hi[0], hi[1], hi[2]) @ e_hat.T)
+        b = mat_euler(euler_mat(lo[0], lo[1], lo[2]) @ e_hat.T)
         for i in range(3):
             g[i, j] = (a[i] - b[i]) / (2 * step)
     p[_PE:_PU + 1, :] = g @ np.ascontiguousarray(p[_PE:_PU + 1, :])
