@@ -38,7 +38,7 @@ from estimators.io.logformat import (
     FLAG_VELOCITY,
     FLAG_ZUPT,
 )
-from estimators.kalman.error_state import (  # noqa: F401 (kf.N_*: the callers' array sizes)
+from estimators.kalman.error_state import (
     ACCEL_BIAS,
     ACCEL_NONORTH,
     CAL_ACCEL,
@@ -52,9 +52,6 @@ from estimators.kalman.error_state import (  # noqa: F401 (kf.N_*: the callers' 
     HGT,
     LAT,
     LON,
-    N_CAL,
-    N_NAV,
-    N_NOMINAL,
     N_STATES,
     NOM_FORCE_1,
     NOM_FORCE_2,

@@ -7,6 +7,7 @@ import pytest
 
 from estimators.io.log import log_from_columns
 from estimators.io.logformat import FLAG_SKIPPED, FLAG_VELOCITY, FLAG_ZUPT
+from estimators.kalman import error_state as es
 from estimators.nav import earth
 from estimators.nav.rotations import (
     euler_to_quat,
@@ -38,7 +39,7 @@ def test_standing_filter_finds_the_gyro_bias_and_leaves_the_heading_alone():
     steps, n_kf, dt = 5, 100, 0.02
     t_mech = np.arange(n_kf * steps + 1) * dt
     phi_b, dv_b = np.tile(w_b * dt, (n_kf * steps, 1)), np.tile(f_b * dt, (n_kf * steps, 1))
-    nav = np.zeros(kf.N_NAV)
+    nav = np.zeros(es.N_NAV)
     nav[:3] = lat, 0.0, h
     q0 = euler_to_quat(0.015, 0.015, 0.32)
     nav[kf.QUAT] = q0
@@ -48,12 +49,12 @@ def test_standing_filter_finds_the_gyro_bias_and_leaves_the_heading_alone():
     params = np.zeros(kf.N_PARAMS)
     params[:7] = [0.01, 0.01, 0.01, 0.002, 5e-4, 1.0, 2.0]
     z = np.zeros
-    out_nav, out_cal = z((n_kf + 1, kf.N_NAV)), z((n_kf + 1, kf.N_CAL))
+    out_nav, out_cal = z((n_kf + 1, es.N_NAV)), z((n_kf + 1, es.N_CAL))
     store = [z((n_kf + 1, kf.N_STATES))] + [z((n_kf + 1, kf.N_STATES, kf.N_STATES)) for _ in range(3)]
     flags = np.zeros(n_kf + 1, np.int32)
-    cal = z(kf.N_CAL)
+    cal = z(es.N_CAL)
     kf.run_filter(0, n_kf, steps, t_mech, phi_b, dv_b, z(n_kf + 1), np.zeros(n_kf + 1, np.int8),
-                  np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), z(0), np.full(kf.N_STATES, 1e-12), params, nav, cal, p, z(kf.N_NOMINAL),
+                  np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), z(0), np.full(kf.N_STATES, 1e-12), params, nav, cal, p, z(es.N_NOMINAL),
                   out_nav, out_cal, *store, flags, z(0), z((n_kf + 1, 3)))
     assert np.all(flags[1:] & FLAG_ZUPT)
     assert np.abs(cal[kf.CAL_GYRO] - bias).max() < 10 * DEG_H
@@ -77,7 +78,7 @@ def test_standing_machine_tone_locked_to_the_epochs_does_not_move_the_position()
     t_mech = np.arange(n_kf * steps + 1) * dt
     v_tone = 1e-3 * np.sin(2 * np.pi * 30.0 * t_mech + 0.7)[:, None] * np.array([1.0, 0.0, 1.0])
     phi_b, dv_b = np.tile(w_b * dt, (n_kf * steps, 1)), np.tile(f_b * dt, (n_kf * steps, 1)) + np.diff(v_tone, axis=0)
-    nav = np.zeros(kf.N_NAV)
+    nav = np.zeros(es.N_NAV)
     nav[:3] = lat, 0.0, h
     nav[kf.QUAT] = q
     nav[kf.VEL] = quat_rotate(q, v_tone[0])
@@ -86,11 +87,11 @@ def test_standing_machine_tone_locked_to_the_epochs_does_not_move_the_position()
     params = np.zeros(kf.N_PARAMS)
     params[:7] = [0.01, 0.01, 0.01, 0.002, 5e-4, 1.0, 2.0]
     z = np.zeros
-    out_nav = z((n_kf + 1, kf.N_NAV))
+    out_nav = z((n_kf + 1, es.N_NAV))
     store = [z((n_kf + 1, kf.N_STATES))] + [z((n_kf + 1, kf.N_STATES, kf.N_STATES)) for _ in range(3)]
     kf.run_filter(0, n_kf, steps, t_mech, phi_b, dv_b, z(n_kf + 1), np.zeros(n_kf + 1, np.int8),
                   np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), z(0), np.full(kf.N_STATES, 1e-12), params, nav,
-                  z(kf.N_CAL), np.diag(sd ** 2), z(kf.N_NOMINAL), out_nav, z((n_kf + 1, kf.N_CAL)), *store,
+                  z(es.N_CAL), np.diag(sd ** 2), z(es.N_NOMINAL), out_nav, z((n_kf + 1, es.N_CAL)), *store,
                   np.zeros(n_kf + 1, np.int32), z(0), z((n_kf + 1, 3)))
     r_m, r_n = earth.radii(lat)
     moved = np.array([out_nav[-1, kf.LON] * (r_n + h) * np.cos(lat), (out_nav[-1, kf.LAT] - lat) * (r_m + h),
@@ -125,7 +126,7 @@ def test_level_prior_is_the_accelerometer_error_so_a_stand_learns_no_bias(defaul
     scn, log = default_log
     cfg = positioning_config(scn)
     q_nb0 = euler_to_quat(0.03, -0.02, 1.1)
-    nav = np.zeros(kf.N_NAV)
+    nav = np.zeros(es.N_NAV)
     nav[:3] = log.survey_llh[0]
     nav[kf.QUAT] = q_nb0
     g = earth.normal_gravity(log.survey_llh[0, 0], log.survey_llh[0, 2])
@@ -223,13 +224,13 @@ def test_nonorthogonality_states_move_the_velocity_as_the_mechanization_does():
     t_mech = np.arange(steps + 1) * dt
     phi_b = np.tile(quat_rotate(quat_conj(q), earth.earth_rate_n(lat)) * dt, (steps, 1))
     dv_b = np.tile(f_b * dt, (steps, 1))
-    nav0 = np.zeros(kf.N_NAV)
+    nav0 = np.zeros(es.N_NAV)
     nav0[:3] = lat, 0.0, h
     nav0[kf.QUAT] = q
     da = np.array([3e-4, -2e-4, 5e-4])
     vel = []
     for a in (np.zeros(3), da):
-        nav, cal = nav0.copy(), np.zeros(kf.N_CAL)
+        nav, cal = nav0.copy(), np.zeros(es.N_CAL)
         cal[kf.CAL_NONORTH] = a
         kf.mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, 0, steps)
         vel.append(nav[kf.VEL])

@@ -17,6 +17,7 @@ from estimators.io.logformat import (
     read_estimate,
     write_estimate,
 )
+from estimators.kalman import error_state as es
 from estimators.shearer import odometer_filter as kf
 from estimators.shearer import rail_fix_update as rf
 from estimators.shearer import rail_kinematics as rk
@@ -185,7 +186,7 @@ def test_a_shrinking_fault_is_readmitted_only_once_its_fix_passes_the_residual_t
     cfg = Config(imu=ImuNoise(gyro_arw=1e-6, accel_vrw=1e-5, gyro_bias=1e-7, accel_bias=1e-5))
     det = cfg.detector
     params = rk.detector_params(det, "fsprt")
-    nav = np.zeros(kf.N_NAV)
+    nav = np.zeros(es.N_NAV)
     nav[kf.LAT], nav[kf.QUAT] = 0.5, (1.0, 0.0, 0.0, 0.0)
     r_m = 6.36e6  # metres per radian of latitude near 0.5 rad (the fix offsets are small)
     p0 = np.eye(kf.N_STATES) * 1e-4
@@ -198,7 +199,7 @@ def test_a_shrinking_fault_is_readmitted_only_once_its_fix_passes_the_residual_t
         x, p = np.zeros(kf.N_STATES), p0.copy()  # the same prior at every fix: only the offsets differ
         llh = np.array([nav[kf.LAT] - offset_north / r_m, 0.0, 0.0])
         fix_k = _one_fix(llh, np.eye(3) * 1e-4, advance, 0.0)
-        return rf.rail_fix_update(x, p, nav, np.zeros(kf.N_CAL), np.zeros(3), fix_k, 0, x.copy(), p0.copy(), params,
+        return rf.rail_fix_update(x, p, nav, np.zeros(es.N_CAL), np.zeros(3), fix_k, 0, x.copy(), p0.copy(), params,
                                   detectors, stats)
 
     assert all(fix(0.01 * rng.standard_normal()) for _ in range(det.window + 5))
@@ -264,7 +265,7 @@ def test_a_fix_is_judged_against_at_least_the_error_the_filter_cannot_share(var_
     judged against at least its stroke's spread: one stroke a few centimetres off is not a fault."""
     det = Config(imu=ImuNoise(gyro_arw=1e-6, accel_vrw=1e-5, gyro_bias=1e-7, accel_bias=1e-5)).detector
     params = rk.detector_params(det, "fsprt")
-    nav = np.zeros(kf.N_NAV)
+    nav = np.zeros(es.N_NAV)
     nav[kf.LAT], nav[kf.QUAT] = 0.5, (1.0, 0.0, 0.0, 0.0)
     r_m = 6.36e6
     p0, r_fix = np.eye(kf.N_STATES) * 1e-6, np.eye(3) * 0.047 ** 2  # the fix's R as cpoem.predict_fixes makes it
@@ -276,7 +277,7 @@ def test_a_fix_is_judged_against_at_least_the_error_the_filter_cannot_share(var_
         x, p = np.zeros(kf.N_STATES), p0.copy()
         llh = np.array([nav[kf.LAT] - offset_north / r_m, 0.0, 0.0])
         fix_k = _one_fix(llh, r_fix, np.array([0.0, 1.0, 0.0]), floor)
-        rf.rail_fix_update(x, p, nav, np.zeros(kf.N_CAL), np.zeros(3), fix_k, 0, x.copy(), p0.copy(), params, detectors,
+        rf.rail_fix_update(x, p, nav, np.zeros(es.N_CAL), np.zeros(3), fix_k, 0, x.copy(), p0.copy(), params, detectors,
                            stats)
 
     for _ in range(det.window + 5):
