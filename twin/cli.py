@@ -54,16 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         if args.command == "run":
-            if args.seed is not None and args.seed < 0:
-                raise ScenarioError(f"--seed: must be >= 0 (got {args.seed})")
-            if args.trials < 1:
-                raise ScenarioError(f"--trials: must be >= 1 (got {args.trials})")
-            if not 1 <= args.workers <= args.trials:
-                raise ScenarioError(f"--workers: must be >= 1 and <= --trials (got {args.workers} for "
-                                    f"{args.trials} trials)")
-            if args.ray is not None and args.workers > 1:
-                raise ScenarioError("--workers and --ray exclude each other: Ray runs the trials on the "
-                                    "cluster's CPUs")
+            api.check_trials(args.trials, args.workers, args.ray, ("--trials", "--workers", "--ray"))
             api.run(args.scenario or default_scenario(), args.out, args.seed, args.trials, force=args.force,
                     quiet=args.quiet, sensors=not args.twin_only, workers=args.workers, ray_address=args.ray)
         elif args.command == "estimate":

@@ -100,36 +100,40 @@ def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Pat
     out = Path(out) if out is not None else Path("runs") / f"{scenario.name}-seed{scenario.seed}"
     if not isinstance(scenario, Scenario):
         return _run_paper(scenario, out, force, quiet)
-    if trials < 1:
-        raise ScenarioError(f"trials: must be >= 1 (got {trials})")
-    if not 1 <= workers <= trials:
-        raise ScenarioError(f"workers: must be >= 1 and <= trials (got {workers} for {trials} trials)")
+    check_trials(trials, workers, ray_address)
     return _run_face(scenario, source, out, force, quiet, trials, sensors, workers, ray_address)
+
+
+def check_trials(trials: int, workers: int, ray_address: str | None,
+                 names: tuple[str, str, str] = ("trials", "workers", "ray_address")) -> None:
+    """ScenarioError (one line) for a Monte Carlo request that cannot run; `names` are the arguments as the caller
+    spells them (the CLI: its flags)."""
+    n_trials, n_workers, n_ray = names
+    if trials < 1:
+        raise ScenarioError(f"{n_trials}: must be >= 1 (got {trials})")
+    if not 1 <= workers <= trials:
+        raise ScenarioError(f"{n_workers}: must be >= 1 and <= {n_trials} (got {workers} for {trials} trials)")
+    if ray_address is not None and workers > 1:
+        raise ScenarioError(f"{n_workers} and {n_ray} exclude each other: Ray runs the trials on the cluster's CPUs")
 
 
 def _run_paper(exp: Experiment | Turntable, out: Path, force: bool, quiet: bool) -> Run:
     """A paper's experiment (000's SINS experiments, 002's turntable): run, write the run directory, print ours
     beside the paper's."""
-    if isinstance(exp, Turntable):
-        from twin.papers import turntable
-
-        def compute(tt: Turntable):
-            return turntable.run_turntable(tt)  # (result, table rows)
-
-        write = turntable.write_run
-    else:
-        from twin.papers import sins_experiments, sins_rundir
-
-        def compute(e: Experiment):
-            result = sins_experiments.run_experiment(e)
-            return result, result.table
-
-        write = sins_rundir.write_run
     check_target(out, force)
     start = time.perf_counter()
-    result, rows = compute(exp)
+    if isinstance(exp, Turntable):
+        from twin.papers import turntable as paper
+
+        result, rows = paper.run_turntable(exp)
+    else:
+        from twin.papers import sins_experiments
+        from twin.papers import sins_rundir as paper
+
+        result = sins_experiments.run_experiment(exp)
+        rows = result.table
     with atomic_run_dir(out, force) as staging:
-        write(staging, exp, result)
+        paper.write_run(staging, exp, result)
     if not quiet:
         print("\n".join(rows))
         print(f"\n{time.perf_counter() - start:.1f} s; run directory: {out}")
