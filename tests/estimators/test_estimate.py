@@ -6,7 +6,7 @@ import pytest
 import estimators
 from estimators.io.log import log_from_columns
 from estimators.io.logformat import STREAMS, write_stream
-from estimators.shearer.config import PositioningError
+from estimators.shearer.config import Config, PositioningError
 from estimators.shearer.methods import METHODS
 from estimators.shearer.solution import Solution
 from tests.conftest import simulated
@@ -35,10 +35,10 @@ def test_one_method_gives_a_solution_and_several_a_dict_from_a_run_directory_or_
     assert np.array_equal(both["dr"].llh, one.llh) and np.array_equal(both["dr"].q_nb, one.q_nb)
 
 
-def test_default_config_runs_and_an_unknown_method_names_the_methods(default_streams):
+def test_appendix_a_config_runs_and_an_unknown_method_names_the_methods(default_streams):
     _, streams = default_streams
     log = log_from_columns(*(streams[name] for name in LOG_STREAMS))
-    assert np.isfinite(estimators.estimate(log, "dr").llh).all()  # Config.appendix_a()
+    assert np.isfinite(estimators.estimate(log, "dr", Config.appendix_a()).llh).all()
     with pytest.raises(PositioningError, match="unknown method 'cusum'") as err:
-        estimators.estimate(log, ("dr", "cusum"))
+        estimators.estimate(log, ("dr", "cusum"), Config.appendix_a())
     assert all(name in str(err.value) for name in METHODS)
