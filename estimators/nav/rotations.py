@@ -1,4 +1,5 @@
-"""Rotation algebra (vectorised over leading dimensions).
+"""Rotation algebra on NumPy arrays, vectorised over leading dimensions: estimators.nav.rotation_kernels' numba
+kernels (the one definition) run over the rows of the broadcast arguments.
 
 Conventions
 -----------
@@ -13,7 +14,10 @@ Conventions
 * Rotation vectors ``phi`` (axis * angle) map to ``exp(phi/2)``.
 
 Vectors have shape ``(...,3)``, quaternions ``(...,4)``, matrices
-``(...,3,3)``; Euler angles are arrays of shape ``(...)``.
+``(...,3,3)``; Euler angles are arrays of shape ``(...)``.  Inputs may be
+lists or arrays of any real dtype; results are float64 arrays (floats for
+scalar Euler angles).  The kernels' names (qmul, qexp, ...) are re-exported
+for the sequential kernels.
 """
 
 from __future__ import annotations
@@ -21,60 +25,149 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from estimators.nav import rotation_kernels as K
+from estimators.nav.rotation_kernels import (
+    cross3,
+    mat_rotvec,
+    qexp,
+    qmul,
+    qrot,
+    quat_mat,
+    rotvec_mat,
+    skew3,
+)
+
 __all__ = [
-    "skew",
-    "quat_mul",
+    "cross3",
+    "euler_to_mat",
+    "euler_to_quat",
+    "heading_deg_cw_from_north",
+    "mat_rotvec",
+    "mat_to_euler",
+    "mat_to_quat",
+    "qexp",
+    "qmul",
+    "qrot",
     "quat_conj",
+    "quat_mat",
+    "quat_mul",
     "quat_normalize",
     "quat_rotate",
-    "quat_to_mat",
-    "mat_to_quat",
-    "rotvec_to_quat",
-    "quat_to_rotvec",
-    "euler_to_mat",
-    "mat_to_euler",
-    "euler_to_quat",
     "quat_to_euler",
-    "heading_deg_cw_from_north",
-    "cross3",
-    "qmul",
-    "qexp",
-    "qrot",
-    "skew3",
-    "quat_mat",
+    "quat_to_mat",
+    "quat_to_rotvec",
     "rotvec_mat",
-    "mat_rotvec",
+    "rotvec_to_quat",
+    "skew",
+    "skew3",
 ]
 
-# Below this angle [rad] the series of sin(x/2)/x resp. atan(x)/x are used;
-# with the terms kept the truncation error is < 1e-19 relative.
-_SMALL_ANGLE = 1e-3
+_VEC, _QUAT, _MAT, _ANGLE = (3,), (4,), (3, 3), ()
+
+
+def _rows(kernel, out_core, *args):
+    """``kernel(*rows, out)`` over the rows of ``args`` = (value, core shape) pairs, their leading dimensions
+    broadcast by NumPy's rules; the result has shape ``leading + out_core``."""
+    arrays, leads = [], []
+    for value, core in args:
+        a = np.asarray(value, dtype=np.float64)
+        k = a.ndim - len(core)
+        if k < 0 or a.shape[k:] != core:
+            raise ValueError(f"expected an array of shape (..., {', '.join(map(str, core))}), got {a.shape}")
+        arrays.append(a)
+        leads.append(a.shape[:k])
+    lead = leads[0] if leads.count(leads[0]) == len(leads) else np.broadcast_shapes(*leads)
+    rows = [
+        np.ascontiguousarray(a if a_lead == lead else np.broadcast_to(a, lead + core)).reshape((-1, *core))
+        for a, a_lead, (_, core) in zip(arrays, leads, args)
+    ]
+    out = np.empty((rows[0].shape[0], *out_core))
+    kernel(*rows, out)
+    return out.reshape(lead + out_core)
+
+
+@nb.njit(cache=True)
+def _skew_rows(v, out):
+    for i in range(out.shape[0]):
+        out[i] = skew3(v[i])
+
+
+@nb.njit(cache=True)
+def _quat_mul_rows(p, q, out):
+    for i in range(out.shape[0]):
+        K.qmul_into(p[i], q[i], out[i])
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _quat_normalize_rows(q, out):
+    for i in range(out.shape[0]):
+        K.qnormalize_into(q[i], out[i])
+
+
+@nb.njit(cache=True)
+def _quat_rotate_rows(q, v, out):
+    for i in range(out.shape[0]):
+        K.qrot_into(q[i], v[i], out[i])
+
+
+@nb.njit(cache=True)
+def _quat_to_mat_rows(q, out):
+    for i in range(out.shape[0]):
+        K.quat_mat_into(q[i], out[i])
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _mat_to_quat_rows(c, out):
+    for i in range(out.shape[0]):
+        K.mat_quat_into(c[i], out[i])
+
+
+@nb.njit(cache=True)
+def _rotvec_to_quat_rows(phi, out):
+    for i in range(out.shape[0]):
+        K.qexp_into(phi[i], out[i])
+
+
+@nb.njit(cache=True, error_model="numpy")
+def _quat_to_rotvec_rows(q, out):
+    for i in range(out.shape[0]):
+        K.quat_rotvec_into(q[i], out[i])
+
+
+@nb.njit(cache=True)
+def _euler_to_mat_rows(pitch, roll, yaw, out):
+    for i in range(out.shape[0]):
+        K.euler_mat_into(pitch[i], roll[i], yaw[i], out[i])
+
+
+@nb.njit(cache=True)
+def _euler_to_quat_rows(pitch, roll, yaw, out):
+    for i in range(out.shape[0]):
+        K.euler_quat_into(pitch[i], roll[i], yaw[i], out[i])
+
+
+@nb.njit(cache=True)
+def _mat_to_euler_rows(c, out):
+    for i in range(out.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = K.mat_euler(c[i])
+
+
+@nb.njit(cache=True)
+def _quat_to_euler_rows(q, out):
+    c = np.empty((3, 3))
+    for i in range(out.shape[0]):
+        K.quat_mat_into(q[i], c)
+        out[i, 0], out[i, 1], out[i, 2] = K.mat_euler(c)
 
 
 def skew(v):
     """Cross-product matrix ``[v]x`` with ``skew(v) @ u == cross(v, u)``."""
-    v = np.asarray(v, dtype=float)
-    x, y, z = v[..., 0], v[..., 1], v[..., 2]
-    o = np.zeros_like(x)
-    return np.stack(
-        [
-            np.stack([o, -z, y], axis=-1),
-            np.stack([z, o, -x], axis=-1),
-            np.stack([-y, x, o], axis=-1),
-        ],
-        axis=-2,
-    )
+    return _rows(_skew_rows, _MAT, (v, _VEC))
 
 
 def quat_mul(p, q):
     """Hamilton product ``p * q``; ``q_ac = quat_mul(q_ab, q_bc)``."""
-    p = np.asarray(p, dtype=float)
-    q = np.asarray(q, dtype=float)
-    pw, pv = p[..., :1], p[..., 1:]
-    qw, qv = q[..., :1], q[..., 1:]
-    w = pw * qw - np.sum(pv * qv, axis=-1, keepdims=True)
-    v = pw * qv + qw * pv + np.cross(pv, qv)
-    return np.concatenate([w, v], axis=-1)
+    return _rows(_quat_mul_rows, _QUAT, (p, _QUAT), (q, _QUAT))
 
 
 def quat_conj(q):
@@ -85,8 +178,7 @@ def quat_conj(q):
 
 def quat_normalize(q):
     """Scale ``q`` to unit norm."""
-    q = np.asarray(q, dtype=float)
-    return q / np.linalg.norm(q, axis=-1, keepdims=True)
+    return _rows(_quat_normalize_rows, _QUAT, (q, _QUAT))
 
 
 def quat_rotate(q, v):
@@ -94,28 +186,12 @@ def quat_rotate(q, v):
 
     With ``q = q_nb`` this maps b components to n components.
     """
-    q = np.asarray(q, dtype=float)
-    v = np.asarray(v, dtype=float)
-    w, u = q[..., :1], q[..., 1:]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+    return _rows(_quat_rotate_rows, _VEC, (q, _QUAT), (v, _VEC))
 
 
 def quat_to_mat(q):
     """Direction cosine matrix of unit quaternion ``q`` (``q_nb -> C_b^n``)."""
-    q = np.asarray(q, dtype=float)
-    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    return np.stack(
-        [
-            np.stack([1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy)], axis=-1),
-            np.stack([2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx)], axis=-1),
-            np.stack([2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy)], axis=-1),
-        ],
-        axis=-2,
-    )
+    return _rows(_quat_to_mat_rows, _MAT, (q, _QUAT))
 
 
 def mat_to_quat(C):
@@ -125,44 +201,16 @@ def mat_to_quat(C):
     largest ``|q_i|`` (largest of trace, C00, C11, C22) is normalised, so
     no small pivot is ever divided by.
     """
-    C = np.asarray(C, dtype=float)
-    c00, c01, c02 = C[..., 0, 0], C[..., 0, 1], C[..., 0, 2]
-    c10, c11, c12 = C[..., 1, 0], C[..., 1, 1], C[..., 1, 2]
-    c20, c21, c22 = C[..., 2, 0], C[..., 2, 1], C[..., 2, 2]
-    tr = c00 + c11 + c22
-    # Row i equals 4 q_i * [w, x, y, z] (for i = w, x, y, z).
-    cand = np.stack(
-        [
-            np.stack([1 + tr, c21 - c12, c02 - c20, c10 - c01], axis=-1),
-            np.stack([c21 - c12, 1 + 2 * c00 - tr, c01 + c10, c02 + c20], axis=-1),
-            np.stack([c02 - c20, c01 + c10, 1 + 2 * c11 - tr, c12 + c21], axis=-1),
-            np.stack([c10 - c01, c02 + c20, c12 + c21, 1 + 2 * c22 - tr], axis=-1),
-        ],
-        axis=-2,
-    )
-    pivot = np.argmax(np.stack([tr, c00, c11, c22], axis=-1), axis=-1)
-    q = np.take_along_axis(cand, pivot[..., None, None], axis=-2)[..., 0, :]
-    q = quat_normalize(q)
-    return np.where(q[..., :1] < 0, -q, q)
+    return _rows(_mat_to_quat_rows, _QUAT, (C, _MAT))
 
 
 def rotvec_to_quat(phi):
     """Quaternion ``exp(phi/2) = [cos(|phi|/2), sin(|phi|/2) phi/|phi|]``.
 
-    Exact; ``sin(x/2)/x`` uses its Taylor series below 1e-3 rad, so the
-    result is accurate to rounding for any small angle including 0.
+    Exact; below 1e-8 rad the series of ``cos(x/2)`` and ``sin(x/2)/x``
+    (equal to them in double precision there) avoids 0/0.
     """
-    phi = np.asarray(phi, dtype=float)
-    ang = np.linalg.norm(phi, axis=-1, keepdims=True)
-    small = ang < _SMALL_ANGLE
-    a2 = ang * ang
-    safe = np.where(small, 1.0, ang)
-    k = np.where(
-        small,
-        0.5 - a2 / 48.0 + a2 * a2 / 3840.0,
-        np.sin(0.5 * safe) / safe,
-    )
-    return np.concatenate([np.cos(0.5 * ang), k * phi], axis=-1)
+    return _rows(_rotvec_to_quat_rows, _QUAT, (phi, _VEC))
 
 
 def quat_to_rotvec(q):
@@ -171,38 +219,17 @@ def quat_to_rotvec(q):
     ``q`` is normalised and its sign chosen with ``w >= 0`` first; a series
     for ``atan(x)/x`` keeps small angles accurate.
     """
-    q = quat_normalize(q)
-    q = np.where(q[..., :1] < 0, -q, q)
-    w, v = q[..., :1], q[..., 1:]
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    small = n < _SMALL_ANGLE  # then w > 0.9999995
-    safe_n = np.where(small, 1.0, n)
-    safe_w = np.where(small, w, 1.0)
-    r2 = (n / safe_w) ** 2  # tan^2(angle/2); used only where small
-    k = np.where(
-        small,
-        2.0 / safe_w * (1.0 - r2 / 3.0 + r2 * r2 / 5.0),
-        2.0 * np.arctan2(safe_n, w) / safe_n,
-    )
-    return k * v
+    return _rows(_quat_to_rotvec_rows, _VEC, (q, _QUAT))
 
 
 def euler_to_mat(pitch, roll, yaw):
     """``C_b^n = Rz(yaw) Rx(pitch) Ry(roll)``."""
-    pitch, roll, yaw = np.broadcast_arrays(
-        np.asarray(pitch, float), np.asarray(roll, float), np.asarray(yaw, float)
-    )
-    sp, cp = np.sin(pitch), np.cos(pitch)
-    sr, cr = np.sin(roll), np.cos(roll)
-    sy, cy = np.sin(yaw), np.cos(yaw)
-    return np.stack(
-        [
-            np.stack([cy * cr - sy * sp * sr, -sy * cp, cy * sr + sy * sp * cr], axis=-1),
-            np.stack([sy * cr + cy * sp * sr, cy * cp, sy * sr - cy * sp * cr], axis=-1),
-            np.stack([-cp * sr, sp, cp * cr], axis=-1),
-        ],
-        axis=-2,
-    )
+    return _rows(_euler_to_mat_rows, _MAT, (pitch, _ANGLE), (roll, _ANGLE), (yaw, _ANGLE))
+
+
+def _angles(rows):
+    """(pitch, roll, yaw) of an array ``(..., 3)`` of them, each ``(...)`` (a float for one)."""
+    return rows[..., 0][()], rows[..., 1][()], rows[..., 2][()]
 
 
 def mat_to_euler(C):
@@ -213,35 +240,17 @@ def mat_to_euler(C):
     with ``C`` near gimbal lock (|pitch| = pi/2, where only yaw + roll or
     yaw - roll is observable); exactly at the lock roll is set to 0.
     """
-    C = np.asarray(C, dtype=float)
-    c20, c21, c22 = C[..., 2, 0], C[..., 2, 1], C[..., 2, 2]
-    cp = np.hypot(c20, c22)
-    pitch = np.arctan2(c21, cp)
-    roll = np.where(cp < 1e-12, 0.0, np.arctan2(-c20, c22))
-    sr, cr = np.sin(roll), np.cos(roll)
-    yaw = np.arctan2(
-        C[..., 1, 0] * cr + C[..., 1, 2] * sr, C[..., 0, 0] * cr + C[..., 0, 2] * sr
-    )
-    return pitch, roll, yaw
+    return _angles(_rows(_mat_to_euler_rows, _VEC, (C, _MAT)))
 
 
 def euler_to_quat(pitch, roll, yaw):
     """``q_nb = qz(yaw) * qx(pitch) * qy(roll)``, sign chosen with ``w >= 0``."""
-    pitch, roll, yaw = np.broadcast_arrays(
-        np.asarray(pitch, float), np.asarray(roll, float), np.asarray(yaw, float)
-    )
-    o = np.zeros_like(pitch)
-    hp, hr, hy = 0.5 * pitch, 0.5 * roll, 0.5 * yaw
-    qx = np.stack([np.cos(hp), np.sin(hp), o, o], axis=-1)
-    qy = np.stack([np.cos(hr), o, np.sin(hr), o], axis=-1)
-    qz = np.stack([np.cos(hy), o, o, np.sin(hy)], axis=-1)
-    q = quat_mul(quat_mul(qz, qx), qy)
-    return np.where(q[..., :1] < 0, -q, q)
+    return _rows(_euler_to_quat_rows, _QUAT, (pitch, _ANGLE), (roll, _ANGLE), (yaw, _ANGLE))
 
 
 def quat_to_euler(q):
     """``(pitch, roll, yaw)`` of unit quaternion ``q_nb``."""
-    return mat_to_euler(quat_to_mat(q))
+    return _angles(_rows(_quat_to_euler_rows, _VEC, (q, _QUAT)))
 
 
 def heading_deg_cw_from_north(yaw):
@@ -252,77 +261,3 @@ def heading_deg_cw_from_north(yaw):
     """
     hdg = np.mod(-np.rad2deg(yaw), 360.0)
     return (np.where(hdg >= 360.0, 0.0, hdg) + 0.0)[()]
-
-
-# ------------------------------------------------------------------------------------------------------------
-# Kernel helpers: the same algebra on single vectors, compiled with numba for the sequential kernels
-# (mechanization, filters). One set, used by every kernel of the package.
-
-
-@nb.njit(cache=True)
-def cross3(a, b):
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-@nb.njit(cache=True)
-def qmul(p, q):
-    return np.array([
-        p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3],
-        p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2],
-        p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1],
-        p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0]])
-
-
-@nb.njit(cache=True)
-def qexp(phi):
-    """Unit quaternion of the rotation vector phi (series below 1e-8 rad)."""
-    theta = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
-    if theta < 1e-8:
-        c, s = 1.0 - theta * theta / 8, 0.5 - theta * theta / 48
-    else:
-        c, s = np.cos(0.5 * theta), np.sin(0.5 * theta) / theta
-    return np.array([c, s * phi[0], s * phi[1], s * phi[2]])
-
-
-@nb.njit(cache=True)
-def qrot(q, v):
-    u = q[1:]
-    t = 2.0 * cross3(u, v)
-    return v + q[0] * t + cross3(u, t)
-
-
-@nb.njit(cache=True)
-def skew3(v):
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-@nb.njit(cache=True)
-def quat_mat(q):
-    """C_b^n of q_nb."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
-@nb.njit(cache=True)
-def rotvec_mat(r):
-    """Rotation matrix of the rotation vector r (Rodrigues; series for tiny angles)."""
-    a2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
-    if a2 < 1e-16:
-        s, c = 1.0 - a2 / 6.0, 0.5 - a2 / 24.0
-    else:
-        a = np.sqrt(a2)
-        s, c = np.sin(a) / a, (1.0 - np.cos(a)) / a2
-    k = skew3(r)
-    return np.eye(3) + s * k + c * (k @ k)
-
-
-@nb.njit(cache=True)
-def mat_rotvec(c):
-    """Rotation vector of a rotation matrix (angles below pi)."""
-    cos_a = min(1.0, max(-1.0, 0.5 * (c[0, 0] + c[1, 1] + c[2, 2] - 1)))
-    a = np.arccos(cos_a)
-    v = np.array([c[2, 1] - c[1, 2], c[0, 2] - c[2, 0], c[1, 0] - c[0, 1]])
-    return 0.5 * v if a < 1e-9 else a / (2 * np.sin(a)) * v

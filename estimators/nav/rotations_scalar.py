@@ -1,13 +1,14 @@
-"""Rotation algebra in scalar form, for the kernels: the batched (prange) support filters and fine alignment.
+"""Rotation algebra in scalar form, for the batched (prange) support filters' kernels.
 
-Conventions are estimators.nav.rotations' (scalar-first Hamilton q_nb, C_b^n = Rz(yaw) Rx(pitch) Ry(roll)). Its
-kernel helpers (qmul, qexp, qrot, quat_mat, ...) take and return arrays, a new one per call; these take quaternion
+Conventions are estimators.nav.rotation_kernels' (scalar-first Hamilton q_nb, C_b^n = Rz(yaw) Rx(pitch) Ry(roll)).
+Its array forms (qmul, qexp, qrot, quat_mat, ...) take and return arrays, a new one per call; these take quaternion
 components as scalars or write into arrays the caller allocated once, so a kernel's sample loop allocates nothing.
-Where one repeats an array-form helper it is kept for speed, measured on our support filter's kernel
-(estimators.support.error_state, 200 units, 60 s at 100 Hz, per core on the 2-core development machine): 490-555x
-real time with these, 370-375x with quat_mat in place of `quat_mat_into` (the same numbers), 180-190x with qrot in
-place of `add_rotated` (and 4e-16 apart). Where the formulas differ (qexp's series, quat_to_euler's yaw and
-gimbal-lock case, euler_to_quat's sign) the scalar form is the one the support filters' numbers come from.
+`euler_quat` and `quat_mat_into` are the kernels' own, re-exported here for the support filters. Where one repeats
+an array-form helper it is kept for speed, measured on our support filter's kernel (estimators.support.error_state,
+200 units, 60 s at 100 Hz, per core on the 2-core development machine): 490-555x real time with these, 370-375x
+with quat_mat in place of `quat_mat_into` (the same numbers), 180-190x with qrot in place of `add_rotated` (and
+4e-16 apart). Where the formulas differ (qexp's series against `exp_half`'s, rotation_kernels.mat_euler's yaw and
+gimbal-lock case against `quat_euler`'s) the scalar form is the one the support filters' numbers come from.
 
 The njit helpers are inlined into the calling kernel (inline="always") and so compiled with its fast-math flags
 (the support kernels': estimators.support.kernel_math.FASTMATH); the register_jitable ones also serve NumPy arrays.
@@ -15,18 +16,29 @@ The njit helpers are inlined into the calling kernel (inline="always") and so co
 
 from __future__ import annotations
 
-import math
-
 import numba as nb
 import numpy as np
 from numba.extending import register_jitable
+
+from estimators.nav.rotation_kernels import euler_quat, quat_mat_into
+
+__all__ = [
+    "add_rotated",
+    "euler_quat",
+    "exp_half",
+    "mul_exp",
+    "normalize_continuous",
+    "quat_euler",
+    "quat_mat_into",
+    "sub_rotated_back",
+]
 
 
 @register_jitable
 def quat_euler(q0, q1, q2, q3):
     """(pitch, roll, yaw) of a quaternion q_nb, normalised first: pitch = asin(C_21), roll = atan2(-C_20, C_22),
     yaw = atan2(-C_01, C_11) of C_b^n (002 eqs. 14, 21 in the project's convention). Unlike
-    rotations.quat_to_euler, no special case at gimbal lock."""
+    rotation_kernels.mat_euler, no special case at gimbal lock."""
     n2 = q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3
     c20 = 2.0 * (q1 * q3 - q0 * q2) / n2
     c21 = 2.0 * (q2 * q3 + q0 * q1) / n2
@@ -37,21 +49,10 @@ def quat_euler(q0, q1, q2, q3):
 
 
 @register_jitable
-def euler_quat(pitch, roll, yaw):
-    """q_nb = qz(yaw) qx(pitch) qy(roll) as four components (unlike rotations.euler_to_quat, w >= 0 is not
-    enforced)."""
-    cp, sp = np.cos(0.5 * pitch), np.sin(0.5 * pitch)
-    cr, sr = np.cos(0.5 * roll), np.sin(0.5 * roll)
-    cy, sy = np.cos(0.5 * yaw), np.sin(0.5 * yaw)
-    return (cy * cp * cr - sy * sp * sr, cy * sp * cr - sy * cp * sr, cy * cp * sr + sy * sp * cr,
-            cy * sp * sr + sy * cp * cr)
-
-
-@register_jitable
 def exp_half(ax, ay, az):
     """(c, s) with exp(a / 2) = [c, s a_x, s a_y, s a_z] for the rotation vector a [rad] (002 eq. 12:
     c = cos(|a|/2), s = sin(|a|/2) / |a|; Taylor series to 4th order below 0.01 rad, exact to 1e-17, where
-    rotations.qexp switches at 1e-8 rad)."""
+    rotation_kernels.qexp switches at 1e-8 rad)."""
     a2 = ax * ax + ay * ay + az * az
     if a2 < 1e-4:
         return 1.0 - a2 / 8.0 + a2 * a2 / 384.0, 0.5 - a2 / 48.0 + a2 * a2 / 3840.0
@@ -73,7 +74,7 @@ def mul_exp(q, a0, a1, a2):
 
 @nb.njit(cache=True, inline="always")
 def add_rotated(q, v, acc):
-    """acc += C_b^n(q) v for a unit q: rotations.qrot added into acc without its three new arrays (2.7x faster in
+    """acc += C_b^n(q) v for a unit q: rotation_kernels.qrot added into acc without its three new arrays (2.7x faster in
     the support kernel, see the module docstring)."""
     w, x, y, z = q[0], q[1], q[2], q[3]
     tx = 2.0 * (y * v[2] - z * v[1])
@@ -95,16 +96,6 @@ def sub_rotated_back(u, q, v, out):
 
 
 @nb.njit(cache=True, inline="always")
-def quat_mat_into(q, c_nb):
-    """C_b^n of the unit quaternion q_nb into c_nb (3, 3): rotations.quat_mat without its new array (1.3x faster in
-    the support kernel, see the module docstring)."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    c_nb[0, 0], c_nb[0, 1], c_nb[0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
-    c_nb[1, 0], c_nb[1, 1], c_nb[1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
-    c_nb[2, 0], c_nb[2, 1], c_nb[2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
-
-
-@nb.njit(cache=True, inline="always")
 def normalize_continuous(q, prev):
     """q normalised in place, its sign chosen on prev's side (q and -q are the same attitude); prev may be q."""
     n = np.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
@@ -113,24 +104,3 @@ def normalize_continuous(q, prev):
     for i in range(4):
         q[i] = q[i] / n
 
-
-@nb.njit(cache=True)
-def euler_mat(pitch, roll, yaw):
-    """C = Rz(yaw) Rx(pitch) Ry(roll) of scalar angles (rotations.euler_to_mat, which broadcasts NumPy arrays, in a
-    kernel's form); fine alignment's large-azimuth error matrix E(phi) with (phi_E, phi_N, phi_U)."""
-    sp, cp = math.sin(pitch), math.cos(pitch)
-    sr, cr = math.sin(roll), math.cos(roll)
-    sy, cy = math.sin(yaw), math.cos(yaw)
-    return np.array([[cy * cr - sy * sp * sr, -sy * cp, cy * sr + sy * sp * cr],
-                     [sy * cr + cy * sp * sr, cy * cp, sy * sr - cy * sp * cr],
-                     [-cp * sr, sp, cp * cr]])
-
-
-@nb.njit(cache=True)
-def mat_euler(c):
-    """Inverse of euler_mat (rotations.mat_to_euler in a kernel's form): (pitch, roll, yaw)."""
-    cp = math.hypot(c[2, 0], c[2, 2])
-    pitch = math.atan2(c[2, 1], cp)
-    roll = 0.0 if cp < 1e-12 else math.atan2(-c[2, 0], c[2, 2])
-    sr, cr = math.sin(roll), math.cos(roll)
-    return pitch, roll, math.atan2(c[1, 0] * cr + c[1, 2] * sr, c[0, 0] * cr + c[0, 2] * sr)

@@ -46,7 +46,6 @@ from estimators.kalman.error_state import (
     CAL_MOUNT,
     CAL_NONORTH,
     CAL_SCALE,
-    DP,
     DV,
     GYRO_BIAS,
     HGT,
@@ -57,7 +56,6 @@ from estimators.kalman.error_state import (
     NOM_FORCE_2,
     ODO_MOUNT,
     ODO_SCALE,
-    PHI,
     QUAT,
     VEL,
 )
@@ -68,8 +66,12 @@ from estimators.kalman.measurements import (
     zero_velocity,
 )
 from estimators.kalman.update import gated_update, joseph_update
-from estimators.nav.earth import gravity_nb, nav_rates, radii_nb
-from estimators.nav.rotations import mat_rotvec, qexp, qmul, quat_mat, rotvec_mat, skew3
+from estimators.nav.rotations import mat_rotvec, quat_mat, rotvec_mat
+from estimators.sins.error_model import (
+    bias_blocks,
+    feed_back_navigation,
+    navigation_block,
+)
 from estimators.sins.strapdown import strapdown_step
 
 # Indices of the kernel's parameter vector.
@@ -89,22 +91,14 @@ def nonorth_matrix(v):
 
 @nb.njit(cache=True)
 def system_matrix(nav, f_n):
-    """F (N_STATES x N_STATES) of the error dynamics at the navigation state `nav` with specific force f_n."""
-    lat, h = nav[LAT], nav[HGT]
-    v = nav[VEL]
-    w_ie, w_en = nav_rates(lat, h, v)
+    """F (N_STATES x N_STATES) of the error dynamics at the navigation state `nav` with specific force f_n: the
+    navigation and bias blocks of estimators.sins.error_model (without the Earth-rate partials), and the
+    non-orthogonality's."""
     c_nb = quat_mat(nav[QUAT])
     f = np.zeros((N_STATES, N_STATES))
-    f[DV, DV] = -skew3(2 * w_ie + w_en)
-    f[DV, PHI] = skew3(f_n)
-    f[DV, ACCEL_BIAS] = c_nb
+    navigation_block(f, nav, f_n, False)
+    bias_blocks(f, c_nb)
     f[DV, ACCEL_NONORTH] = c_nb @ nonorth_matrix(c_nb.T @ f_n)
-    r_m, r_n = radii_nb(lat)
-    f[DV.start + 2, DP.start + 2] = 2 * gravity_nb(lat, h) / np.sqrt((r_m + h) * (r_n + h))
-    f[PHI, PHI] = -skew3(w_ie + w_en)
-    f[PHI, GYRO_BIAS] = -c_nb
-    for i in range(3):
-        f[DP.start + i, DV.start + i] = 1.0
     return f
 
 
@@ -120,14 +114,7 @@ def discretize(f, q_psd, dt):
 @nb.njit(cache=True)
 def apply_correction(nav, cal, x):
     """Feed an error estimate back: corrected navigation state and calibration (in place)."""
-    lat, h = nav[LAT], nav[HGT]
-    r_m, r_n = radii_nb(lat)
-    nav[LAT] -= x[DP.start + 1] / (r_m + h)
-    nav[LON] -= x[DP.start] / ((r_n + h) * np.cos(lat))
-    nav[HGT] -= x[DP.start + 2]
-    nav[VEL] -= x[DV]
-    q = qmul(qexp(x[PHI]), nav[QUAT])
-    nav[QUAT] = q / np.sqrt(np.sum(q * q))
+    feed_back_navigation(nav, x)
     cal[CAL_GYRO] += x[GYRO_BIAS]
     cal[CAL_ACCEL] += x[ACCEL_BIAS]
     cal[CAL_NONORTH] += x[ACCEL_NONORTH]

@@ -27,7 +27,7 @@ from estimators.nav.rotations import (
 )
 from estimators.shearer.config import Config, PositioningError
 from estimators.shearer.cpoem import RamLog
-from estimators.sins.fine_alignment import EPS_A, EPS_W, fine_align
+from estimators.sins.fine_alignment import fine_align
 from estimators.sins.strapdown import compensated_increments
 
 
@@ -104,9 +104,8 @@ def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndar
                      velocity_sigma=cfg.r_zupt, rate_sigma=cfg.r_zaru, on_motion="flag")
     if res.motion_t is None:
         q_nb = res.attitude(min(10.0, 0.5 * n * dt))
-        bias = np.concatenate([np.zeros(EPS_A.start), res.bias[-1]])  # FineAlignment.bias: its states from EPS_A
-        cal[es.CAL_ACCEL.start:es.CAL_ACCEL.start + 2] = bias[EPS_A]
-        cal[es.CAL_GYRO] = bias[EPS_W]
+        cal[es.CAL_ACCEL.start:es.CAL_ACCEL.start + 2] = res.accel_bias[-1]
+        cal[es.CAL_GYRO] = res.gyro_bias[-1]
         p0, r0, _ = quat_to_euler(q_nb)
         notes.append(f"fine alignment over {n * dt:.1f} s of standing: pitch {np.degrees(p0):.3f} deg, roll "
                      f"{np.degrees(r0):.3f} deg, gyro bias {np.round(np.degrees(cal[es.CAL_GYRO]) * 3600, 1)} deg/h")

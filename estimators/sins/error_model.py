@@ -1,76 +1,114 @@
-"""Linear SINS error model in the local-level ENU frame (psi-angle form; 001 eqs. 12-17 without the sensor and
-odometer states, which later filters append).
+"""Linear SINS error model in the local-level ENU frame (psi-angle form; 001 eqs. 12-17), on the shared layout of
+estimators.kalman.error_state: the navigation block (DV, PHI, DP) of F, the IMU-bias blocks, and the feedback of a
+navigation error estimate. The 001 filter (estimators.shearer.odometer_filter), the 000 section 6.4 loop
+(estimators.sins.lever_arm_filter) and the Schuler check below use it.
 
-Error state x = [phi (attitude error of the computed n frame, C_n^n' = I - [phi x]), dv_n (ENU), dlat, dlon, dh]:
+Navigation error (estimate - truth): dv_n (ENU), phi (C_b^n' = (I - [phi x]) C_b^n), dp (ENU metres):
 
-    dphi/dt = -w_in x phi + dw_in - C_nb dw_ib
-    ddv/dt  = f_n x phi + C_nb df - (2 w_ie + w_en) x dv - (2 dw_ie + dw_en) x v + dg
-    dlat/dt = dv_N / (R_M + h) - v_N dh / (R_M + h)^2
-    dlon/dt = dv_E / ((R_N + h) cos L) + v_E tan L dlat / ((R_N + h) cos L) - v_E dh / ((R_N + h)^2 cos L)
-    dh/dt   = dv_U
+    d(dv)/dt  = f_n x phi - (2 w_ie + w_en) x dv - (2 dw_ie + dw_en) x v + dg + C_b^n nabla
+    d(phi)/dt = -(w_ie + w_en) x phi + dw_ie + dw_en - C_b^n eps
+    d(dp)/dt  = dv + (position-rate terms below)
 
-with dw_ie = [0, -w sin L dlat, w cos L dlat], dw_en from the errors of the transport rate, and the free-air
-gravity error dg_U = 2 g dh / R. The named slices below address the blocks. The filters' 22-state layout
-(estimators.kalman.error_state) holds the same navigation error in 001 eq. 12's order (velocity first, position in
-ENU metres, the partials of the Earth and transport rates dropped); this model keeps the attitude-first order and the
-geodetic position whose partials the Schuler check (stationary_day) needs.
+with the free-air gravity error dg_U = 2 g dp_U / R. The Earth- and transport-rate errors dw_ie, dw_en and the
+position-rate terms are the partials of 001 eqs. 13-16 in (dv, dlat, dh), taken to ENU metres by 001 eq. 7's
+diagonal C (dlat = dp_N / (R_M + h), dlon = dp_E / ((R_N + h) cos L), dh = dp_U) with its rate:
+
+    d(dp_E)/dt = dv_E + v_E tan L dp_N / (R_M + h) - v_E dp_U / (R_N + h) + (v_U / (R_N + h) - v_N tan L / (R_M + h)) dp_E
+    d(dp_N)/dt = dv_N - v_N dp_U / (R_M + h) + v_U dp_N / (R_M + h)
+
+(the radii's own rates, of order e^2 v / R, dropped). `earth_partials=False` leaves all of them out, as the 001
+filter does: at a shearer's speed they are below 1e-9 of the kept terms.
 """
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
+from estimators.kalman.error_state import (
+    ACCEL_BIAS,
+    DP,
+    DV,
+    GYRO_BIAS,
+    HGT,
+    LAT,
+    LON,
+    PHI,
+    QUAT,
+    VEL,
+)
 from estimators.nav import earth
-from estimators.nav.rotations import quat_to_mat, skew
+from estimators.nav.earth import gravity_nb, nav_rates, radii_nb
+from estimators.nav.rotations import cross3, qexp, qmul, quat_mat, skew3
 
-PHI = slice(0, 3)
-DV = slice(3, 6)
-DLAT, DLON, DH = 6, 7, 8
-DPOS = slice(6, 9)
-N_STATES = 9
+N_NAV_ERRORS = DP.stop
+"""The navigation error states (DV, PHI, DP), the first blocks of the layout."""
+_E, _N, _U = 0, 1, 2
 
 
-def system_matrix(lat: float, h: float, v_n: np.ndarray, f_n: np.ndarray) -> np.ndarray:
-    """F (9 x 9) of the error dynamics at one state."""
-    r_m, r_n = earth.radii(lat)
+@nb.njit(cache=True)
+def navigation_block(f, nav, f_n, earth_partials):
+    """Write F's navigation block (rows and columns DV, PHI, DP) at the navigation state `nav`
+    (estimators.kalman.error_state's LAT .. QUAT) with specific force f_n (ENU) into f (in place)."""
+    lat, h = nav[LAT], nav[HGT]
+    v = nav[VEL]
+    w_ie, w_en = nav_rates(lat, h, v)
+    r_m, r_n = radii_nb(lat)
+    f[DV, DV] = -skew3(2 * w_ie + w_en)
+    f[DV, PHI] = skew3(f_n)
+    f[DV.start + _U, DP.start + _U] = 2 * gravity_nb(lat, h) / np.sqrt((r_m + h) * (r_n + h))
+    f[PHI, PHI] = -skew3(w_ie + w_en)
+    for i in range(3):
+        f[DP.start + i, DV.start + i] = 1.0
+    if not earth_partials:
+        return
     rm, rn = r_m + h, r_n + h
-    w = earth.OMEGA_IE
     sl, cl, tl = np.sin(lat), np.cos(lat), np.tan(lat)
-    ve, vn, _vu = v_n
-    w_ie = earth.earth_rate_n(lat)
-    w_en = earth.transport_rate_n(lat, h, v_n)
-    # Partial derivatives of w_ie and w_en with respect to (dv, dlat, dh).
-    dwie_dlat = np.array([0.0, -w * sl, w * cl])
+    ve, vn, vu = v[_E], v[_N], v[_U]
+    # Partials of w_ie and w_en in dv, in dp_N (through dlat = dp_N / rm) and in dp_U (= dh).
     dwen_dv = np.array([[0.0, -1.0 / rm, 0.0], [1.0 / rn, 0.0, 0.0], [tl / rn, 0.0, 0.0]])
-    dwen_dlat = np.array([0.0, 0.0, ve / (rn * cl ** 2)])
-    dwen_dh = np.array([vn / rm ** 2, -ve / rn ** 2, -ve * tl / rn ** 2])
-    f = np.zeros((N_STATES, N_STATES))
-    f[PHI, PHI] = -skew(w_ie + w_en)
+    dwie_dpn = np.array([0.0, -earth.OMEGA_IE * sl, earth.OMEGA_IE * cl]) / rm
+    dwen_dpn = np.array([0.0, 0.0, ve / (rn * cl ** 2)]) / rm
+    dwen_dpu = np.array([vn / rm ** 2, -ve / rn ** 2, -ve * tl / rn ** 2])
     f[PHI, DV] = dwen_dv
-    f[PHI, DLAT] = dwie_dlat + dwen_dlat
-    f[PHI, DH] = dwen_dh
-    f[DV, PHI] = skew(f_n)
-    f[DV, DV] = -skew(2 * w_ie + w_en) + skew(v_n) @ dwen_dv
-    f[DV, DLAT] = -np.cross(2 * dwie_dlat + dwen_dlat, v_n)
-    f[DV, DH] = -np.cross(dwen_dh, v_n)
-    f[DV.start + 2, DH] += 2 * earth.normal_gravity(lat, h) / np.sqrt(rm * rn)
-    f[DLAT, DV.start + 1] = 1.0 / rm
-    f[DLAT, DH] = -vn / rm ** 2
-    f[DLON, DV.start] = 1.0 / (rn * cl)
-    f[DLON, DLAT] = ve * tl / (rn * cl)
-    f[DLON, DH] = -ve / (rn ** 2 * cl)
-    f[DH, DV.start + 2] = 1.0
+    f[PHI, DP.start + _N] = dwie_dpn + dwen_dpn
+    f[PHI, DP.start + _U] = dwen_dpu
+    f[DV, DV] += skew3(v) @ dwen_dv
+    f[DV, DP.start + _N] = -cross3(2 * dwie_dpn + dwen_dpn, v)
+    f[DV, DP.start + _U] -= cross3(dwen_dpu, v)
+    f[DP.start + _E, DP.start + _E] = vu / rn - vn * tl / rm
+    f[DP.start + _E, DP.start + _N] = ve * tl / rm
+    f[DP.start + _E, DP.start + _U] = -ve / rn
+    f[DP.start + _N, DP.start + _N] = vu / rm
+    f[DP.start + _N, DP.start + _U] = -vn / rm
+
+
+@nb.njit(cache=True)
+def bias_blocks(f, c_nb):
+    """Write how the gyro bias eps and accelerometer bias nabla (body axes) drive phi and dv into f (in place)."""
+    f[DV, ACCEL_BIAS] = c_nb
+    f[PHI, GYRO_BIAS] = -c_nb
+
+
+@nb.njit(cache=True)
+def feed_back_navigation(nav, x):
+    """Correct the navigation state (in place) by the error estimate x (estimate - truth)."""
+    lat, h = nav[LAT], nav[HGT]
+    r_m, r_n = radii_nb(lat)
+    nav[LAT] -= x[DP.start + _N] / (r_m + h)
+    nav[LON] -= x[DP.start + _E] / ((r_n + h) * np.cos(lat))
+    nav[HGT] -= x[DP.start + _U]
+    nav[VEL] -= x[DV]
+    q = qmul(qexp(x[PHI]), nav[QUAT])
+    nav[QUAT] = q / np.sqrt(np.sum(q * q))
+
+
+def system_matrix(nav: np.ndarray, f_n: np.ndarray, earth_partials: bool = True) -> np.ndarray:
+    """F (N_NAV_ERRORS + the two bias blocks, i.e. ACCEL_BIAS.stop square) at one navigation state."""
+    f = np.zeros((ACCEL_BIAS.stop, ACCEL_BIAS.stop))
+    navigation_block(f, np.asarray(nav, float), np.asarray(f_n, float), earth_partials)
+    bias_blocks(f, quat_mat(np.asarray(nav, float)[QUAT]))
     return f
-
-
-def sensor_input(q_nb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """G_gyro, G_accel (9 x 3): how body-frame gyro and accelerometer errors drive the error state."""
-    mat_nb = quat_to_mat(q_nb)
-    g_gyro = np.zeros((N_STATES, 3))
-    g_accel = np.zeros((N_STATES, 3))
-    g_gyro[PHI] = -mat_nb
-    g_accel[DV] = mat_nb
-    return g_gyro, g_accel
 
 
 def stationary_day(lat: float = np.radians(34.0), hours: float = 24.0, gyro_bias_z: float = np.radians(0.01) / 3600,
@@ -92,18 +130,26 @@ def stationary_day(lat: float = np.radians(34.0), hours: float = 24.0, gyro_bias
     dtheta[0] = dv[0] = 0.0
     q0 = np.array([1.0, 0.0, 0.0, 0.0])  # level, body y north: b = n
     nav = mechanize(t, dtheta, dv, lat, 0.0, 0.0, np.zeros(3), q0, n_samples=1, hold_height=True)
-    r_m, r_n = earth.radii(lat)
     idx = np.arange(0, n, step)
-    keep = np.r_[0:5, DLAT, DLON]
-    a = np.zeros((8, 8))
-    a[:7, :7] = system_matrix(lat, 0.0, np.zeros(3), np.array([0.0, 0.0, gamma]))[np.ix_(keep, keep)]
-    a[:7, 7] = (sensor_input(q0)[0] @ [0.0, 0.0, gyro_bias_z])[keep]
+    keep = horizontal_channels()
+    f = system_matrix(np.r_[lat, 0.0, 0.0, np.zeros(3), q0], np.array([0.0, 0.0, gamma]))
+    a = np.zeros((keep.size + 1, keep.size + 1))
+    a[:-1, :-1] = f[np.ix_(keep, keep)]
+    a[:-1, -1] = (f[:, GYRO_BIAS] @ [0.0, 0.0, gyro_bias_z])[keep]
     transition = expm(a * step / rate)
-    lin = np.zeros((idx.size, 8))
-    lin[0, 7] = 1.0
+    lin = np.zeros((idx.size, keep.size + 1))
+    lin[0, -1] = 1.0
     for k in range(1, idx.size):
         lin[k] = transition @ lin[k - 1]
+    lin_full = np.zeros((idx.size, N_NAV_ERRORS))
+    lin_full[:, keep] = lin[:, :-1]
+    r_m, r_n = earth.radii(lat)
     return {"north": (nav.lat[idx] - lat) * r_m, "east": nav.lon[idx] * r_n * np.cos(lat),
             "phi": -quat_to_rotvec(quat_mul(nav.q_nb[idx], quat_conj(q0))),  # C_n^n' = I - [phi x]
-            "lin_north": lin[:, 5] * r_m, "lin_east": lin[:, 6] * r_n * np.cos(lat), "lin_phi": lin[:, PHI]}
+            "lin_north": lin_full[:, DP.start + _N], "lin_east": lin_full[:, DP.start + _E],
+            "lin_phi": lin_full[:, PHI]}
 
+
+def horizontal_channels() -> np.ndarray:
+    """Indices of the navigation errors without the vertical channel (dv_U, dp_U): the Schuler loop's states."""
+    return np.r_[DV.start + _E, DV.start + _N, PHI.start:PHI.stop, DP.start + _E, DP.start + _N]

@@ -1,11 +1,12 @@
 """Stationary fine alignment of a standing shearer: the 10-state model of 000 section 5.2 run by an EKF, a UKF
 and the "optimized UKF", all sharing one model, one measurement and one loop.
 
-Model, measurements and reset: estimators.sins.alignment_model (state 000 eq. 19: dV_E, dV_N, phi_E, phi_N,
-phi_U, accelerometer and gyro biases; phi the large-azimuth error angles C_b^n = E(phi) C_b^n').
+Model, measurements and reset: estimators.sins.alignment_model (the states of 000 eq. 19 as a selection of the
+shared error-state layout: dv_E, dv_N, phi_E, phi_N, phi_U, gyro and accelerometer biases; phi the large-azimuth
+error angles C_b^n = E(phi) C_b^n').
 
 Loop: increments are summed over blocks of `update_rate` (default 10 Hz); per block the nominal solution
-(C_b^n', v') is mechanized, the filter predicts and updates, and the estimated phi and dV are fed back into the
+(C_b^n', v') is mechanized, the filter predicts and updates, and the estimated phi and dv are fed back into the
 nominal, the covariance following (estimators.sins.alignment_model `reset`). The measurements are linear, so all
 three filters share the exact linear (Kalman, Joseph form) update; they differ in the time update only:
 
@@ -57,9 +58,10 @@ from estimators.nav.rotations import (
     rotvec_mat,
 )
 from estimators.sins.alignment_model import (
+    ACCEL_BIAS,
+    BIASES,
     DV,
-    EPS_A,
-    EPS_W,
+    GYRO_BIAS,
     N_STATES,
     PHI,
     measurement,
@@ -78,7 +80,8 @@ METHODS = ("ekf", "ukf", "optimized_ukf")
 @dataclass
 class FineAlignment:
     """Estimates at each update: t [s] (end of block), q_nb (K, 4), sigma (K, 10) state sigmas after the update
-    (attitude sigmas = uncertainty of the attitude), bias (K, 5) the bias estimates (phi, dV are reset to 0),
+    (attitude sigmas = uncertainty of the attitude), bias (K, 5) the bias states' estimates (alignment_model
+    BIASES: gyro x, y, z, then accelerometer x, y; read by name as gyro_bias, accel_bias; phi, dv are reset to 0),
     nis (K,) normalized innovation squared of each update (dof = number of measurements: 3 with the zero-rate
     update, else 2), the final covariance P, and motion_t: the start [s] of the first window that failed the
     motion test (None: the data look stationary)."""
@@ -91,6 +94,16 @@ class FineAlignment:
     P: np.ndarray
     nis: np.ndarray
     motion_t: float | None = None
+
+    @property
+    def gyro_bias(self) -> np.ndarray:
+        """(K, 3) gyro bias estimates [rad/s] in b (reported - true)."""
+        return self.bias[:, GYRO_BIAS.start - BIASES.start:GYRO_BIAS.stop - BIASES.start]
+
+    @property
+    def accel_bias(self) -> np.ndarray:
+        """(K, 2) accelerometer bias estimates [m/s^2] in b, x and y (reported - true)."""
+        return self.bias[:, ACCEL_BIAS.start - BIASES.start:ACCEL_BIAS.stop - BIASES.start]
 
     @property
     def attitude_sigma(self) -> np.ndarray:
@@ -173,7 +186,7 @@ def _correct(k, c0, c, v, x, p, dth, w, T, r_vel, r_rate, zero_rate, c_out, s_ou
     c_out[k] = c
     for i in range(N_STATES):
         s_out[k, i] = math.sqrt(p[i, i])
-    b_out[k] = x[EPS_A.start:]
+    b_out[k] = x[BIASES]
     return c, v
 
 
@@ -269,11 +282,14 @@ def fine_align(dtheta, dv, dt: float, lat: float, q0_nb, grade_noise: tuple[floa
     q_psd = np.zeros(N_STATES)
     q_psd[DV] = max(vrw, 1e-6) ** 2
     q_psd[PHI] = max(arw, 1e-9) ** 2
-    q_psd[EPS_A] = accel_bias_psd
-    q_psd[EPS_W] = gyro_bias_psd
-    s0 = np.asarray(initial_sigma_rad, float)
-    P = np.diag(np.concatenate([[velocity_sigma ** 2] * 2, s0 ** 2, [max(accel_bias_sigma, tiny) ** 2] * 2,
-                                [max(gyro_bias_sigma, 1e-12) ** 2] * 3]))
+    q_psd[GYRO_BIAS] = gyro_bias_psd
+    q_psd[ACCEL_BIAS] = accel_bias_psd
+    var0 = np.zeros(N_STATES)
+    var0[DV] = velocity_sigma ** 2
+    var0[PHI] = np.asarray(initial_sigma_rad, float) ** 2
+    var0[GYRO_BIAS] = max(gyro_bias_sigma, 1e-12) ** 2
+    var0[ACCEL_BIAS] = max(accel_bias_sigma, tiny) ** 2
+    P = np.diag(var0)
     w = earth.earth_rate_n(lat)
     gamma = float(earth.normal_gravity(lat, h))
     g_n = earth.gravity_n(lat, h)
@@ -282,7 +298,7 @@ def fine_align(dtheta, dv, dt: float, lat: float, q0_nb, grade_noise: tuple[floa
 
     c_out = np.empty((n_upd, 3, 3))
     s_out = np.empty((n_upd, N_STATES))
-    b_out = np.empty((n_upd, N_STATES - EPS_A.start))
+    b_out = np.empty((n_upd, BIASES.stop - BIASES.start))
     nis = np.empty(n_upd)
     args = (dth_b, dv_b, c, np.zeros(2), np.zeros(N_STATES), T, w, rotvec_mat(-w * T), g_n, gamma, q_psd, P, r_vel, r_rate, zero_rate, c_out, s_out, b_out, nis)
     P = _ekf_kernel(*args) if method == "ekf" else _ukf_loop(method, *args)

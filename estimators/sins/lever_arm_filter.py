@@ -5,15 +5,14 @@ at a lever arm r_p sees the lever-arm acceleration (000 eq. 41), which the filte
 increments are compensated first (estimators.sins.installation.compensate_lever_arm, eqs. 48-53). The paper
 gives no filter; this is the one its setting implies:
 
-* 15 error states: the navigation errors of estimators.sins.error_model (attitude phi with
-  C_est = (I - [phi x]) C_true, ENU velocity, latitude, longitude, height), the gyro drift and the
-  accelerometer bias (body axes);
+* 15 error states, the first five blocks of estimators.kalman.error_state (ENU velocity, attitude phi with
+  C_b^n' = (I - [phi x]) C_b^n, ENU position in metres, gyro drift, accelerometer bias);
 * propagation per update interval T: the strapdown mechanization of the increments less the estimated
-  biases (estimators.sins.strapdown, two-sample updates), Phi = I + F T + (F T)^2 / 2 with F of the error model
-  at the new state and the sensor blocks of error_model.sensor_input, P <- Phi P Phi^T + G Q G^T;
+  biases (estimators.sins.strapdown, two-sample updates), Phi = I + F T + (F T)^2 / 2 with F of
+  estimators.sins.error_model (with the Earth-rate partials) at the new state, P <- Phi P Phi^T + G Q G^T;
 * observation: the computed velocity, which is the velocity error of a resting reference point, with noise
   `velocity_sigma` (000 eqs. 28-30 through estimators.kalman.update.joseph_update);
-* closed loop: the estimate is fed back after each update (attitude, velocity, position corrected, the biases
+* closed loop: the estimate is fed back after each update (estimators.sins.error_model.feed_back_navigation, the biases
   accumulated and removed from later increments) and the error state restarts at zero.
 """
 
@@ -23,24 +22,31 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimators.kalman.error_state import (
+    ACCEL_BIAS,
+    DP,
+    DV,
+    GYRO_BIAS,
+    HGT,
+    LAT,
+    LON,
+    N_NAV,
+    PHI,
+    QUAT,
+    VEL,
+)
 from estimators.kalman.update import joseph_update
-from estimators.nav.rotations import quat_mul, quat_to_mat, rotvec_to_quat
+from estimators.nav.rotations import quat_to_mat
 from estimators.sins import error_model
 from estimators.sins.strapdown import mechanize
 
-NAV = slice(0, error_model.N_STATES)
-"""The navigation error states of estimators.sins.error_model: phi, dv_n, dlat, dlon, dh."""
-PHI, DV, DLAT, DLON, DH = error_model.PHI, error_model.DV, error_model.DLAT, error_model.DLON, error_model.DH
-BG = slice(9, 12)
-"""Gyro drift [rad/s], body axes."""
-BA = slice(12, 15)
-"""Accelerometer bias [m/s^2], body axes."""
-N_STATES = 15
+N_STATES = ACCEL_BIAS.stop
+"""Navigation errors, gyro drift and accelerometer bias: the shared layout up to the IMU biases."""
 
 VELOCITY_SIGMA0 = 0.01
 """Initial sigma of the velocity error [m/s] (the body starts at rest, its velocity known)."""
-POSITION_VAR0 = (1e-14, 1e-14, 1e-2)
-"""Initial variances of dlat, dlon [rad^2] and dh [m^2] (the reference point's position is surveyed)."""
+POSITION_SIGMA0 = 0.1
+"""Initial sigma of each position error [m] (the reference point's position is surveyed)."""
 NOISE_INFLATION = 1e3
 """Process noise: the sensors' white noise over an update interval, times this (000 gives no tuning)."""
 SAMPLES_PER_STEP = 2
@@ -73,36 +79,35 @@ def align_at_rest(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, q0_nb: np.n
     step = float(t[1] - t[0])
     chunk = max(1, round(1.0 / (s.update_hz * step)))
     dt = chunk * step
-    p = np.diag(np.r_[np.asarray(s.attitude_sigma) ** 2, [VELOCITY_SIGMA0 ** 2] * 3, list(POSITION_VAR0),
-                      [s.gyro_bias_sigma ** 2] * 3, [s.accel_bias_sigma ** 2] * 3])
+    p = np.zeros((N_STATES, N_STATES))
+    p[PHI, PHI] = np.diag(np.asarray(s.attitude_sigma, float) ** 2)
+    p[DV, DV] = np.eye(3) * VELOCITY_SIGMA0 ** 2
+    p[DP, DP] = np.eye(3) * POSITION_SIGMA0 ** 2
+    p[GYRO_BIAS, GYRO_BIAS] = np.eye(3) * s.gyro_bias_sigma ** 2
+    p[ACCEL_BIAS, ACCEL_BIAS] = np.eye(3) * s.accel_bias_sigma ** 2
     hm = np.zeros((3, N_STATES))
     hm[:, DV] = np.eye(3)
     r = np.eye(3) * s.velocity_sigma ** 2
+    g = np.zeros((N_STATES, 6))  # white sensor noise (gyro, accelerometer) into phi and dv
     qn = np.diag(np.r_[[s.gyro_noise ** 2 * dt * NOISE_INFLATION] * 3,
                        [s.accel_noise ** 2 * dt * NOISE_INFLATION] * 3])
-    q, v, bg, ba = np.asarray(q0_nb, float), np.zeros(3), np.zeros(3), np.zeros(3)
+    nav = np.zeros(N_NAV)
+    nav[LAT], nav[LON], nav[HGT], nav[QUAT] = lat, lon, h, q0_nb
+    bg, ba = np.zeros(3), np.zeros(3)
     k_out, q_out = [], []
     for k0 in range(0, t.size - chunk, chunk):
         sl = slice(k0, k0 + chunk + 1)
-        nav = mechanize(t[sl], dtheta[sl] - bg * step, dv[sl] - ba * step, lat, lon, h, v, q,
-                        n_samples=SAMPLES_PER_STEP)
-        lat, lon, h, v, q = nav.lat[-1], nav.lon[-1], nav.h[-1], nav.v_n[-1], nav.q_nb[-1]
-        f_n = quat_to_mat(q) @ (dv[sl][1:].sum(axis=0) / dt - ba)
-        g_gyro, g_accel = error_model.sensor_input(q)
-        f = np.zeros((N_STATES, N_STATES))
-        f[NAV, NAV] = error_model.system_matrix(lat, h, v, f_n)
-        f[NAV, BG], f[NAV, BA] = g_gyro, g_accel
+        sol = mechanize(t[sl], dtheta[sl] - bg * step, dv[sl] - ba * step, nav[LAT], nav[LON], nav[HGT], nav[VEL],
+                        nav[QUAT], n_samples=SAMPLES_PER_STEP)
+        nav[LAT], nav[LON], nav[HGT], nav[VEL], nav[QUAT] = sol.lat[-1], sol.lon[-1], sol.h[-1], sol.v_n[-1], sol.q_nb[-1]
+        f = error_model.system_matrix(nav, quat_to_mat(nav[QUAT]) @ (dv[sl][1:].sum(axis=0) / dt - ba))
         phi = np.eye(N_STATES) + f * dt + f @ f * dt * dt / 2
-        g = np.zeros((N_STATES, 6))
-        g[NAV, :3], g[NAV, 3:] = g_gyro, g_accel
+        g[:, :3], g[:, 3:] = f[:, GYRO_BIAS], f[:, ACCEL_BIAS]
         p = phi @ p @ phi.T + g @ qn @ g.T
         x = np.zeros(N_STATES)
-        joseph_update(x, p, v, hm, r)  # z = v: the computed velocity minus the zero of the resting point
-        q = quat_mul(rotvec_to_quat(x[PHI]), q)
-        q = q / np.linalg.norm(q)
-        v = v - x[DV]
-        lat, lon, h = lat - x[DLAT], lon - x[DLON], h - x[DH]
-        bg, ba = bg + x[BG], ba + x[BA]
+        joseph_update(x, p, nav[VEL].copy(), hm, r)  # z: the computed velocity minus the zero of the resting point
+        error_model.feed_back_navigation(nav, x)
+        bg, ba = bg + x[GYRO_BIAS], ba + x[ACCEL_BIAS]
         k_out.append(k0 + chunk)
-        q_out.append(q)
+        q_out.append(nav[QUAT].copy())
     return np.array(k_out), np.array(q_out)

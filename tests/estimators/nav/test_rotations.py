@@ -328,3 +328,4 @@ def test_broadcasting_shapes():
     batch = R.quat_to_rotvec(qs)
     for i in range(10):
         np.testing.assert_array_equal(batch[i], R.quat_to_rotvec(qs[i]))
+

@@ -50,12 +50,3 @@ def test_euler_quat_round_trip_and_sign(angles):
     np.testing.assert_allclose(q * np.sign(q[0] or 1.0), w_positive, rtol=0, atol=1e-15)
     np.testing.assert_allclose(S.quat_euler(*(2.0 * q)), angles, rtol=0, atol=1e-12)
 
-
-def test_euler_matrix_and_back_match_the_array_forms():
-    """Large angles included (fine alignment's heading error is tens of degrees)."""
-    angles = RNG.uniform(-1.4, 1.4, size=(20, 3)) * np.array([1.0, 2.0, 2.2])
-    for pitch, roll, yaw in angles:
-        c = S.euler_mat(pitch, roll, yaw)
-        np.testing.assert_allclose(c, R.euler_to_mat(pitch, roll, yaw), rtol=0, atol=1e-15)
-        np.testing.assert_allclose(S.mat_euler(c), R.mat_to_euler(c), rtol=0, atol=1e-12)
-        np.testing.assert_allclose(S.mat_euler(c), (pitch, roll, yaw), rtol=0, atol=1e-12)

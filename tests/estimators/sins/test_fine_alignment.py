@@ -156,6 +156,19 @@ def test_error_free_imu_converges_for_every_method(method):
     assert res.q_nb.shape == (1200, 4) and res.sigma.shape == (1200, 10)
 
 
+def test_the_bias_estimates_are_read_by_name():
+    """An error-free IMU but for a vertical gyro bias of 20 deg/h: the zero-rate update finds it, in gyro_bias's z
+    (the accelerometer estimates, accel_bias, stay near zero: at rest they mimic a tilt)."""
+    dtheta, dv, _, q0, _, _ = stationary("ideal", 60.0, 0)
+    eps = np.radians(20.0 / 3600)
+    dtheta[:, 2] += eps / RATE
+    res = fine_align(dtheta, dv, 1 / RATE, LAT, q0, (0.0, 0.0), ERR0, "ekf", gyro_bias_sigma=np.radians(100 / 3600),
+                     accel_bias_sigma=1e-3)
+    assert res.gyro_bias.shape == (600, 3) and res.accel_bias.shape == (600, 2)
+    assert res.gyro_bias[-1, 2] == pytest.approx(eps, rel=1e-3)
+    assert np.all(np.abs(res.gyro_bias[-1, :2]) < 0.05 * eps) and np.all(np.abs(res.accel_bias[-1]) < 1e-4)
+
+
 def test_ekf_kernel_and_ukf_agree():
     """The numba EKF loop and the Python UKF loop share the model: same answer where the model is linear."""
     a, q_true, _, _ = run("nav-004", 120.0, 5, "ekf")
