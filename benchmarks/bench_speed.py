@@ -218,7 +218,7 @@ def stage_twin(scn) -> tuple[object, float, float]:
     start = time.perf_counter()
     result = simulate(scn)
     wall = time.perf_counter() - start
-    return result, twin_summary(scn, result.tables, wall)["simulated_s"], wall
+    return result, twin_summary(scn, result.tables)["simulated_s"], wall
 
 
 def stage_sensors(scn, tables) -> tuple[dict, int, float]:

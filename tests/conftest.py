@@ -57,6 +57,34 @@ def run(request) -> tuple[Scenario, SimResult]:
     return simulated(request.param)
 
 
+SHORT_RUN_S = 5.0
+"""Length of the `short_default_run` fixture's log [s]."""
+
+
+@pytest.fixture(scope="session")
+def short_default_run(tmp_path_factory) -> Path:
+    """The default scenario's run directory (truth of `simulated`, trial 0's sensors) with every stream cut to its
+    first SHORT_RUN_S seconds: a log `longwall import`, `estimate` and `report` take, for the bad-input tests."""
+    import pyarrow.compute as pc
+
+    from estimators.io.logformat import STREAMS, make_table, write_stream
+    from twin.config.scenario import scenario_to_toml
+    from twin.sensors.streams import imu_truth, sensor_streams
+
+    scn, result = simulated("default")
+    truth = result.tables
+    out = tmp_path_factory.mktemp("short_default") / "run"
+    out.mkdir()
+    for name, cols in {**truth, **sensor_streams(scn, truth, imu_truth(scn, truth["truth_shearer"]))}.items():
+        table = make_table(STREAMS[name], cols)
+        if STREAMS[name].time_order != "none":
+            table = table.filter(pc.less_equal(table["t"], SHORT_RUN_S))
+        write_stream(out, STREAMS[name], table)
+    (out / "scenario.toml").write_text(scenario_to_toml(scn))
+    (out / "metrics.json").write_text('{"twin": {}, "estimators": {}}\n')
+    return out
+
+
 def benchmark_module(name: str) -> ModuleType:
     """benchmarks/NAME.py imported as module NAME (the benchmarks are scripts, not a package)."""
     spec = importlib.util.spec_from_file_location(name, SCENARIO_DIR.parent / "benchmarks" / f"{name}.py")

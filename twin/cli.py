@@ -1,12 +1,17 @@
 """`longwall` command line: a thin layer over the Python API (twin.pipeline.api) and the readers and writers.
 
-Errors are one line on stderr ("longwall: error: ...") with exit code 2; no tracebacks for bad input.
+Errors are one line on stderr ("longwall: error: ...") with exit code 2; no tracebacks for bad input, and a usage
+error is one line too. SIGTERM is handled as Ctrl-C: one line, exit 143 (130 for SIGINT); a run directory is
+written only when complete (twin.pipeline.rundir), so an interrupted run leaves none.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from estimators.io.csv_import import import_csv
@@ -20,10 +25,40 @@ from twin.pipeline.montecarlo import MonteCarloError
 from twin.pipeline.rundir import RunDirError
 
 EXIT_BAD_INPUT = 2
+EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM
+
+
+class Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line ("longwall: error: ..." and where to read the usage)."""
+
+    def error(self, message: str):
+        self.exit(EXIT_BAD_INPUT, f"longwall: error: {message}; see `{self.prog} --help`\n")
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the program is, so it unwinds (and cleans up) as Ctrl-C does."""
+
+
+def _terminate(signum, frame) -> None:
+    raise Terminated
+
+
+@contextmanager
+def sigterm_as_interrupt() -> Iterator[None]:
+    """While the block runs, SIGTERM raises Terminated (in the main thread only; elsewhere nothing changes)."""
+    try:
+        previous = signal.signal(signal.SIGTERM, _terminate)
+    except ValueError:  # not the main thread
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="longwall", description="Longwall face digital twin")
+    parser = Parser(prog="longwall", description="Longwall face digital twin")
     sub = parser.add_subparsers(dest="command", required=True)
     p_run = sub.add_parser("run", help="simulate a scenario and write a run directory")
     p_run.add_argument("scenario", nargs="?", type=Path, help="scenario TOML (default: the shipped default.toml)")
@@ -51,32 +86,43 @@ def main(argv: list[str] | None = None) -> int:
     p_exp.add_argument("--csv", type=Path, required=True, help="folder for the CSV files")
     p_rep = sub.add_parser("report", help="plots of a run directory as one HTML page (DIR/report/report.html)")
     p_rep.add_argument("run_dir", type=Path)
-    args = parser.parse_args(argv)
     try:
-        if args.command == "run":
-            api.check_trials(args.trials, args.workers, args.ray, ("--trials", "--workers", "--ray"))
-            api.run(args.scenario or default_scenario(), args.out, args.seed, args.trials, force=args.force,
-                    quiet=args.quiet, sensors=not args.twin_only, workers=args.workers, ray_address=args.ray)
-        elif args.command == "estimate":
-            api.estimate(args.run_dir, args.quiet)
-        elif args.command == "view":
-            from twin.view.recording import open_viewer
-            open_viewer(args.run_dir)
-        elif args.command == "import":
-            report = import_csv(args.csv_dir, args.out)
-            print(report.summary())
-        elif args.command == "export":
-            for path in export_csv(args.run_dir, args.csv):
-                print(path)
-        elif args.command == "report":
-            from twin.view.report import build_report
-            print(build_report(args.run_dir))
+        args = parser.parse_args(argv)
+    except SystemExit as done:  # --help, or a usage error (one line)
+        return done.code
+    try:
+        with sigterm_as_interrupt():
+            return _command(args)
     except (ScenarioError, RunDirError, LogError, PositioningError, FileNotFoundError, MonteCarloError) as err:
         print(f"longwall: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print("longwall: interrupted; nothing was written", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as err:
+        term = isinstance(err, Terminated)
+        print(f"longwall: stopped by {'SIGTERM' if term else 'Ctrl-C (SIGINT)'}; a run directory is only "
+              f"written when complete", file=sys.stderr)
+        return EXIT_SIGTERM if term else EXIT_SIGINT
+
+
+def _command(args: argparse.Namespace) -> int:
+    """Run the parsed command; 0 when done."""
+    if args.command == "run":
+        api.check_trials(args.trials, args.workers, args.ray, ("--trials", "--workers", "--ray"))
+        api.run(args.scenario or default_scenario(), args.out, args.seed, args.trials, force=args.force,
+                quiet=args.quiet, sensors=not args.twin_only, workers=args.workers, ray_address=args.ray)
+    elif args.command == "estimate":
+        api.estimate(args.run_dir, args.quiet)
+    elif args.command == "view":
+        from twin.view.recording import open_viewer
+        open_viewer(args.run_dir)
+    elif args.command == "import":
+        report = import_csv(args.csv_dir, args.out)
+        print(report.summary())
+    elif args.command == "export":
+        for path in export_csv(args.run_dir, args.csv):
+            print(path)
+    elif args.command == "report":
+        from twin.view.report import build_report
+        print(build_report(args.run_dir))
     return 0
 
 

@@ -15,6 +15,7 @@ from estimators.io.logformat import (
     ODOMETER,
     PUSHRAM,
     SURVEY,
+    LogError,
     read_stream,
 )
 
@@ -69,12 +70,25 @@ def log_from_columns(imu, odometer, survey, pushram=None, mag=None, face_survey=
                **optional)
 
 
+MIN_ROWS = {IMU.name: (2, "two IMU samples give the first sample interval"),
+            ODOMETER.name: (1, "one odometer sample"), SURVEY.name: (1, "the surveyed start pose")}
+"""Fewest rows of the streams the positioning needs, and why."""
+
+
 def load_log(run_dir: Path) -> Log:
     """The streams of a run directory the positioning reads (push rams, magnetometer and face survey optional),
     checked on load."""
     def optional(stream):
         return read_stream(run_dir, stream) if (Path(run_dir) / stream.filename).is_file() else None
 
-    return log_from_columns(read_stream(run_dir, IMU), read_stream(run_dir, ODOMETER), read_stream(run_dir, SURVEY),
+    def required(stream):
+        table = read_stream(run_dir, stream)
+        least, why = MIN_ROWS[stream.name]
+        if table.num_rows < least:
+            raise LogError(f"{Path(run_dir) / stream.filename}: {table.num_rows} rows, the positioning needs at least "
+                           f"{least} ({why}); import a recording that has them")
+        return table
+
+    return log_from_columns(required(IMU), required(ODOMETER), required(SURVEY),
                             optional(PUSHRAM), optional(MAG), optional(FACE_SURVEY))
 

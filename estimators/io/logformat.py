@@ -2,9 +2,10 @@
 
 This is the seam between the twin and the estimators (DESIGN "The sensor log"). Each stream is a table
 whose columns carry their unit in the Parquet field metadata (key b"unit"). `read_stream` checks every
-declared column is present with its unit, that no value is NaN where NaN is not allowed, and that time is
-strictly increasing (or non-decreasing for streams keyed by (t, id)); a problem raises `LogError` with one
-line naming the file, the column and the first offending row.
+declared column is present with its unit and type, that no value is NaN where NaN is not allowed, that time is
+strictly increasing (or non-decreasing for streams keyed by (t, id)) and that sensor values lie within their
+physical limits (estimators.io.plausible); a problem, or a damaged file, raises `LogError` with one line naming
+the file, the column and the first offending row, or how to get the file back.
 """
 
 from __future__ import annotations
@@ -15,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
+
+from estimators.io.plausible import first_implausible
 
 
 class LogError(ValueError):
@@ -242,6 +245,7 @@ FLAG_COVARIANCE_REPAIRED = 16  # the covariance was re-symmetrized / clipped to 
 FLAG_SMOOTHED = 32  # the row is an RTS-smoothed estimate
 FLAG_MAG = 64  # magnetometer yaw update applied
 FLAG_ISOLATED = 128  # the rail kinematics model is isolated (its fault detector holds a fault)
+FLAG_UNHEALTHY = 256  # the health monitor found the filter lost track here (estimators.shearer.health)
 
 ESTIMATE = Stream(
     "estimate",
@@ -366,14 +370,23 @@ def make_table(stream: Stream, data: dict[str, np.ndarray]) -> pa.Table:
 def write_stream(run_dir: Path, stream: Stream, data: dict[str, np.ndarray] | pa.Table) -> Path:
     table = data if isinstance(data, pa.Table) else make_table(stream, data)
     path = Path(run_dir) / stream.filename
-    # Byte-stream split makes smooth float64 series compress about 40 % better than plain zstd.
-    floats = [f.name for f in table.schema if pa.types.is_floating(f.type)]
-    pq.write_table(table, path, compression="zstd", use_dictionary=False, use_byte_stream_split=floats or False)
+    with stream_writer(path, table.schema) as writer:
+        writer.write_table(table)
     return path
 
 
-def check_table(stream: Stream, table: pa.Table, source: str) -> None:
-    """Raise LogError naming the first problem: missing column, wrong unit, NaN, time order."""
+def stream_writer(path: Path, schema: pa.Schema) -> pq.ParquetWriter:
+    """A Parquet writer for a stream file: each `write_table` appends row groups (a log written in blocks)."""
+    # Byte-stream split makes smooth float64 series compress about 40 % better than plain zstd.
+    floats = [f.name for f in schema if pa.types.is_floating(f.type)]
+    return pq.ParquetWriter(path, schema, compression="zstd", use_dictionary=False,
+                            use_byte_stream_split=floats or False)
+
+
+def check_table(stream: Stream, table: pa.Table, source: str, before: dict[str, float] | None = None) -> None:
+    """Raise LogError naming the first problem: missing column, wrong unit or type, NaN, time order, a value
+    outside the physical limits of estimators.io.plausible. `before` holds the row before the table's first
+    (a log checked in blocks)."""
     names = set(table.column_names)
     for c in stream.columns:
         if c.name not in names:
@@ -382,30 +395,59 @@ def check_table(stream: Stream, table: pa.Table, source: str) -> None:
         unit = meta.get(b"unit", b"").decode()
         if unit != c.unit:
             raise LogError(f"{source}: column '{c.name}' has unit '{unit or '(none)'}', expected '{c.unit}'")
+        kind = table.schema.field(c.name).type
+        if kind != (pa.string() if c.dtype == "str" else pa.from_numpy_dtype(np.dtype(c.dtype))):
+            raise LogError(f"{source}: column '{c.name}' has type {kind}, expected {c.dtype} ({c.doc})")
         values = table.column(c.name).to_numpy(zero_copy_only=False)
         if values.dtype.kind == "f" and not c.nan_ok:
             bad = np.flatnonzero(~np.isfinite(values))
             if bad.size:
                 raise LogError(f"{source}: column '{c.name}' row {bad[0]}: not a finite number")
     t = table.column("t").to_numpy() if "t" in names and stream.time_order != "none" else None
+    if t is not None and before is not None and "t" in before:
+        t = np.concatenate(([before["t"]], t))
     if t is not None and t.size > 1:
         dt = np.diff(t)
         bad = np.flatnonzero(dt <= 0 if stream.time_order == "increasing" else dt < 0)
         if bad.size:
             raise LogError(f"{source}: column 't' row {bad[0] + 1}: time goes from {t[bad[0]]!r} to "
                            f"{t[bad[0] + 1]!r} (must be {stream.time_order})")
+    found = first_implausible(stream.name, table, before)
+    if found is not None:
+        row, column, what = found
+        raise LogError(f"{source}: column '{column}' row {row}: {what}")
 
 
-def read_stream(run_dir: Path, stream: Stream) -> pa.Table:
+def read_stream(run_dir: Path, stream: Stream, columns: tuple[str, ...] | None = None) -> pa.Table:
+    """The stream's file in run_dir, checked (check_table); only `columns` (declared names) when given."""
     path = Path(run_dir) / stream.filename
     if not path.is_file():
         raise LogError(f"{path}: stream file not found")
+    if columns is not None:
+        stream = Stream(stream.name, stream.doc, tuple(c for c in stream.columns if c.name in columns),
+                        stream.time_order)
     try:
-        table = pq.read_table(path)
-    except (pa.ArrowInvalid, OSError) as err:
-        raise LogError(f"{path}: not a readable Parquet file ({err})") from None
+        table = pq.read_table(path, columns=None if columns is None else [c.name for c in stream.columns])
+    except (pa.ArrowException, OSError, ValueError) as err:
+        raise LogError(f"{path}: not a readable Parquet file ({' '.join(str(err).split())}); {_remedy(path)}") from None
     check_table(stream, table, str(path))
     return table
+
+
+def read_schema(path: Path) -> pa.Schema:
+    """The schema of a stream or estimate file, LogError when it is not a readable Parquet file."""
+    try:
+        return pq.read_schema(path)
+    except (pa.ArrowException, OSError, ValueError) as err:
+        raise LogError(f"{path}: not a readable Parquet file ({' '.join(str(err).split())}); {_remedy(path)}") from None
+
+
+def _remedy(path: Path) -> str:
+    """How to get a damaged file of a run directory back."""
+    if path.parent.name == ESTIMATES_DIR:
+        return f"run `longwall estimate {path.parent.parent}` again to rewrite the estimates"
+    return ("the run directory is damaged: import the recording again (`longwall import CSV_DIR --out NEW_DIR`) "
+            "or run the scenario again")
 
 
 ESTIMATES_DIR = "estimates"

@@ -1,4 +1,6 @@
-"""Accuracy of an estimate against the truth: position and attitude errors, per-cycle statistics, NEES.
+"""Accuracy of an estimate against the truth: position and attitude errors, per-cycle statistics, NEES; and what
+an estimate says of itself without truth (`self_assessment`: sigmas, flags, distance, survey residuals), all a
+recording from a real face allows.
 
 Inputs are tables as `estimators.io.logformat.read_stream` / `read_estimate` return them (pyarrow tables), or any
 mapping of column name to array with the same columns (the twin's dicts of numpy arrays).
@@ -18,7 +20,17 @@ from collections.abc import Mapping
 import numpy as np
 from scipy.stats import chi2
 
-from estimators.io.logformat import LogError
+from estimators.io.logformat import (
+    FLAG_COVARIANCE_REPAIRED,
+    FLAG_ISOLATED,
+    FLAG_MAG,
+    FLAG_POSITION,
+    FLAG_SKIPPED,
+    FLAG_UNHEALTHY,
+    FLAG_VELOCITY,
+    FLAG_ZUPT,
+    LogError,
+)
 from estimators.nav import earth
 from estimators.nav.rotations import (
     quat_conj,
@@ -184,3 +196,63 @@ def nees_band(dof: int, trials: int, confidence: float = 0.95) -> tuple[float, f
     alpha = 0.5 * (1.0 - confidence)
     lo, hi = chi2.ppf([alpha, 1.0 - alpha], dof * trials) / trials
     return float(lo), float(hi)
+
+
+# ----------------------------------------------------------------------------------------------- without truth
+
+FLAG_COUNTS = {"velocity_updates": FLAG_VELOCITY, "position_fixes": FLAG_POSITION, "zupts": FLAG_ZUPT,
+               "skipped": FLAG_SKIPPED, "covariance_repaired": FLAG_COVARIANCE_REPAIRED, "mag_updates": FLAG_MAG,
+               "isolated": FLAG_ISOLATED, "unhealthy": FLAG_UNHEALTHY}
+"""The flag bits `self_assessment` counts, by the name it gives their count."""
+
+
+def _finite(x) -> float | None:
+    """x as a float, None when not finite (JSON has no NaN)."""
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def survey_residuals(estimate, survey) -> list[dict]:
+    """The estimate against each surveyed fix after its first epoch, before the fix is applied: the estimate at
+    the last epoch before the fix's time minus the surveyed point [m] East/North/Up, and its normalized square
+    over the estimate's and the survey's variances (chi-square with 3 dof for a consistent filter; None without
+    sigmas). A smoother's rows already hold the fix, so its residuals are small by construction."""
+    t = column(estimate, "t")
+    rows = []
+    for k, t_fix in enumerate(column(survey, "t")):
+        i = int(np.searchsorted(t, t_fix, side="left")) - 1
+        if i < 0:
+            continue
+        fix = {key: column(survey, key)[k] for key in ("lat", "lon", "h", "sd_horizontal", "sd_vertical")}
+        d = geodetic_to_enu_offset(column(estimate, "lat")[i:i + 1], column(estimate, "lon")[i:i + 1],
+                                   column(estimate, "h")[i:i + 1], fix["lat"], fix["lon"], fix["h"])[0]
+        var = columns(estimate, "sd_pos")[i] ** 2 + np.array([fix["sd_horizontal"]] * 2 + [fix["sd_vertical"]]) ** 2
+        rows.append({"t_fix": float(t_fix), "t_estimate": float(t[i]), "east": float(d[0]), "north": float(d[1]),
+                     "up": float(d[2]), "horizontal": float(np.hypot(d[0], d[1])),
+                     "nis": _finite(np.sum(d ** 2 / var)) if np.all(var > 0) else None})
+    return rows
+
+
+def self_assessment(estimate, survey=None) -> dict:
+    """What an estimate (ESTIMATE columns) says of itself, needing no truth: its span, the distance along its path
+    [m] (3-D, summed over the epochs), its final and largest one-sigma (position [m] E/N/U and horizontal,
+    attitude [deg]; None without covariance), how many epochs set each flag of FLAG_COUNTS, and its residuals
+    against the survey's fixes (`survey_residuals`, with a survey table)."""
+    t = column(estimate, "t")
+    if t.size == 0:
+        return {"samples": 0}
+    lat, lon, h = (column(estimate, k) for k in ("lat", "lon", "h"))
+    steps = geodetic_to_enu_offset(lat[1:], lon[1:], h[1:], lat[:-1], lon[:-1], h[:-1])
+    sd_pos, sd_att = columns(estimate, "sd_pos"), np.degrees(columns(estimate, "sd_att"))
+    sd_h = np.hypot(sd_pos[:, 0], sd_pos[:, 1])
+    flags = column(estimate, "flags").astype(np.int64)
+    out = {"samples": int(t.size), "t_start": float(t[0]), "t_end": float(t[-1]),
+           "distance_m": float(np.linalg.norm(steps, axis=1).sum()),
+           "final_sd_pos_m": {a: _finite(v) for a, v in zip(("east", "north", "up"), sd_pos[-1])},
+           "final_sd_att_deg": {a: _finite(v) for a, v in zip(ENU, sd_att[-1])},
+           "final_sd_horizontal_m": _finite(sd_h[-1]),
+           "max_sd_horizontal_m": _finite(np.nanmax(sd_h)) if np.isfinite(sd_h).any() else None,
+           "flags": {name: int(np.count_nonzero(flags & bit)) for name, bit in FLAG_COUNTS.items()}}
+    if survey is not None:
+        out["survey_residuals"] = survey_residuals(estimate, survey)
+    return out

@@ -82,10 +82,42 @@ def short_scenario(tmp_path, seed: int):
     return out
 
 
+def rrd_content(path):
+    """An .rrd's stores: the recording's chunks with their ids (twin.view.rrd_stream numbers them); the blueprint's
+    without the store id, chunk and row ids and log_time rerun-sdk 0.41 stamps from the clock there."""
+    reader = RrdReader(str(path))
+    stores = [[(c.id, c.entity_path, c.to_record_batch()) for c in reader.stream(store=s).to_chunks()]
+              for s in reader.recordings()]
+    for store in reader.blueprints():
+        chunks = [(c.entity_path, c.to_record_batch()) for c in reader.stream(store=store).to_chunks()]
+        stores.append(sorted(((entity, batch.drop_columns(["rerun.controls.RowId", "log_time"])
+                               .replace_schema_metadata(None)) for entity, batch in chunks), key=lambda x: x[0]))
+    return [store.recording_id for store in reader.recordings()], stores
+
+
+def assert_same_rrd(a, b):
+    (ids_a, stores_a), (ids_b, stores_b) = rrd_content(a), rrd_content(b)
+    assert ids_a == ids_b and len(stores_a) == len(stores_b)
+    for store_a, store_b in zip(stores_a, stores_b):
+        assert [x[:-1] for x in store_a] == [x[:-1] for x in store_b]
+        for x, y in zip(store_a, store_b):
+            assert x[-1].equals(y[-1], check_metadata=True), x[:-1]
+
+
 def test_same_seed_gives_bit_identical_truth_and_another_seed_does_not(tmp_path):
     a, b = short_scenario(tmp_path, 7), short_scenario(tmp_path, 7)
     for name in TRUTH_FILES:
         assert filecmp.cmp(a / name, b / name, shallow=False), name
+    # Every file of the run directory: the same bytes, but the wall-clock figures (timing.json); the
+    # recordings the same chunks with the same ids.
+    files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
+    assert "wall_s" not in (a / "metrics.json").read_text() and (a / "timing.json").is_file()
+    for name in files:
+        if name.suffix == ".rrd":
+            assert_same_rrd(a / name, b / name)
+        elif name.name != "timing.json":
+            assert filecmp.cmp(a / name, b / name, shallow=False), name
     c = short_scenario(tmp_path, 8)
     # Rows at t = 0 are the initial pans; their bends come from the seed.
     bends = [read_stream(run, STREAMS["truth_pans"]).column("bend_h").to_numpy()[:43] for run in (a, c)]

@@ -22,16 +22,25 @@ from pydantic import BaseModel, Field, model_validator
 from twin.config.experiments import EXPERIMENT_KIND, Experiment, parse_experiment
 from twin.config.imu_grades import GRADES
 from twin.config.section import (
+    Duration,
     Finite,
     NonNegativeFloat,
     PositiveFloat,
     ScenarioError,
     Section,
     Site,
-    Vector3,
+    between,
     validate,
+    vector3,
 )
-from twin.config.sensors import Fault, Sensors
+from twin.config.sensors import (
+    EARTH_FIELD_T,
+    TARGETED,
+    Fault,
+    Sensors,
+    SoftIron,
+    check_soft_iron,
+)
 from twin.config.tomlfile import read_scenario
 from twin.config.turntable import TURNTABLE_KIND, Turntable, parse_turntable
 from twin.face import snake
@@ -54,17 +63,20 @@ class Face(Section):
     bend_limit_vertical_deg: BendLimit = 3.0
     initial_bend_horizontal_deg: Literal["random"] | list[Finite] = "random"
     """Per-chute horizontal bend (pan i+1 yaw minus pan i yaw), pan_count - 1 values, or "random"."""
-    initial_straightness_deg: NonNegativeFloat = 0.3
-    """Standard deviation of the random initial pan yaw (smooth, AR(1) along the face)."""
+    initial_straightness_deg: between(0, 5) = 0.3
+    """Standard deviation of the random initial pan yaw (smooth, AR(1) along the face); at most 5 deg (a face
+    line more crooked cannot be pushed straight within any bend limit)."""
     seam_dip_deg: Annotated[float, Field(ge=-20, le=20, allow_inf_nan=False)] = 0.0
     """Floor slope along the face; positive rises towards the tailgate."""
     advance_dip_deg: Annotated[float, Field(ge=-20, le=20, allow_inf_nan=False)] = 0.0
     """Floor slope in the advance direction; positive rises towards the coal wall."""
     undulation_amplitude_m: NonNegativeFloat = 0.1
-    undulation_wavelength_m: Annotated[float, Field(ge=5, allow_inf_nan=False)] = 30.0
+    undulation_wavelength_m: between(5, 10000) = 30.0
+    """Above 10 km the floor is a plane over any face and panel."""
     web_depth_m: Annotated[float, Field(ge=0.3, le=1.5, allow_inf_nan=False)] = 0.8
-    panel_length_m: PositiveFloat = 20.0
-    """Extent of coal (and floor) in the advance direction; cycles * web_depth_m must fit in it."""
+    panel_length_m: Annotated[float, Field(gt=0, le=6000, allow_inf_nan=False)] = 20.0
+    """Extent of coal (and floor) in the advance direction; cycles * web_depth_m must fit in it. At most 6 km, the
+    longest longwall panels (the floor's height field covers the panel: twin.config.resources counts it)."""
 
 
 class Supports(Section):
@@ -100,7 +112,8 @@ class Stop(Section):
     cycle: Annotated[int, Field(ge=0)]
     at_m: NonNegativeFloat
     """Distance travelled into the cycle's straight cut where the shearer stops."""
-    duration_s: PositiveFloat
+    duration_s: Duration
+    """At most a day (section.Duration)."""
 
 
 class Haulage(Section):
@@ -109,9 +122,10 @@ class Haulage(Section):
     """Speed through coal already cut (the start of a pass over the previous sump)."""
     sump_speed_m_min: Annotated[float, Field(ge=1, le=30, allow_inf_nan=False)] = 6.0
     acceleration_m_s2: Annotated[float, Field(ge=0.005, le=2, allow_inf_nan=False)] = 0.05
-    reversal_stop_s: NonNegativeFloat = 10.0
-    end_push_stop_s: NonNegativeFloat = 30.0
-    """Stop while the end pans are pushed during snake sumping."""
+    reversal_stop_s: between(0, 3600) = 10.0
+    """Stand at each reversal; at most an hour (a longer stand is a scripted stop)."""
+    end_push_stop_s: between(0, 3600) = 30.0
+    """Stop while the end pans are pushed during snake sumping; at most an hour, as the reversal."""
     stops: list[Stop] = []
 
 
@@ -150,12 +164,16 @@ class ShearerPositioning(Section):
     """Magnetic yaw error the magnetometer's white noise does not cover (calibration residual, motor field) [deg]."""
     mag_field_check: bool = True
     """afkf: leave out magnetometer readings whose strength or dip disagrees with the geomagnetic model."""
-    mag_hard_iron_t: Vector3 = [0.0, 0.0, 0.0]
+    mag_hard_iron_t: vector3(2 * EARTH_FIELD_T) = [0.0, 0.0, 0.0]
     """Hard-iron offset [T] of the magnetometer's calibration (estimators.nav.geomagnetic.fit_ellipsoid), removed from
-    the readings before use."""
-    mag_soft_iron_correction: Annotated[list[Vector3], Field(min_length=3, max_length=3)] = [
-        [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
-    """The calibration's S^-1 (rows): calibrated field = S^-1 (reading - hard iron)."""
+    the readings before use; within twice the Earth's field (twin.config.sensors.EARTH_FIELD_T)."""
+    mag_soft_iron_correction: SoftIron = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]
+    """The calibration's S^-1 (rows): calibrated field = S^-1 (reading - hard iron); not singular."""
+
+    @model_validator(mode="after")
+    def _invertible(self) -> ShearerPositioning:
+        check_soft_iron(self.mag_soft_iron_correction, "mag_soft_iron_correction")
+        return self
 
 
 class Estimators(Section):
@@ -196,7 +214,7 @@ class Scenario(Section):
         if sh.shoe_spacing_m >= sh.length_m:
             raise ValueError(f"shearer.shoe_spacing_m: {sh.shoe_spacing_m} m must be shorter than "
                              f"shearer.length_m = {sh.length_m} m")
-        end_zone = sh.length_m + (p.snake_length_pans + p.push_lag_pans + 2) * f.pan_length_m
+        end_zone = sump_length_m(self)
         if 2 * end_zone > length:
             raise ValueError(f"face.pan_count: a {length:.1f} m face is too short for the shearer and the snake "
                              f"at both ends (needs > {2 * end_zone:.1f} m); add pans or shorten the snake")
@@ -213,14 +231,9 @@ class Scenario(Section):
         if f.web_depth_m > max_push:
             raise ValueError(f"pattern.snake_length_pans: {p.snake_length_pans} pans bend at most {max_push:.2f} m "
                              f"within bend_limit_horizontal_deg; web_depth_m {f.web_depth_m} m needs a longer snake")
-        n_supports = len(range(self.supports.pans_per_support // 2, f.pan_count, self.supports.pans_per_support))
+        n_supports = support_count(self)
         for k, fault in enumerate(self.faults):
-            if fault.t_end_s <= fault.t_start_s:
-                raise ValueError(f"faults[{k}]: t_end_s {fault.t_end_s} must be after t_start_s {fault.t_start_s}")
-            needs_target = fault.kind.startswith("ram_") or fault.kind == "push_shortfall"
-            if needs_target and (fault.target is None or fault.target >= n_supports):
-                raise ValueError(f"faults[{k}]: {fault.kind} needs a target support 0..{n_supports - 1} "
-                                 f"(got {fault.target})")
+            _check_fault_target(self, k, fault, n_supports)
         for where, name in (("sensors.imu.grade", self.sensors.imu.grade),
                             ("sensors.support_imu.grade", self.sensors.support_imu.grade)):
             if name not in GRADES:
@@ -232,6 +245,10 @@ class Scenario(Section):
         bad = [j for j in self.sensors.support_imu.supports if j >= n_supports]
         if bad:
             raise ValueError(f"sensors.support_imu.supports: no support {bad[0]} (supports 0..{n_supports - 1})")
+        for a, b in self.sensors.vibration.rock_zones_m:
+            if not a < b <= length:
+                raise ValueError(f"sensors.vibration.rock_zones_m: [{a}, {b}] must be an interval within the "
+                                 f"{length:.1f} m face (from < to <= pan_count * pan_length_m)")
         for stop in self.haulage.stops:
             if stop.cycle >= self.cycles:
                 raise ValueError(f"haulage.stops: stop in cycle {stop.cycle} but the run has {self.cycles} cycles")
@@ -239,6 +256,32 @@ class Scenario(Section):
                 raise ValueError(f"haulage.stops: stop at {stop.at_m} m is beyond the "
                                  f"{travel_length_m(self):.1f} m of travel")
         return self
+
+
+def support_count(scn: Scenario) -> int:
+    """Number of roof supports: one per pans_per_support pans, the first at pan pans_per_support // 2."""
+    return len(range(scn.supports.pans_per_support // 2, scn.face.pan_count, scn.supports.pans_per_support))
+
+
+def _check_fault_target(scn: Scenario, k: int, fault: Fault, n_supports: int) -> None:
+    """ValueError unless the fault acts on a unit the face has (and a push shortfall within the web)."""
+    units = scn.sensors.support_imu.supports
+    if fault.kind in TARGETED and (fault.target is None or fault.target >= n_supports):
+        raise ValueError(f"faults[{k}]: {fault.kind} needs a target support 0..{n_supports - 1} (got {fault.target})")
+    if fault.kind == "mag_interference" and fault.target is not None and fault.target not in units:
+        raise ValueError(f"faults[{k}]: mag_interference target {fault.target} has no canopy unit (units on "
+                         f"supports {units} of sensors.support_imu.supports; no target: the shearer's magnetometer)")
+    if fault.kind not in (*TARGETED, "mag_interference") and fault.target is not None:
+        raise ValueError(f"faults[{k}]: {fault.kind} takes no target (got {fault.target}); remove the key")
+    if fault.kind == "push_shortfall" and fault.value > scn.face.web_depth_m:
+        raise ValueError(f"faults[{k}]: push_shortfall value {fault.value:g} m exceeds face.web_depth_m = "
+                         f"{scn.face.web_depth_m} m (a pan cannot fall short by more than its push)")
+
+
+def sump_length_m(scn: Scenario) -> float:
+    """How far the shearer backs into the snake at a face end: past the snake, its lag and one more pan."""
+    p = scn.pattern
+    return scn.shearer.length_m + (p.push_lag_pans + p.snake_length_pans + 2) * scn.face.pan_length_m
 
 
 def travel_length_m(scn: Scenario) -> float:

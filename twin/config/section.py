@@ -8,18 +8,58 @@ one line naming the file and the key (`format_error`).
 
 from __future__ import annotations
 
-from typing import Annotated
+import datetime
+from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, ValidationError
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegativeFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Vector3 = Annotated[list[Finite], Field(min_length=3, max_length=3)]
 
+Rate = Annotated[float, Field(gt=0, le=2000, allow_inf_nan=False)]
+"""A sampling or update rate [Hz]: above 2 kHz no instrument of a face (nor the papers' simulations) samples."""
+Duration = Annotated[float, Field(gt=0, le=86400, allow_inf_nan=False)]
+"""A simulated span [s]: at most a day (a longwall shift is 8 h; longer spans are several runs)."""
+
+
+def between(lo: float, hi: float) -> Any:
+    """A finite float type within [lo, hi] (the bounds' reason goes in the field's docstring)."""
+    return Annotated[float, Field(ge=lo, le=hi, allow_inf_nan=False)]
+
+
+def vector3(limit: float) -> Any:
+    """Three finite floats, each within [-limit, limit]."""
+    return Annotated[list[between(-limit, limit)], Field(min_length=3, max_length=3)]
+
+
+WMM_YEARS = (2010, 2029)
+"""Years the World Magnetic Model of pygeomag covers: its coefficient files WMM2010, 2015, 2020 and 2025, each
+valid five years (tests/twin/config/test_ranges.py checks both ends against pygeomag)."""
+
+
+def _wmm_date(text: str) -> str:
+    try:
+        day = datetime.date.fromisoformat(text)
+    except ValueError:
+        raise ValueError(f"{text!r} is not a calendar date YYYY-MM-DD") from None
+    if not WMM_YEARS[0] <= day.year <= WMM_YEARS[1]:
+        raise ValueError(f"{text} is outside the geomagnetic model's years {WMM_YEARS[0]}-01-01 .. "
+                         f"{WMM_YEARS[1]}-12-31 (pygeomag's WMM)")
+    return text
+
+
+WmmDate = Annotated[str, Field(pattern=r"^\d{4}-\d{2}-\d{2}$"), AfterValidator(_wmm_date)]
+"""A date YYYY-MM-DD for the geomagnetic model: a real calendar date within WMM_YEARS."""
+
 
 class ScenarioError(ValueError):
-    """A scenario that cannot be run; the message is one line: file, key, what is wrong."""
+    """A scenario that cannot be run; the message is one line: file, key, what is wrong (line breaks a file's
+    keys or values bring in are escaped)."""
+
+    def __init__(self, message: str):
+        super().__init__(str(message).replace("\r", "\\r").replace("\n", "\\n"))
 
 
 class Section(BaseModel):

@@ -7,19 +7,37 @@ mining engineer would expect for a modern face; `grade` names a preset of twin.c
 
 from __future__ import annotations
 
+import math
 from typing import Annotated, Literal
 
-from pydantic import Field
+import numpy as np
+from pydantic import Field, model_validator
 
 from twin.config.section import (
     Finite,
     NonNegativeFloat,
-    PositiveFloat,
+    Rate,
     Section,
-    Vector3,
+    WmmDate,
+    between,
+    vector3,
 )
 
-Rate = Annotated[float, Field(gt=0, le=2000, allow_inf_nan=False)]
+EARTH_FIELD_T = 6.6e-5
+"""The strongest geomagnetic field anywhere (near the south magnetic pole) [T]; fields and noises are bounded by a
+multiple of it (a magnetometer noise of more than a fifth of it leaves no heading; a fault or calibration term of
+more than twice it saturates the magnetometers of a face, +-0.8 mT being the widest range sold and 1e-4 T already
+a welding cable at a metre)."""
+SoftIron = Annotated[list[vector3(2.0)], Field(min_length=3, max_length=3)]
+"""A 3 x 3 soft-iron matrix (rows), entries within +-2 (a real one is near the identity, within a few per cent)."""
+
+
+def check_soft_iron(rows: list[list[float]], key: str) -> None:
+    """ValueError when a soft-iron matrix is (nearly) singular: it would leave no heading to compute."""
+    det = float(np.linalg.det(np.array(rows)))
+    if abs(det) < 0.1:
+        raise ValueError(f"{key}: determinant {det:.3g} is (nearly) singular; a soft-iron matrix is near the "
+                         f"identity (|det| >= 0.1)")
 
 
 class Imu(Section):
@@ -28,10 +46,12 @@ class Imu(Section):
     grade: str = "mti-g-700"
     """A preset of twin.config.imu_grades (mti-g-700, par1 .. par12, nav-004, mti-30, icm-42605, ideal)."""
     rate_hz: Rate = 200.0
-    lever_arm_m: Vector3 = [0.3, 0.5, 0.2]
-    """IMU position relative to the body reference point, in the body frame b."""
-    misalignment_deg: Vector3 = [0.05, -0.05, 0.1]
-    """Small rotation of the IMU axes relative to b (about x, y, z): C_s^b = I + [m]x to first order."""
+    lever_arm_m: vector3(10.0) = [0.3, 0.5, 0.2]
+    """IMU position relative to the body reference point, in the body frame b; within +-10 m per axis (the IMU is
+    on the machine, at most 20 m long)."""
+    misalignment_deg: vector3(5.0) = [0.05, -0.05, 0.1]
+    """Small rotation of the IMU axes relative to b (about x, y, z): C_s^b = I + [m]x to first order, so within
+    +-5 deg per axis (beyond, the first-order model is wrong by more than the sensors' errors)."""
 
 
 class VibrationState(Section):
@@ -69,11 +89,12 @@ class Odometer(Section):
     """The haulage encoder: pulses of the drive sprocket on the rack."""
 
     rate_hz: Rate = 50.0
-    metres_per_pulse: PositiveFloat = 0.002
+    metres_per_pulse: between(1e-5, 0.1) = 0.002
+    """Travel per pulse: 10 um to 10 cm (finer than any rack encoder; coarser is not an odometer)."""
     scale_error: Annotated[float, Field(ge=-0.1, le=0.1, allow_inf_nan=False)] = 0.003
     """Relative error of the nominal metres per pulse (0.003 = 3 per mille)."""
-    mounting_deg: Vector3 = [0.2, 0.0, -0.3]
-    """Angles of the encoder's axis relative to b (about x, y, z): the encoder counts travel along that axis, so
+    mounting_deg: vector3(10.0) = [0.2, 0.0, -0.3]
+    """Within +-10 deg per axis (an encoder bolted to the haulage, off by more, is not mounted). Angles of the encoder's axis relative to b (about x, y, z): the encoder counts travel along that axis, so
     they change its count by their cosine only. 001's mounting angles (eq. 10), between the IMU and the frame the
     machine moves in, are [sensors.imu] misalignment_deg here: the machine moves along b."""
 
@@ -82,24 +103,34 @@ class PushRam(Section):
     """Stroke sensors on the push rams."""
 
     rate_hz: Rate = 1.0
-    noise_m: NonNegativeFloat = 1e-4
-    """Standard deviation of the reading (0.02 m for the sensors of 004 Table 1)."""
-    resolution_m: NonNegativeFloat = 1e-4
+    noise_m: between(0, 0.1) = 1e-4
+    """Standard deviation of the reading (0.02 m for the sensors of 004 Table 1); at most 0.1 m, an eighth of a web
+    (a noisier stroke sensor cannot tell a push from none)."""
+    resolution_m: between(0, 0.1) = 1e-4
+    """Reading step; at most 0.1 m, as the noise."""
 
 
 class Magnetometer(Section):
     """The shearer's three-axis magnetometer."""
 
     rate_hz: Rate = 50.0
-    date: Annotated[str, Field(pattern=r"^\d{4}-\d{2}-\d{2}$")] = "2026-06-01"
-    """Date for the geomagnetic model (declination, inclination, intensity at the site)."""
-    noise_t: NonNegativeFloat = 1.0e-7
-    hard_iron_t: Vector3 = [2.0e-6, -1.0e-6, 0.5e-6]
-    soft_iron: Annotated[list[Vector3], Field(min_length=3, max_length=3)] = [[1.02, 0.01, 0.0], [0.01, 0.98, 0.0],
-                                                                              [0.0, 0.0, 1.0]]
-    """Soft-iron matrix applied to the Earth field in b (rows)."""
-    motor_disturbance_t: Vector3 = [1.5e-6, 0.5e-6, -1.0e-6]
-    """Field of the haulage and cutting motors in b while the shearer moves (scaled by speed / cutting speed)."""
+    date: WmmDate = "2026-06-01"
+    """Date for the geomagnetic model (declination, inclination, intensity at the site): a real date within the
+    model's years (section.WMM_YEARS)."""
+    noise_t: between(0, 0.2 * EARTH_FIELD_T) = 1.0e-7
+    """White noise per axis and sample; at most a fifth of the Earth's field (EARTH_FIELD_T)."""
+    hard_iron_t: vector3(2 * EARTH_FIELD_T) = [2.0e-6, -1.0e-6, 0.5e-6]
+    """Constant field of the machine's magnetised iron in b; within twice the Earth's field (EARTH_FIELD_T)."""
+    soft_iron: SoftIron = [[1.02, 0.01, 0.0], [0.01, 0.98, 0.0], [0.0, 0.0, 1.0]]
+    """Soft-iron matrix applied to the Earth field in b (rows); not singular (check_soft_iron)."""
+    motor_disturbance_t: vector3(2 * EARTH_FIELD_T) = [1.5e-6, 0.5e-6, -1.0e-6]
+    """Field of the haulage and cutting motors in b while the shearer moves (scaled by speed / cutting speed);
+    within twice the Earth's field."""
+
+    @model_validator(mode="after")
+    def _invertible(self) -> Magnetometer:
+        check_soft_iron(self.soft_iron, "soft_iron")
+        return self
 
 
 class SupportImu(Section):
@@ -108,20 +139,23 @@ class SupportImu(Section):
     supports: list[Annotated[int, Field(ge=0)]] = []
     rate_hz: Rate = 50.0
     grade: str = "icm-42605"
-    shearer_disturbance_t: NonNegativeFloat = 5.0e-6
-    """Peak magnetic disturbance at a support while the shearer passes it (falls off over a pan length)."""
+    shearer_disturbance_t: between(0, 2 * EARTH_FIELD_T) = 5.0e-6
+    """Peak magnetic disturbance at a support while the shearer passes it (falls off over a pan length); within
+    twice the Earth's field."""
 
 
 class Survey(Section):
     """Surveyed fixes of the shearer: the start pose at face end A and face end B of the first cut (001 section
     2.2: the face ends are measured in advance). Defaults are 001 Table 1's initial position and heading errors."""
 
-    sd_horizontal_m: NonNegativeFloat = 0.05
-    """One-sigma error of each horizontal coordinate (east, north) of a fix."""
-    sd_vertical_m: NonNegativeFloat = 0.05
-    """One-sigma error of the height of a fix."""
-    sd_yaw_deg: NonNegativeFloat = 1.0
-    """One-sigma error of the surveyed yaw of the start pose (the face-end fix B carries no heading)."""
+    sd_horizontal_m: between(0, 2.0) = 0.05
+    """One-sigma error of each horizontal coordinate (east, north) of a fix; at most 2 m, about a pan length (a
+    fix that cannot tell the chute is not a survey)."""
+    sd_vertical_m: between(0, 2.0) = 0.05
+    """One-sigma error of the height of a fix; at most 2 m, as the horizontal."""
+    sd_yaw_deg: between(0, 10.0) = 1.0
+    """One-sigma error of the surveyed yaw of the start pose (the face-end fix B carries no heading); at most 10
+    deg (the filters' attitude errors are small angles)."""
     face_ends: Literal["first_cut", "every_cut"] = "every_cut"
     """first_cut: only the ends of the first straight cut are fixed (001's experiment); every_cut: both ends of
     every straight cut, as the gate-road survey marks them ahead of each advance."""
@@ -158,5 +192,32 @@ class Fault(Section):
     t_end_s: NonNegativeFloat
     target: Annotated[int, Field(ge=0)] | None = None
     """Support index for ram faults and push_shortfall; for mag_interference, a support whose canopy unit is
-    disturbed (None: the shearer magnetometer); None for the others."""
+    disturbed (None: the shearer magnetometer); None for the others (the scenario checks that it exists)."""
     value: Finite = 0.0
+    """Within FAULT_VALUES[kind]."""
+
+    @model_validator(mode="after")
+    def _in_range(self) -> Fault:
+        lo, hi, why = FAULT_VALUES[self.kind]
+        if not lo <= self.value <= hi:
+            raise ValueError(f"value: {self.value:g} is outside {lo:g} .. {hi:g} for {self.kind} ({why})")
+        if self.t_end_s <= self.t_start_s:
+            raise ValueError(f"t_end_s {self.t_end_s:g} must be after t_start_s {self.t_start_s:g}")
+        return self
+
+
+TARGETED = ("ram_stuck", "ram_offset", "ram_drift", "ram_scale", "ram_dropout", "ram_noise_burst", "push_shortfall")
+"""The fault kinds that need a target support."""
+FAULT_VALUES: dict[str, tuple[float, float, str]] = {
+    "ram_stuck": (-math.inf, math.inf, "ignored"),
+    "ram_offset": (-3.0, 3.0, "metres; a ram is at most 3 m long"),
+    "ram_drift": (-0.1, 0.1, "m/s; a tenth of the fastest ram, and a drift that fast is an offset"),
+    "ram_scale": (-1.0, 1.0, "relative error; -1 reads zero"),
+    "ram_dropout": (-math.inf, math.inf, "ignored"),
+    "ram_noise_burst": (0.0, 1.0, "standard deviation [m]; more than a metre is no reading"),
+    "push_shortfall": (0.0, 1.5, "metres; the scenario also keeps it within face.web_depth_m"),
+    "rail_deviation": (-10.0, 10.0, "deg per two chutes; the largest face.bend_limit_horizontal_deg"),
+    "mag_interference": (-2 * EARTH_FIELD_T, 2 * EARTH_FIELD_T, "tesla; twice the Earth's field saturates"),
+    "odometer_slip": (0.0, 1.0, "fraction of the travel missed; 1 misses all of it"),
+}
+"""Each fault kind's range of `value` (lo, hi, why)."""

@@ -30,6 +30,7 @@ from estimators.io.logformat import (
     write_stream,
 )
 from twin.config.experiments import Experiment
+from twin.config.resources import check_resources, estimate_resources
 from twin.config.scenario import (
     Scenario,
     ScenarioError,
@@ -39,7 +40,14 @@ from twin.config.scenario import (
     scenario_to_toml,
 )
 from twin.config.turntable import Turntable
-from twin.pipeline.rundir import RunDirError, atomic_run_dir, check_target
+from twin.pipeline.rundir import (
+    RunDirError,
+    atomic_run_dir,
+    check_target,
+    default_run_dir,
+    run_lock,
+    write_timing,
+)
 
 
 @dataclass(frozen=True)
@@ -97,10 +105,12 @@ def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Pat
         source, scenario = str(scenario), load_scenario(scenario, seed)
     else:
         source, scenario = scenario.name, _seeded(scenario, seed)
-    out = Path(out) if out is not None else Path("runs") / f"{scenario.name}-seed{scenario.seed}"
+    out = Path(out) if out is not None else default_run_dir(scenario.name, scenario.seed)
     if not isinstance(scenario, Scenario):
+        check_resources(source, estimate_resources(scenario))
         return _run_paper(scenario, out, force, quiet)
     check_trials(trials, workers, ray_address)
+    check_resources(source, estimate_resources(scenario, trials, sensors, workers))
     return _run_face(scenario, source, out, force, quiet, trials, sensors, workers, ray_address)
 
 
@@ -146,12 +156,11 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
     from twin.pipeline.montecarlo import (
         TrialResult,
-        format_monte_carlo,
         trial_context,
         trial_runner,
-        write_monte_carlo,
         write_sensors,
     )
+    from twin.pipeline.montecarlo_table import format_monte_carlo, write_monte_carlo
     from twin.pipeline.simulate import simulate
     from twin.sensors.faults import check_faults_in_run
     from twin.view.recording import write_recording
@@ -193,7 +202,9 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
                         result.floor_grid.mesh_t(result.frame),
                         sensors={k: v for k, v in tables.items() if not k.startswith("truth_")})
         progress("recording", 1.0)
-        summary = twin_summary(scn, result.tables, time.perf_counter() - start)
+        summary = twin_summary(scn, result.tables)
+        wall_s = time.perf_counter() - start
+        write_timing(staging, wall_s=wall_s, real_time_factor=summary["simulated_s"] / wall_s)
         (staging / "metrics.json").write_text(json.dumps({"twin": summary, "estimators": {}}, indent=2) + "\n")
         estimated = run_estimators(staging, scn) if sensors else {}
         write_metrics(staging, estimated)
@@ -204,7 +215,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
                                             runner.description)
         bar.close()
     if not quiet:
-        print(format_summary(summary))
+        print(format_summary(summary, wall_s))
         print(format_estimators(estimated, scn.name))
         if monte_carlo:
             print(format_monte_carlo(monte_carlo))
@@ -218,8 +229,10 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
 
 def estimate(run_dir: str | Path, quiet: bool = True) -> Run:
     """Re-run the estimators the run's scenario.toml names on an existing (simulated or imported) run directory;
-    `quiet=False` prints their table."""
+    `quiet=False` prints their table. Without truth (a real face's log) every estimate is written and the metrics
+    hold what each says of itself, marked "truth": false (twin.pipeline.estimate.run_estimators)."""
     from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
+    from twin.pipeline.log_layout import check_run_dir
 
     run_dir = Path(run_dir)
     scenario = run_dir / "scenario.toml"
@@ -227,8 +240,10 @@ def estimate(run_dir: str | Path, quiet: bool = True) -> Run:
         raise ScenarioError(f"{scenario}: not found; the estimators take their configuration (IMU grade, lever arm, "
                             f"odometer pulse length, supports) from the run's scenario.toml")
     scn = load_face_scenario(scenario)
-    estimated = run_estimators(run_dir, scn)
-    write_metrics(run_dir, estimated)
+    check_run_dir(run_dir, scn)
+    with run_lock(run_dir):
+        estimated = run_estimators(run_dir, scn)
+        write_metrics(run_dir, estimated)
     if not quiet:
         print(format_estimators(estimated, scn.name))
     return Run(run_dir)

@@ -3,7 +3,8 @@
 The estimators read only the log (estimators.io.log.load_log); what they are told about the machine
 (IMU error budget, lever arm, odometer pulse length, where the supports sit along the face) comes from the
 scenario, as a mining engineer would enter it from the datasheets and the face layout. The truth is used only to
-score the result (estimators.io.metrics) and to give the true sensor states beside the estimated ones.
+score the result (estimators.io.metrics) and to give the true sensor states beside the estimated ones: a log without
+it (a real face's, imported) gets every estimate, the recording and what the estimates say of themselves, unscored.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from estimators.kalman.error_state import CAL_MOUNT, CAL_SCALE
 from estimators.shearer.config import Config, ImuNoise, MagSettings
 from estimators.shearer.methods import estimate
 from estimators.shearer.rail_kinematics import detector_chi2
-from estimators.shearer.solution import estimate_columns, state_columns
+from estimators.shearer.solution import Solution, estimate_columns, state_columns
 from twin.config.imu_grades import grade
 from twin.config.scenario import Scenario
 from twin.face.layout import support_stations
@@ -105,10 +106,37 @@ def detector_thresholds(scn: Scenario) -> dict[str, float]:
     return {"residual": residual, "dual_state": dual, "t_on": detector.t_on, "t_off": detector.t_off}
 
 
+NO_CYCLES = {key: np.empty(0) for key in ("cycle", "t", "t_cut_end", "t_end")}
+"""truth_cycles with no cycle: errors scored over the whole run only (estimators.io.metrics.cycle_metrics)."""
+
+
+def _optional(run_dir: Path, name: str):
+    """Stream `name` of run_dir, None when its file is absent."""
+    return read_stream(run_dir, STREAMS[name]) if (Path(run_dir) / STREAMS[name].filename).is_file() else None
+
+
+def _calibration(sol: Solution, states_truth: dict[str, float] | None) -> dict:
+    """The final odometer scale and mounting [deg] with their one-sigma, and the true values with truth."""
+    def state(i: int, key: str, deg: bool) -> dict:
+        out = {"estimate": float(np.degrees(sol.cal[-1, i]) if deg else sol.cal[-1, i]),
+               "sd": float(np.degrees(sol.sd_cal[-1, i]) if deg else sol.sd_cal[-1, i])}
+        if states_truth:
+            out["truth"] = math.degrees(states_truth[key]) if deg else states_truth[key]
+        return out
+    return {"odo_scale": state(CAL_SCALE, "odo_scale", False),
+            "odo_mount_deg": {a: state(CAL_MOUNT.start + i, f"odo_mount_{a}", True) for i, a in enumerate("xyz")}}
+
+
 def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict:
     """Run the scenario's shearer estimators on run_dir; writes estimates/, estimates.rrd (with `recording`) and
     returns the metrics. A log the estimators cannot use raises PositioningError (one line). With instrumented
-    supports the metrics also hold their canopy attitude under SUPPORT_ATTITUDE (twin.pipeline.support_estimate)."""
+    supports the metrics also hold their canopy attitude under SUPPORT_ATTITUDE (twin.pipeline.support_estimate).
+
+    Each method's entry holds "truth" (whether truth_shearer was there to score against), its notes, what it says
+    of itself (estimators.io.metrics.self_assessment, under "self") and, for the filters, the final odometer
+    calibration; with truth_shearer also the errors ("cycles": estimators.io.metrics.cycle_metrics) and the true
+    calibration. Partial truth: without truth_cycles the errors are scored over the whole run only (the "all" row);
+    truth_cycles without truth_shearer scores nothing. The truth never reaches an estimator."""
     # The canopy attitude of the instrumented supports (issue 8), under the key SUPPORT_ATTITUDE.
     from twin.pipeline.support_estimate import SUPPORT_ATTITUDE, support_attitude
     from twin.view.estimate_recording import write_estimate_recording
@@ -121,9 +149,9 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
         return out
     log = load_log(run_dir)
     sols = estimate(log, positioning_config(scn), methods)
-    truth = read_stream(run_dir, STREAMS["truth_shearer"])
-    cycles = read_stream(run_dir, STREAMS["truth_cycles"])
-    states_truth = true_states(scn)
+    truth, survey = _optional(run_dir, "truth_shearer"), read_stream(run_dir, STREAMS["survey"])
+    cycles = _optional(run_dir, "truth_cycles") if truth is not None else None
+    states_truth = true_states(scn) if truth is not None else None
     for name, sol in sols.items():
         write_estimate(run_dir, name, estimate_columns(sol))
         if sol.cal is not None:
@@ -133,14 +161,12 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
         if sol.detectors is not None:
             write_estimate(run_dir, name, sol.detectors, ESTIMATE_DETECTORS)
         table = read_estimate(run_dir, name)
-        t, err = metrics.position_errors(table, truth)
-        entry = {"cycles": metrics.cycle_metrics(t, err, cycles), "notes": sol.notes}
-        if sol.cal is not None:
-            entry["odo_scale"] = {"estimate": float(sol.cal[-1, CAL_SCALE]), "truth": states_truth["odo_scale"]}
-            entry["odo_mount_deg"] = {a: {"estimate": float(np.degrees(sol.cal[-1, CAL_MOUNT.start + i])),
-                                          "truth": math.degrees(states_truth[f"odo_mount_{a}"])}
-                                      for i, a in enumerate("xyz")}
-        out[name] = entry
+        entry = {"truth": truth is not None}
+        if truth is not None:
+            entry["cycles"] = metrics.cycle_metrics(*metrics.position_errors(table, truth),
+                                                    NO_CYCLES if cycles is None else cycles)
+        entry |= {"notes": sol.notes, "self": metrics.self_assessment(table, survey)}
+        out[name] = entry | (_calibration(sol, states_truth) if sol.cal is not None else {})
     if recording:
         estimates = {name: read_estimate(run_dir, name) for name in sols}
         states = {name: read_estimate(run_dir, name, ESTIMATE_STATES) for name, sol in sols.items() if sol.cal is not None}
@@ -162,18 +188,56 @@ PAPER_FIGURES = {
 """The paper figures a scenario reproduces, printed beside the table they belong to."""
 
 
+SELF_COLUMNS = ("sd h. [m]", "max sd h. [m]", "path [m]", "fixes", "ZUPTs", "survey [m]", "scale [1e-3]")
+"""Headings of `self_assessment_rows`' columns."""
+
+
+def self_assessment_rows(estimators: dict) -> list[list]:
+    """Per method what its estimate says of itself (metrics.json's "self"): final and largest horizontal one-sigma,
+    distance along its path, fixes and ZUPTs applied, the largest horizontal residual against the survey's fixes,
+    the final odometer scale error [1e-3]; None where a method has none."""
+    rows = []
+    for name, e in estimators.items():
+        own = e["self"]
+        if not own["samples"]:
+            rows.append([name] + [None] * len(SELF_COLUMNS))
+            continue
+        scale = e["odo_scale"]["estimate"] * 1e3 if "odo_scale" in e else None
+        rows.append([name, own["final_sd_horizontal_m"], own["max_sd_horizontal_m"], own["distance_m"],
+                     own["flags"]["position_fixes"], own["flags"]["zupts"],
+                     max((r["horizontal"] for r in own.get("survey_residuals", [])), default=None), scale])
+    return rows
+
+
+def format_self_assessment(estimators: dict) -> str:
+    """One line saying the run has no truth, so no errors are scored, then `self_assessment_rows` as a table."""
+    formats = (".3f", ".3f", ".1f", "d", "d", ".3f", ".3f")
+    lines = ["", "no truth in this run (no truth_shearer.parquet): no errors are scored; each estimate on its own:",
+             f"{'method':16s}" + "".join(f"{h:>13s}" for h in SELF_COLUMNS)]
+    for name, *cells in self_assessment_rows(estimators):
+        lines.append(f"{name:16s}" + "".join(f"{'-' if c is None else format(c, f):>13s}"
+                                             for c, f in zip(cells, formats)))
+    return "\n".join(lines)
+
+
 def format_estimators(estimators: dict, scenario: str = "") -> str:
     """Per-method SEP per cutting cycle and maximum |east|, |north| error over the run [m] as tables, with the
-    paper's figures for the scenarios that reproduce one (PAPER_FIGURES)."""
+    paper's figures for the scenarios that reproduce one (PAPER_FIGURES); a run without truth gets one line saying
+    so and format_self_assessment's table. A method that lost track (estimators.shearer.health) says so after them."""
     # The supports' canopy attitude (twin.pipeline.support_estimate) has its own table, after the shearer's.
     from twin.pipeline.support_estimate import SUPPORT_ATTITUDE, format_support_attitude
     supports = format_support_attitude(estimators.get(SUPPORT_ATTITUDE))
     estimators = {name: e for name, e in estimators.items() if name != SUPPORT_ATTITUDE}
     if not estimators:
         return supports
+    health = "".join(f"\n{note}" for e in estimators.values() for note in e.get("notes", [])
+                     if note.startswith("health:"))
+    if not all("cycles" in e for e in estimators.values()):
+        return format_self_assessment(estimators) + health + supports
     table, paper = PAPER_FIGURES.get(scenario, ("", ""))
     n = max(len(e["cycles"]) - 1 for e in estimators.values())
-    lines = ["", "shearer position, SEP per cutting cycle [m]" + (f" ({paper})" if table == "sep" else ""),
+    lines = ["", "shearer position, SEP per cutting cycle [m]" + (f" ({paper})" if table == "sep" else "")
+             + ("" if n else " (no truth_cycles.parquet: over the whole run only)"),
              f"{'method':16s}" + "".join(f"{'A' + str(k + 1):>8s}" for k in range(n)) + f"{'all':>8s}"]
     for name, e in estimators.items():
         lines.append(f"{name:16s}" + "".join(f"{c['sep']:8.3f}" for c in e["cycles"]))
@@ -182,7 +246,7 @@ def format_estimators(estimators: dict, scenario: str = "") -> str:
     for name, e in estimators.items():
         run = e["cycles"][-1]
         lines.append(f"{name:16s}{run['max_e']:8.3f}{run['max_n']:8.3f}{run['max_horizontal']:8.3f}")
-    return "\n".join(lines) + supports
+    return "\n".join(lines) + health + supports
 
 
 def write_metrics(run_dir: Path, estimators: dict) -> None:

@@ -1,48 +1,147 @@
-"""Run directories, written atomically.
+"""Run directories: named safely, marked as ours, locked while written, written atomically.
 
 Everything is written into a hidden sibling `.NAME.partial-XXXX` and renamed to NAME only when complete, so
-a crash or an interrupt never leaves a directory that looks like a finished run. An existing non-empty
-directory is refused unless `force`, and then replaced only after the new run is complete.
+a crash, an interrupt or a SIGTERM never leaves a directory that looks like a finished run. Every run
+directory holds the MARKER file; an existing non-empty directory is refused unless `force`, and even then
+replaced only if it holds the marker (never a directory of somebody's files), and only after the new run is
+complete. While a directory is written, the lock file `.NAME.lock` beside it holds the writer's pid: a second
+writer is refused, a lock left by a killed process is taken over.
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
+import re
 import shutil
+import signal
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+
+MARKER = ".longwall-run"
+"""The file that makes a directory a run directory `--force` may replace."""
+MARKER_TEXT = "a longwall-twin run directory: `longwall run --force` may replace this directory\n"
+TIMING = "timing.json"
+"""Wall-clock figures of a run (they differ from run to run, so they stay out of metrics.json)."""
+MAX_NAME = 80
+"""Longest directory name made from a scenario name (file systems allow 255 bytes)."""
 
 
 class RunDirError(ValueError):
     """The run directory cannot be written; one line saying why and how to fix it."""
 
 
+def safe_name(name: str) -> str:
+    """`name` as one directory name: characters other than letters, digits, `.`, `_` and `-` (path separators,
+    `..`, control characters) become `_`, no leading dot, at most MAX_NAME characters; a changed name gets a
+    short hash of the original so that two names never meet."""
+    clean = re.sub(r"[^A-Za-z0-9._-]", "_", name).lstrip(".")[:MAX_NAME] or "scenario"
+    if clean == name:
+        return name
+    return f"{clean[:MAX_NAME - 9]}-{hashlib.sha256(name.encode()).hexdigest()[:8]}"
+
+
+def default_run_dir(name: str, seed: int) -> Path:
+    """runs/NAME-seedN, with the scenario name made safe (safe_name)."""
+    return Path("runs") / f"{safe_name(name)}-seed{seed}"
+
+
 def check_target(path: Path, force: bool) -> None:
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise RunDirError(f"{path}: exists and is not a directory; choose another --out")
-    if path.is_dir() and any(path.iterdir()) and not force:
+    if not path.is_dir() or not any(path.iterdir()):
+        return
+    if not force:
         raise RunDirError(f"{path}: directory exists and is not empty; use --force to replace it or choose "
                           f"another --out")
+    if not (path / MARKER).is_file():
+        raise RunDirError(f"{path}: not a run directory (no {MARKER} file), so --force will not replace it; "
+                          f"choose another --out or remove it yourself")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # somebody else's live process
+    return True
+
+
+@contextmanager
+def run_lock(path: Path) -> Iterator[None]:
+    """Hold the lock of run directory `path` (the file `.NAME.lock` beside it, holding our pid) while the
+    block runs; RunDirError if a live process holds it. A lock whose process is gone is taken over."""
+    path = Path(path)
+    lock = path.parent / f".{path.name}.lock"
+    for _ in range(2):
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+            break
+        except FileExistsError:
+            try:
+                pid = int(lock.read_text().strip() or 0)
+            except (OSError, ValueError):
+                pid = 0
+            if not pid:  # being written this instant, or by a process killed in that instant
+                raise RunDirError(f"{path}: locked by {lock}; remove it if no longwall process is running") from None
+            if _pid_alive(pid):
+                raise RunDirError(f"{path}: another longwall process (pid {pid}) is writing it; wait for it to "
+                                  f"finish or choose another --out") from None
+            lock.unlink(missing_ok=True)  # stale: its process is gone
+        except OSError as err:
+            raise RunDirError(f"{path}: cannot write there ({err.strerror}: {err.filename}); choose another "
+                              f"directory") from None
+    else:
+        raise RunDirError(f"{path}: locked by {lock}; remove it if no longwall process is running")
+    try:
+        os.write(fd, f"{os.getpid()}\n".encode())
+        os.close(fd)
+        yield
+    finally:
+        lock.unlink(missing_ok=True)
 
 
 @contextmanager
 def atomic_run_dir(path: Path, force: bool = False) -> Iterator[Path]:
-    """Yield a staging directory; on success it becomes `path` (replacing it when `force`)."""
+    """Yield a staging directory holding MARKER; on success it becomes `path` (replacing it when `force`
+    and check_target allows). The lock on `path` is held throughout."""
     path = Path(path)
-    check_target(path, force)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
+    with run_lock(path):
+        check_target(path, force)
+        staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
+        try:
+            (staging / MARKER).write_text(MARKER_TEXT)
+            yield staging
+            check_target(path, force)  # a directory something other than longwall made meanwhile
+        except BaseException:
+            shutil.rmtree(staging, ignore_errors=True)
+            raise
+        _swap_in(staging, path)
+
+
+def _swap_in(staging: Path, path: Path) -> None:
+    """Rename `staging` to `path`, the old `path` out of the way first; Ctrl-C and SIGTERM wait until both
+    renames are done (never the old run gone and the new one not yet there)."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT, signal.SIGTERM})
     try:
-        yield staging
-    except BaseException:
-        shutil.rmtree(staging, ignore_errors=True)
-        raise
-    if path.exists():
-        trash = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-", dir=path.parent))
-        path.rename(trash / path.name)
+        trash = None
+        if path.exists():
+            trash = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-", dir=path.parent))
+            path.rename(trash / path.name)
         staging.rename(path)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
+    if trash is not None:
         shutil.rmtree(trash, ignore_errors=True)
-    else:
-        staging.rename(path)
+
+
+def write_timing(run_dir: Path, **figures: float) -> None:
+    """Wall-clock figures (seconds, rates) into run_dir/TIMING."""
+    (Path(run_dir) / TIMING).write_text(json.dumps(figures, indent=2) + "\n")

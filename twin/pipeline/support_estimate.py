@@ -24,6 +24,7 @@ from estimators.nav import earth
 from estimators.nav.rotations_scalar import quat_euler
 from estimators.support.batch import SupportBatch, support_batch
 from estimators.support.error_state import (
+    FLAG_ACCEL,
     FLAG_DIP,
     FLAG_GATE,
     FLAG_NORM,
@@ -53,6 +54,8 @@ OURS_UPDATE_HZ = 10.0
 NEAR_FRACTION = 0.1
 """A unit counts as disturbed while the shearer's field there exceeds this fraction of its peak."""
 FLAGS_MAG = FLAG_NORM | FLAG_DIP | FLAG_GATE
+FLAG_NAMES = (("norm", FLAG_NORM), ("dip", FLAG_DIP), ("gate", FLAG_GATE), ("accelerating", FLAG_ACCEL))
+"""Ours' flag bits by name: counted in the metrics, drawn in the recording."""
 ANGLES = ("pitch", "roll", "yaw")
 CLASSES = {"face_end": "face ends", "mid_face": "mid-face"}
 
@@ -167,6 +170,16 @@ def _error_stats(err: np.ndarray, near: np.ndarray | None) -> dict:
     return out
 
 
+def _own(batch: SupportBatch, euler: dict[str, np.ndarray], res) -> dict:
+    """What needs no truth: per support each method's final pitch, roll, yaw and ours' final attitude one-sigma
+    [deg]; ours' flag counts (FLAG_NAMES) over its updates."""
+    final = {int(j): {name: dict(zip(ANGLES, np.degrees(e[i, -1]).tolist())) for name, e in euler.items()}
+             for i, j in enumerate(batch.supports)}
+    sd = {int(j): dict(zip("xyz", np.degrees(res.sigma[i, -1, :3]).tolist())) for i, j in enumerate(batch.supports)}
+    return {"final_deg": final, "ours_final_sd_deg": sd, "ours_updates": int(res.flags.size),
+            "ours_flags": {name: int(np.count_nonzero(res.flags & bit)) for name, bit in FLAG_NAMES}}
+
+
 def support_attitude(run_dir: Path, scn: Scenario) -> SupportAttitude | None:
     """KF, UKF, GD-UKF and ours on the run's support_imu stream; None when the scenario names no instrumented
     support. Writes estimates/METHOD_support_attitude.parquet (estimators.io.logformat.ESTIMATE_SUPPORT_ATTITUDE).
@@ -174,8 +187,10 @@ def support_attitude(run_dir: Path, scn: Scenario) -> SupportAttitude | None:
     The filters read only the stream and the scenario (unit_model, ours_settings). The truth, where the run has it,
     tunes the GD-UKF's Q on a reference segment (002 step 1: truth_supports) and scores every method against the
     true canopy attitude, with the shearer's proximity (truth_shearer) marking the disturbed samples; without it
-    the GD-UKF and the scores are left out with a note. Supports the filters cannot use are skipped with their
-    reason (estimators.support.batch.support_batch); a stream with none left raises LogError (one line).
+    the GD-UKF and the scores are left out with a note. The metrics hold "truth" (whether truth_supports was
+    there) and, needing no truth, each method's final angles and ours' final one-sigma [deg] and flag counts
+    ("own"). Supports the filters cannot use are skipped with their reason (estimators.support.batch.support_batch);
+    a stream with none left raises LogError (one line).
     """
     if not scn.sensors.support_imu.supports:
         return None
@@ -223,8 +238,9 @@ def support_attitude(run_dir: Path, scn: Scenario) -> SupportAttitude | None:
                        ESTIMATE_SUPPORT_ATTITUDE)
 
     classes = {int(j): support_class(scn, int(j)) for j in batch.supports}
-    metrics = {"methods": list(q), "supports": batch.supports.tolist(), "skipped": batch.skipped, "classes": classes,
-               "tuning": tuning, "seconds": seconds, "notes": notes}
+    metrics = {"truth": q_true is not None, "methods": list(q), "supports": batch.supports.tolist(),
+               "skipped": batch.skipped, "classes": classes, "tuning": tuning, "seconds": seconds, "notes": notes,
+               "own": _own(batch, euler, res)}
     near = None if scale is None else scale > NEAR_FRACTION
     if near is not None:
         flagged, near_ours = (res.flags & FLAGS_MAG) > 0, near[:, res.sample]
@@ -257,7 +273,8 @@ def format_support_attitude(metrics: dict | None) -> str:
     largest |yaw error| per support class and method; ours' disturbance flags; the GD objective; what was left out."""
     if not metrics:
         return ""
-    lines = ["", "support canopy attitude (002's KF, UKF, GD-UKF and ours): RMSE [deg]"]
+    scored = ": RMSE [deg]" if metrics.get("by_class") else ""  # else a note says why
+    lines = ["", f"support canopy attitude (002's KF, UKF, GD-UKF and ours){scored}"]
     for cls, label in CLASSES.items():
         entry = metrics.get("by_class", {}).get(cls)
         if entry is None:
@@ -273,6 +290,10 @@ def format_support_attitude(metrics: dict | None) -> str:
     if d:
         lines.append(f"  ours: magnetometer updates flagged {d['flagged_near']}/{d['near_updates']} while the shearer "
                      f"is near (field > {NEAR_FRACTION:.0%} of its peak), {d['flagged_far']}/{d['far_updates']} otherwise")
+    own = metrics.get("own")
+    if own and not metrics.get("by_class"):
+        counts = ", ".join(f"{name} {n}" for name, n in own["ours_flags"].items())
+        lines.append(f"  ours: flags over {own['ours_updates']} unit updates: {counts}")
     tu = metrics.get("tuning")
     if tu:
         obj = tu["objective_deg"]

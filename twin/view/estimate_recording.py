@@ -1,14 +1,17 @@
 """The estimators' Rerun recording: `estimates.rrd` beside a run's `run.rrd`, merged with it by the viewer.
 
-The file carries the application id and the recording id of run.rrd (read from it; a fresh id when the run has
-none, e.g. an imported log), so `longwall view` shows the truth replay and the estimates as one recording. Its
-default blueprint is the run's with a second "Estimates" tab of plots. Everything is logged column-wise with
-`send_columns` on the `sim_time` timeline; plots are decimated to at most `PLOT_RATE_HZ`.
+The file carries the application id and the recording id of run.rrd (read from it; the scenario's when the run has
+none, e.g. an imported log; written reproducibly by twin.view.rrd_stream), so `longwall view` shows the truth replay and the estimates as one recording. Its
+default blueprint is the run's with a second "Estimates" tab of plots. A run without truth (truth_shearer None, e.g.
+a real face's log) gets everything but the errors: paths, sigmas, flags, sensor states, fusion, detectors.
+Everything is logged column-wise with `send_columns` on the `sim_time` timeline; plots are decimated to at most
+`PLOT_RATE_HZ`.
 
 Entities, per estimator METHOD (errors as estimators.io.metrics defines them: estimate - truth in East/North/Up at
 the truth point; attitude the psi-angle phi, C_b^n(true) = (I + [phi x]) C_b^n(est)):
 
 * `world/estimates/METHOD/path`       static LineStrips3D of the estimated body path in t, one strip per cycle
+                                      (one strip without truth)
 * `world/estimates/METHOD/position`   Points3D, the estimated body point in t at the plot rate
 * `plots/errors/METHOD/{east,north,up}`               Scalars, position error [m]
 * `plots/attitude_errors/METHOD/{e,n,u}`              Scalars, attitude error phi [deg]
@@ -29,7 +32,8 @@ and for a federated filter (ESTIMATE_FUSION, 003 section 4):
 * `plots/fusion/METHOD/magnetometer`                  Scalars 0/1: reading used, disturbed, gated in each plot
                                                       interval (estimators.shearer.federated_filter MAG_*)
 * `plots/fusion/METHOD/subfilter_errors/{east,north}` Scalars, position error of the global estimate and of each
-                                                      sub-filter's own estimate before the fusion [m]
+                                                      sub-filter's own estimate before the fusion [m]; without
+                                                      truth their offsets from the global estimate (global: 0)
 
 and for the rail kinematics model's filter (ESTIMATE_DETECTORS, 004 section IV):
 
@@ -51,7 +55,6 @@ and for the supports' canopy attitude (twin.pipeline.support_estimate.SupportAtt
 
 from __future__ import annotations
 
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -63,12 +66,12 @@ from estimators.io.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT, NONO
 from estimators.io.metrics import attitude_errors, column, columns, position_errors
 from estimators.nav import earth
 from estimators.shearer.federated_filter import MAG_DISTURBED, MAG_GATED, MAG_USED
-from estimators.support.error_state import FLAG_ACCEL, FLAG_DIP, FLAG_GATE, FLAG_NORM
 from twin.config.imu_grades import DEG, DEG_PER_H, MG
 from twin.config.scenario import Scenario
-from twin.pipeline.support_estimate import ANGLES, SupportAttitude
+from twin.pipeline.support_estimate import ANGLES, FLAG_NAMES, SupportAttitude
 from twin.view.recording import blueprint, run_recording_id
-from twin.view.rerun_columns import APPLICATION_ID, decimate, series, time_column
+from twin.view.rerun_columns import decimate, series, time_column
+from twin.view.rrd_stream import recording_id, recording_stream
 
 PLOT_RATE_HZ = 10.0
 """Largest rate of the logged plots and the moving estimate point."""
@@ -114,23 +117,27 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method:
     site = scn.site
     p_t = earth.lla_to_enu(column(sub, "lat"), column(sub, "lon"), column(sub, "h"), np.radians(site.lat_deg),
                            np.radians(site.lon_deg), site.height_m).astype(np.float32)
-    # One strip per cycle, the cycle of the truth sample at or before each estimate time.
-    t_truth = column(truth_shearer, "t")
-    cycle = column(truth_shearer, "cycle")[np.clip(np.searchsorted(t_truth, t, side="right") - 1, 0, None)]
-    breaks = np.flatnonzero(np.diff(cycle)) + 1
+    # With truth one strip per cycle, the cycle of the truth sample at or before each estimate time.
+    breaks = []
+    if truth_shearer is not None:
+        t_truth = column(truth_shearer, "t")
+        cycle = column(truth_shearer, "cycle")[np.clip(np.searchsorted(t_truth, t, side="right") - 1, 0, None)]
+        breaks = np.flatnonzero(np.diff(cycle)) + 1
     rec.log(f"world/estimates/{method}/path", rr.LineStrips3D(np.split(p_t, breaks), radii=0.03, colors=color),
             static=True)
     rec.log(f"world/estimates/{method}/position", rr.Points3D.from_fields(radii=0.15, colors=color), static=True)
     rec.send_columns(f"world/estimates/{method}/position", indexes=[time_column(t)],
                      columns=rr.Points3D.columns(positions=p_t))
 
-    _, err = position_errors(sub, truth_shearer)
-    _, phi = attitude_errors(sub, truth_shearer)
+    if truth_shearer is not None:
+        _, err = position_errors(sub, truth_shearer)
+        _, phi = attitude_errors(sub, truth_shearer)
+        for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
+            series(rec, f"plots/errors/{method}/{axis}", t, err[:, i:i + 1], [f"{method} {axis} [m]"])
+            series(rec, f"plots/attitude_errors/{method}/{a}", t, np.degrees(phi[:, i:i + 1]),
+                    [f"{method} phi_{a} [deg]"])
     sd_pos, sd_att = columns(sub, "sd_pos"), np.degrees(columns(sub, "sd_att"))
     for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
-        series(rec, f"plots/errors/{method}/{axis}", t, err[:, i:i + 1], [f"{method} {axis} [m]"])
-        series(rec, f"plots/attitude_errors/{method}/{a}", t, np.degrees(phi[:, i:i + 1]),
-                [f"{method} phi_{a} [deg]"])
         _log_band(rec, f"plots/sigma/{method}/position/{axis}", t, sd_pos[:, i], f"{method} {axis} [m]")
         _log_band(rec, f"plots/sigma/{method}/attitude/{a}", t, sd_att[:, i], f"{method} phi_{a} [deg]")
 
@@ -161,7 +168,7 @@ def _log_fusion(rec: rr.RecordingStream, truth_shearer, method: str, estimate: p
         return  # a centralized filter: no sub-filters
     series(rec, f"{root}/beta", t, beta, [f"{method} beta {s}" for s in SUBFILTERS])
     est, _ = plot_rows(estimate, rate_hz)
-    _, err = position_errors(est, truth_shearer)
+    err = np.zeros((t.size, 3)) if truth_shearer is None else position_errors(est, truth_shearer)[1]
     for i, axis in enumerate(POSITION_AXES[:2]):
         d = np.column_stack([np.zeros(t.size)] + [column(sub, f"{s}_d_pos_{'en'[i]}") for s in SUBFILTERS])
         series(rec, f"{root}/subfilter_errors/{axis}", t, err[:, i:i + 1] + d,
@@ -208,18 +215,19 @@ def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, table: p
 
 
 def estimate_views(methods: list[str], state_methods: list[str], fusion_methods: list[str] = (),
-                   detector_methods: list[str] = ()) -> tuple[rrb.View, ...]:
-    """Time-series views of the Estimates tab: each error axis over all methods with their sigma bands, each
-    group of sensor states, the flags, and the fusion of federated filters."""
+                   detector_methods: list[str] = (), truth: bool = True) -> tuple[rrb.View, ...]:
+    """Time-series views of the Estimates tab: each error axis over all methods with their sigma bands (without
+    `truth`: the bands alone), each group of sensor states, the flags, and the fusion of federated filters."""
     views = []
+    error = "error" if truth else "one-sigma"
     for axis in POSITION_AXES:
         views.append(rrb.TimeSeriesView(
-            name=f"Position error {axis} [m]", origin="/",
+            name=f"Position {error} {axis} [m]", origin="/",
             contents=[f"plots/errors/{m}/{axis}" for m in methods] + [f"plots/sigma/{m}/position/{axis}"
                                                                        for m in methods]))
     for a in ATTITUDE_AXES:
         views.append(rrb.TimeSeriesView(
-            name=f"Attitude error phi_{a} [deg]", origin="/",
+            name=f"Attitude {error} phi_{a} [deg]", origin="/",
             contents=[f"plots/attitude_errors/{m}/{a}" for m in methods] + [f"plots/sigma/{m}/attitude/{a}"
                                                                              for m in methods]))
     for group, (_, _, unit) in STATE_GROUPS.items() if state_methods else ():
@@ -230,7 +238,8 @@ def estimate_views(methods: list[str], state_methods: list[str], fusion_methods:
     views.append(rrb.TimeSeriesView(name="Position fixes, ZUPTs, skipped", origin="plots/flags"))
     for part, title in (("beta", "Information sharing"), ("r_yaw", "Magnetometer yaw noise sd [deg]"),
                         ("yaw_innovation", "Yaw innovation [deg]"), ("magnetometer", "Magnetometer readings"),
-                        ("subfilter_errors", "Sub-filter position errors [m]")) if fusion_methods else ():
+                        ("subfilter_errors", "Sub-filter position errors [m]" if truth else
+                         "Sub-filter offsets from the global estimate [m]")) if fusion_methods else ():
         views.append(rrb.TimeSeriesView(name=title, origin="/",
                                         contents=[f"plots/fusion/{m}/{part}/**" for m in fusion_methods]))
     for part, title in (("residual", "Residual chi-square"), ("dual_state", "Dual-state chi-square"),
@@ -241,7 +250,6 @@ def estimate_views(methods: list[str], state_methods: list[str], fusion_methods:
 
 
 # The supports' canopy attitude (issue 8).
-SUPPORT_FLAG_SERIES = (("norm", FLAG_NORM), ("dip", FLAG_DIP), ("gate", FLAG_GATE), ("accelerating", FLAG_ACCEL))
 SUPPORT_PLOT_RATE_HZ = 2.0
 """Largest rate of the supports' plots: a canopy moves over seconds (an advance, the shearer's pass), and a face has
 many units."""
@@ -283,8 +291,8 @@ def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, ra
     keep = decimate(t, rate_hz)
     for i, j in enumerate(supports.supports):
         flags = np.bitwise_or.reduceat(supports.flags[i].astype(np.int64), keep)
-        values = [(flags & bit) != 0 for _, bit in SUPPORT_FLAG_SERIES]
-        labels = [f"support {j} ours {label}" for label, _ in SUPPORT_FLAG_SERIES]
+        values = [(flags & bit) != 0 for _, bit in FLAG_NAMES]
+        labels = [f"support {j} ours {label}" for label, _ in FLAG_NAMES]
         if supports.near is not None:
             values.append(np.maximum.reduceat(supports.near[i], keep))
             labels.append(f"support {j} shearer's field / peak")
@@ -308,19 +316,21 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
     "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters);
     `detectors`: method name -> (ESTIMATE_DETECTORS table, thresholds by statistic: residual, dual_state, t_on,
     t_off); `supports`: the supports' canopy attitude (twin.pipeline.support_estimate.support_attitude).
-    Estimate times must lie within the truth span (LogError otherwise).
+    With truth, estimate times must lie within its span (LogError otherwise); without (None) the errors are left
+    out, and without a run.rrd beside `path` the recording gets the world's axes and the scenario's name itself.
     """
     fusion = fusion or {}
     detectors = detectors or {}
     if not rate_hz > 0:
         raise ValueError(f"write_estimate_recording: rate_hz must be positive, got {rate_hz}")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=run_recording_id(path.parent) or uuid.uuid4())
+    run_id = run_recording_id(Path(path).parent)
     # The supports' views after the shearer's.
-    views = estimate_views(list(estimates), list(states), list(fusion), list(detectors)) if estimates else ()
-    rec.save(path, default_blueprint=blueprint(views + support_attitude_views(supports)))
-    try:
+    views = estimate_views(list(estimates), list(states), list(fusion), list(detectors),
+                           truth_shearer is not None) if estimates else ()
+    with recording_stream(path, run_id or recording_id(scn), blueprint(views + support_attitude_views(supports))) as rec:
+        if run_id is None:  # no run.rrd to merge with: this recording is the whole view
+            rec.send_recording_name(scn.name)
+            rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for k, (method, table) in enumerate(estimates.items()):
             _log_estimate(rec, scn, truth_shearer, method, table, rate_hz, _PALETTE[k % len(_PALETTE)])
         for method, table in states.items():
@@ -331,6 +341,3 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
             _log_detectors(rec, scn, method, table, thresholds)
         if supports is not None:
             _log_support_attitude(rec, supports, min(rate_hz, SUPPORT_PLOT_RATE_HZ))
-        rec.flush()
-    finally:
-        rec.disconnect()

@@ -24,7 +24,6 @@ from __future__ import annotations
 import shutil
 import subprocess
 import sys
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +38,6 @@ from estimators.nav.rotations import mat_to_quat, quat_mul, quat_rotate
 from twin.config.scenario import Scenario
 from twin.face.layout import PAN_HEIGHT_M, PAN_WIDTH_M, SUPPORT_BASE_LENGTH_M
 from twin.view.rerun_columns import (
-    APPLICATION_ID,
     col,
     decimate,
     latest_rows,
@@ -50,6 +48,7 @@ from twin.view.rerun_columns import (
     vec,
     xyzw,
 )
+from twin.view.rrd_stream import recording_id, recording_stream
 
 RUN_RRD = "run.rrd"
 ESTIMATES_RRD = "estimates.rrd"
@@ -295,7 +294,8 @@ def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
 def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
                     floor_mesh: tuple[np.ndarray, np.ndarray], shearer_rate_hz: float = 10.0,
                     sensors: dict[str, pa.Table] | None = None) -> None:
-    """Write the truth streams of a run as a Rerun recording (.rrd) with its blueprint.
+    """Write the truth streams of a run as a Rerun recording (.rrd) with its blueprint, reproducibly
+    (twin.view.rrd_stream: the recording id from the scenario and seed).
 
     `truth` maps "truth_shearer", "truth_pans", "truth_supports" (required) and "truth_cycles" (optional,
     not drawn) to tables with the columns of `estimators.io.logformat`. `floor_mesh` is (vertices (V, 3) in t,
@@ -306,12 +306,7 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
         raise KeyError(f"write_recording: missing truth streams {', '.join(missing)}")
     if not shearer_rate_hz > 0:
         raise ValueError(f"write_recording: shearer_rate_hz must be positive, got {shearer_rate_hz}")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
-    rec.save(path, default_blueprint=blueprint())
-    try:
+    with recording_stream(path, recording_id(scn), blueprint()) as rec:
         rec.send_recording_name(scn.name)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         _log_floor(rec, floor_mesh)
@@ -319,9 +314,6 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
         _log_supports(rec, scn, truth["truth_supports"])
         _log_shearer(rec, scn, truth["truth_shearer"], shearer_rate_hz)
         _log_sensors(rec, sensors or {}, shearer_rate_hz)
-        rec.flush()
-    finally:
-        rec.disconnect()
 
 
 def run_recording_id(run_dir: Path) -> str | None:
@@ -336,16 +328,16 @@ def run_recording_id(run_dir: Path) -> str | None:
 
 
 def open_viewer(run_dir: Path) -> None:
-    """Open `run_dir/run.rrd` (and `estimates.rrd` beside it, if there is one) in the Rerun viewer (a detached
-    `rerun` process)."""
-    rrd = Path(run_dir) / RUN_RRD
-    if not rrd.is_file():
-        raise FileNotFoundError(f"{rrd}: recording not found (write it first)")
+    """Open `run_dir/run.rrd` and `estimates.rrd` beside it, whichever it holds (a run without truth, e.g. imported,
+    has estimates.rrd only), in the Rerun viewer (a detached `rerun` process)."""
+    files = [str(p) for p in (Path(run_dir) / RUN_RRD, Path(run_dir) / ESTIMATES_RRD) if p.is_file()]
+    if not files:
+        raise FileNotFoundError(f"{run_dir}: no {RUN_RRD} or {ESTIMATES_RRD}; `longwall run` writes both, and "
+                                f"`longwall estimate {run_dir}` writes {ESTIMATES_RRD} for an imported log")
     beside = Path(sys.executable).parent / "rerun"
     exe = str(beside) if beside.is_file() else shutil.which("rerun")
     if exe is None:
         raise FileNotFoundError(f"rerun viewer executable not found next to {sys.executable} or on PATH "
                                 "(pip install rerun-sdk)")
-    files = [str(p) for p in (rrd, Path(run_dir) / ESTIMATES_RRD) if p.is_file()]
     subprocess.Popen([exe, *files], start_new_session=True,
                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

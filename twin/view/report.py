@@ -13,8 +13,8 @@ own) and the same figures as PNG files beside it:
 * `pan_line.png`     the pans' lateral deviation from their best-fit straight line at installation and at the end
                      of each cutting cycle
 
-A run without truth (e.g. imported with `longwall import`) gets the plots that need no truth and a note naming what
-was left out. The run's data: twin.view.run_data; the figures: twin.view.report_figures.
+A run without truth (e.g. imported with `longwall import`) gets the plots that need no truth, what each estimate says
+of itself (metrics.json's "self") in place of the error table, and a note naming what was left out. The run's data: twin.view.run_data; the figures: twin.view.report_figures.
 """
 
 from __future__ import annotations
@@ -29,7 +29,11 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from estimators.io.metrics import column
-from twin.pipeline.estimate import detector_thresholds
+from twin.pipeline.estimate import (
+    SELF_COLUMNS,
+    detector_thresholds,
+    self_assessment_rows,
+)
 from twin.view.report_figures import (
     colors_for,
     cycle_plot,
@@ -72,7 +76,7 @@ figure{margin:1em 0}figcaption{font-size:90%;color:#444}.note{background:#fff4d6
 
 def _table(header: list[str], rows: list[list]) -> str:
     def cell(v) -> str:
-        return f"{v:.3f}" if isinstance(v, float) else html.escape(str(v))
+        return f"{v:.3f}" if isinstance(v, float) else "-" if v is None else html.escape(str(v))
     head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{cell(v)}</td>" for v in row) + "</tr>" for row in rows)
     return f"<table><tr>{head}</tr>{body}</table>"
@@ -97,7 +101,13 @@ def _header(run: RunData, stats: dict[str, list[dict]]) -> str:
     per_method = _table(["method", "RMSE east [m]", "RMSE north [m]", "RMSE up [m]", "max horizontal [m]",
                          "max 3-D [m]", "SEP [m]"],
                         [[m] + [float(rows[-1][k]) for k in keys] for m, rows in stats.items()])
-    return facts + ("<h3>Shearer position over the run</h3>" + per_method if stats else "")
+    if stats:
+        return facts + "<h3>Shearer position over the run</h3>" + per_method
+    unscored = {m: e for m, e in run.metrics.get("estimators", {}).items() if m in run.estimates and "self" in e}
+    if not unscored:
+        return facts
+    return facts + ("<h3>Shearer estimates on their own (no truth: no errors scored)</h3>"
+                    + _table(["method", *SELF_COLUMNS], self_assessment_rows(unscored)))
 
 
 def _figure_html(figs: Figures, name: str) -> str:
@@ -119,6 +129,9 @@ def build_report(run_dir: Path) -> Path:
     if run.estimates and "truth_shearer" in run.truth:
         figs.add("errors.png", error_plot(error_series(run), cycles, colors), "Position error against time",
                  "Estimate - truth at the truth point; dotted: cutting-cycle boundaries.")
+    if run.estimates and not stats:
+        run.notes.append("no errors scored (metrics.json holds none, and the run has no truth to score against): "
+                         "left out the errors per cutting cycle")
     if stats:
         figs.add("cycle_errors.png", cycle_plot(stats, colors), "Error per cutting cycle",
                  "RMSE east/north/up per cutting cycle and estimator" + (

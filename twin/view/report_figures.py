@@ -116,11 +116,11 @@ def error_plot(errors: dict[str, tuple[np.ndarray, np.ndarray]], cycles: pa.Tabl
 
 def method_stats(run: RunData) -> dict[str, list[dict]]:
     """Per method the rows of estimators.io.metrics.cycle_metrics (each cutting cycle, then "all"): from
-    metrics.json, else recomputed against the truth; methods with neither are left out."""
+    metrics.json, else recomputed against the truth; methods with neither (no truth) are left out."""
     stats = {}
     recorded = run.metrics.get("estimators", {})
     for m, table in run.estimates.items():
-        if m in recorded:
+        if "cycles" in recorded.get(m, {}):
             stats[m] = recorded[m]["cycles"]
         elif {"truth_shearer", "truth_cycles"} <= run.truth.keys():
             stats[m] = cycle_metrics(*position_errors(table, run.truth["truth_shearer"]), run.truth["truth_cycles"])

@@ -3,12 +3,10 @@ on what is missing."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pyarrow as pa
-import pyarrow.parquet as pq
 
 from estimators.io.logformat import (
     ESTIMATE,
@@ -18,8 +16,10 @@ from estimators.io.logformat import (
     Stream,
     estimate_path,
     read_estimate,
+    read_schema,
     read_stream,
 )
+from estimators.io.run_check import read_metrics
 from twin.config.scenario import Scenario, load_face_scenario
 from twin.pipeline.rundir import RunDirError
 
@@ -45,7 +45,7 @@ def _methods(run_dir: Path, stream: Stream) -> list[str]:
     suffix = estimate_path(Path(), "m", stream).stem.removeprefix("m")
     methods = []
     for path in sorted((run_dir / ESTIMATES_DIR).glob(f"*{suffix}.parquet")):
-        if (pq.read_schema(path).metadata or {}).get(b"stream") == stream.name.encode():
+        if (read_schema(path).metadata or {}).get(b"stream") == stream.name.encode():
             methods.append(path.stem.removesuffix(suffix))
     return methods
 
@@ -62,9 +62,8 @@ def load_run(run_dir: Path) -> RunData:
         raise RunDirError(f"{run_dir}: nothing to report (no truth_*.parquet, no {ESTIMATES_DIR}/*.parquet); "
                           f"give a directory written by `longwall run`, `longwall import` or `longwall estimate`")
     scenario = run_dir / "scenario.toml"
-    metrics_path = run_dir / "metrics.json"
     data = RunData(run_dir, load_face_scenario(scenario) if scenario.is_file() else None,
-                   json.loads(metrics_path.read_text()) if metrics_path.is_file() else {}, truth, estimates,
+                   read_metrics(run_dir), truth, estimates,
                    {m: read_estimate(run_dir, m, ESTIMATE_DETECTORS) for m in _methods(run_dir, ESTIMATE_DETECTORS)})
     missing = [STREAMS[name].filename for name in TRUTH_NAMES if name not in truth]
     if missing:

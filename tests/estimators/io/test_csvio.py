@@ -31,7 +31,7 @@ SCENARIO_TEXT = 'name = "synthetic"\nseed = 7\n'
 def _imu_data(n: int, rng: np.random.Generator, dt: float = 0.005) -> dict[str, np.ndarray]:
     data = {"t": np.arange(1, n + 1) * dt}
     for c in IMU.columns[1:]:
-        data[c.name] = rng.standard_normal(n) * 10.0 ** rng.integers(-8, 3, n)
+        data[c.name] = rng.standard_normal(n) * 10.0 ** rng.integers(-9, -1, n)  # within estimators.io.plausible
     return data
 
 
@@ -40,7 +40,7 @@ def _make_run(run_dir: Path) -> Path:
     rng = np.random.default_rng(42)
     run_dir.mkdir(parents=True)
     imu = _imu_data(300, rng)
-    awkward = [0.1, 1 / 3, -0.0, 5e-324, 1.7976931348623157e308, 2.0**-1074 * 3, 123456789.123456789, 1e-300]
+    awkward = [1e-3, 1 / 3e3, -0.0, 5e-324, 2.0**-1074 * 3, 1.23456789123456789e-3, 1e-300]
     imu["dv_x"][: len(awkward)] = awkward
     write_stream(run_dir, IMU, imu)
 
@@ -48,7 +48,7 @@ def _make_run(run_dir: Path) -> Path:
     pulses = (np.arange(n) * 123457 + 2**40).astype(np.int64)
     write_stream(run_dir, ODOMETER, {
         "t": np.arange(n) * 0.1 + 0.05,
-        "distance": pulses * 1e-4,
+        "distance": pulses * 1e-9,  # large pulse counts, a plausible distance
         "pulses": pulses,
         "direction": np.resize(np.array([1, 0, -1], np.int8), n),
     })
@@ -69,6 +69,7 @@ def _make_run(run_dir: Path) -> Path:
 
     shearer = {c.name: rng.standard_normal(4) for c in TRUTH_SHEARER.columns if c.dtype == "f8"}
     shearer["t"] = np.array([0.0, 0.005, 0.01, 0.015])
+    shearer["s"] = np.array([0.1, 1.7976931348623157e308, 123456789.123456789, 1 / 3])  # truth has no limits
     shearer.update(pan_rear=np.array([1, 1, 2, 2]), pan_front=np.array([3, 3, 4, 4]),
                    cycle=np.zeros(4), phase=np.array([0, 1, 1, 4]))
     write_stream(run_dir, TRUTH_SHEARER, shearer)

@@ -4,8 +4,9 @@ update, and a blown-up sub-filter left out."""
 import numpy as np
 import pytest
 
+from estimators.kalman import error_state as es
+from estimators.kalman.update import joseph_update
 from estimators.shearer import federated_filter as fk
-from estimators.shearer import odometer_filter as kf
 
 
 @pytest.mark.parametrize("beta_od", [0.5, 0.1])
@@ -13,19 +14,19 @@ def test_one_fusion_equals_the_centralized_update(beta_od):
     """Sub-filters holding the shares P / beta_i of a dense prior, each updated with its own measurement, fuse
     to the centralized posterior (to rounding), and are reset to P_g / beta_i."""
     rng = np.random.default_rng(3)
-    a = rng.normal(size=(kf.N_STATES, kf.N_STATES))
-    p = a @ a.T + np.eye(kf.N_STATES)
-    h_od, r_od, z_od = rng.normal(size=(3, kf.N_STATES)), 0.5 * np.eye(3), rng.normal(size=3)
-    h_mag = np.zeros((1, kf.N_STATES))
-    h_mag[0, kf.PHI] = rng.normal(size=3)
+    a = rng.normal(size=(es.N_STATES, es.N_STATES))
+    p = a @ a.T + np.eye(es.N_STATES)
+    h_od, r_od, z_od = rng.normal(size=(3, es.N_STATES)), 0.5 * np.eye(3), rng.normal(size=3)
+    h_mag = np.zeros((1, es.N_STATES))
+    h_mag[0, es.PHI] = rng.normal(size=3)
     r_mag, z_mag = np.array([[0.3]]), rng.normal(size=1)
-    x_c, p_c = np.zeros(kf.N_STATES), p.copy()
-    kf.joseph_update(x_c, p_c, z_od, h_od, r_od)
-    kf.joseph_update(x_c, p_c, z_mag, h_mag, r_mag)
-    x_od, p_od = np.zeros(kf.N_STATES), p / beta_od
-    x_aiding, p_aiding = np.zeros(kf.N_STATES), p / (1 - beta_od)
-    kf.joseph_update(x_od, p_od, z_od, h_od, r_od)
-    kf.joseph_update(x_aiding, p_aiding, z_mag, h_mag, r_mag)
+    x_c, p_c = np.zeros(es.N_STATES), p.copy()
+    joseph_update(x_c, p_c, z_od, h_od, r_od)
+    joseph_update(x_c, p_c, z_mag, h_mag, r_mag)
+    x_od, p_od = np.zeros(es.N_STATES), p / beta_od
+    x_aiding, p_aiding = np.zeros(es.N_STATES), p / (1 - beta_od)
+    joseph_update(x_od, p_od, z_od, h_od, r_od)
+    joseph_update(x_aiding, p_aiding, z_mag, h_mag, r_mag)
     tr_od, tr_mag = np.trace(p_od), np.trace(p_aiding)
     x_g, p_g, beta, valid, ok = fk.fuse_epoch(x_od, p_od, x_aiding, p_aiding, False)
     assert ok and valid.all()
@@ -35,9 +36,9 @@ def test_one_fusion_equals_the_centralized_update(beta_od):
 
 
 def test_a_blown_up_subfilter_is_left_out_and_restarted():
-    p = np.diag(np.linspace(1.0, 2.0, kf.N_STATES))
-    x_od, p_od = np.full(kf.N_STATES, 0.1), p.copy()
-    x_aiding, p_aiding = np.zeros(kf.N_STATES), p.copy()
+    p = np.diag(np.linspace(1.0, 2.0, es.N_STATES))
+    x_od, p_od = np.full(es.N_STATES, 0.1), p.copy()
+    x_aiding, p_aiding = np.zeros(es.N_STATES), p.copy()
     p_aiding[5, 5] = np.nan
     x_g, p_g, beta, valid, ok = fk.fuse_epoch(x_od, p_od, x_aiding, p_aiding, False)
     assert ok and list(valid) == [True, False] and list(beta) == [1.0, 0.0]

@@ -21,7 +21,9 @@ FILE = SCENARIO_DIR / "seed002_turntable.toml"
 
 def short(**motion) -> dict:
     data = tomllib.loads(FILE.read_text())
-    data["motion"].update(duration_s=40.0, **motion)
+    # The ramps and the shearer's passes scaled into the shortened motion (they must lie within it).
+    data["motion"].update(duration_s=40.0, pitch_s=[0.0, 16.0], roll_s=[0.0, 20.0], heading_s=[0.0, 20.0], **motion)
+    data["disturbance"]["pass_times_s"] = [12.0, 30.0]
     data["paper_filters"]["gd_iterations"] = 2
     return data
 

@@ -166,7 +166,8 @@ def test_interference_fault_changes_the_stream_exactly_inside_its_window():
     fault = {"kind": "mag_interference", "t_start_s": 10.0, "t_end_s": 30.0, "value": 2.0e-5}
     clean_scn = scenario()
     clean = columns(mag_stream(clean_scn, truth, np.random.default_rng(3), []), "b")
-    scn = scenario(faults=[fault, {**fault, "target": 3}])  # the targeted one belongs to support 3's unit
+    # The targeted one belongs to support 3's canopy unit (a fault may only target a unit that exists).
+    scn = scenario(support_imu={"supports": [3]}, faults=[fault, {**fault, "target": 3}])
     out = mag_stream(scn, truth, np.random.default_rng(3), scn.faults)
     diff = columns(out, "b") - clean
     inside = (out["t"] >= 10.0) & (out["t"] < 30.0)

@@ -1,0 +1,90 @@
+"""`longwall` output safety: usage errors, --force on foreign directories, scenario names as paths, the run
+directory lock, SIGTERM."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from tests.conftest import SCENARIO_DIR
+from twin.cli import EXIT_SIGTERM, main
+from twin.pipeline import api
+from twin.pipeline.rundir import MARKER, MARKER_TEXT
+
+
+def short(tmp_path, name: str = "default"):
+    """The default face, one cycle, named `name` (a TOML basic string is a JSON string)."""
+    text = (SCENARIO_DIR / "default.toml").read_text().replace("cycles = 2", "cycles = 1")
+    path = tmp_path / "short.toml"
+    path.write_text(text.replace('name = "default"', f"name = {json.dumps(name)}"))
+    return path
+
+
+@pytest.mark.parametrize("argv", [["run", "--bogus"], ["run", "--seed", "x"], [], ["estimate"], ["frobnicate"],
+                                  ["import", "somewhere"]])
+def test_a_usage_error_is_one_line_exit_2(capsys, argv):
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err.count("\n") == 1 and captured.err.startswith("longwall: error: ")
+    assert "--help" in captured.err
+
+
+def test_help_still_prints_the_usage(capsys):
+    assert main(["run", "--help"]) == 0
+    assert "--force" in capsys.readouterr().out
+
+
+def test_force_never_replaces_a_directory_that_holds_no_run(tmp_path, capsys):
+    home = tmp_path / "home"
+    (home / "photos").mkdir(parents=True)
+    (home / "notes.txt").write_text("mine")
+    assert main(["run", str(short(tmp_path)), "--out", str(home), "--force", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a run directory" in err
+    assert sorted(p.name for p in home.iterdir()) == ["notes.txt", "photos"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["home", "short.toml"]
+
+
+@pytest.mark.parametrize("name", ["../../escaped", "a/b", "..", "x" * 300, "bell\x07", "tab\tnew\nline"])
+def test_a_scenario_name_never_leads_the_run_directory_out_of_runs(tmp_path, monkeypatch, name):
+    outs = []
+    monkeypatch.setattr(api, "_run_face", lambda scn, source, out, *args: outs.append(out))
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", str(short(tmp_path, name)), "--quiet"]) == 0
+    [out] = outs
+    assert out.parent.as_posix() == "runs" and (tmp_path / out).resolve().parent == tmp_path / "runs"
+
+
+def test_a_run_directory_being_written_is_refused_to_a_second_run_and_estimate(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "scenario.toml").write_text((SCENARIO_DIR / "default.toml").read_text())
+    (out / MARKER).write_text(MARKER_TEXT)
+    (tmp_path / ".out.lock").write_text(f"{os.getpid()}\n")  # a live writer
+    for argv in (["run", str(short(tmp_path)), "--out", str(out), "--force", "--quiet"], ["estimate", str(out)]):
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "another longwall process" in err
+    assert sorted(p.name for p in out.iterdir()) == sorted([MARKER, "scenario.toml"])
+
+
+def test_sigterm_stops_a_run_with_one_line_exit_143_and_no_directory(tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "run", str(short(tmp_path)), "--out", str(out),
+                             "--quiet"], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob(".out.partial-*")) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert proc.poll() is None, proc.stderr.read()
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == EXIT_SIGTERM
+    assert err.count("\n") == 1 and "SIGTERM" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["short.toml"]

@@ -1,0 +1,60 @@
+"""Reproducible Rerun recordings (twin.view.rrd_stream): the same content, the same chunks and ids."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import rerun as rr
+import rerun.blueprint as rrb
+from rerun.chunk import RrdReader
+
+from tests.conftest import capped
+from twin.view.rrd_stream import recording_id, recording_stream
+
+ROW_ID = "rerun.controls.RowId"
+
+
+def write(path, recording="fixed"):
+    with recording_stream(path, recording, rrb.Blueprint(rrb.TimeSeriesView(origin="plots"))) as rec:
+        rec.send_recording_name("test")
+        rec.log("world/a", rr.Points3D([[1.0, 2.0, 3.0]]), static=True)
+        rec.send_columns("plots/x", indexes=[rr.TimeColumn("sim_time", duration=np.arange(5.0))],
+                         columns=rr.Scalars.columns(scalars=np.arange(5.0)))
+        rec.set_time("sim_time", duration=7.0)
+        rec.log("plots/y", rr.Scalars(1.0))  # not static: Rerun adds log_time and log_tick
+        rec.log("world/b", rr.Points3D([[0.0, 0.0, 0.0]]), static=True)
+    return [(c.id, c.entity_path, c.to_record_batch()) for c in RrdReader(str(path)).stream().to_chunks()]
+
+
+def test_the_same_content_twice_gives_the_same_chunks_ids_and_rows(tmp_path):
+    a, b = write(tmp_path / "a" / "run.rrd"), write(tmp_path / "b" / "run.rrd")
+    assert [(i, e) for i, e, _ in a] == [(i, e) for i, e, _ in b]
+    for (_, entity, x), (_, _, y) in zip(a, b):
+        assert x.equals(y, check_metadata=True), entity
+    assert all("log_time" not in batch.schema.names for _, _, batch in a)
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["run.rrd"]  # no scratch file left
+
+
+def test_row_ids_keep_the_logging_order(tmp_path):
+    first_row = {entity: bytes(batch.column(ROW_ID)[0].as_py()) for _, entity, batch in write(tmp_path / "r.rrd")}
+    order = ["/world/a", "/plots/x", "/plots/y", "/world/b"]
+    assert sorted(order, key=first_row.get) == order
+
+
+def test_two_files_of_one_recording_share_no_id(tmp_path):
+    a, b = write(tmp_path / "run.rrd"), write(tmp_path / "estimates.rrd")
+    assert not {i for i, _, _ in a} & {i for i, _, _ in b}
+    rows = [{bytes(r) for _, _, batch in chunks for r in batch.column(ROW_ID).to_pylist()} for chunks in (a, b)]
+    assert not rows[0] & rows[1]
+
+
+def test_an_exception_leaves_no_recording(tmp_path):
+    with pytest.raises(RuntimeError), recording_stream(tmp_path / "run.rrd", "x") as rec:
+        rec.log("world/a", rr.Points3D([[1.0, 2.0, 3.0]]), static=True)
+        raise RuntimeError("disk full")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_recording_id_comes_from_the_scenario_and_seed():
+    assert recording_id(capped("default")) == recording_id(capped("default"))
+    assert recording_id(capped("default")) != recording_id(capped("default", seed=2))

@@ -1,0 +1,123 @@
+"""Rerun recordings written reproducibly: the same scenario and seed, the same recording.
+
+Rerun stamps what it logs with time-based ids (TUIDs: nanoseconds since the epoch plus a per-thread random
+counter), one per row and one per chunk, and adds the wall-clock timeline `log_time` to `log` calls that are
+not static. `recording_stream` lets the caller log as usual, into a scratch file; on leaving, the final file
+is written from that file's chunks as identified chunks (rerun.chunk.Chunk.from_record_batch keeps the row-id
+column and chunk id it is given) with the ids numbered in logging order under a base drawn from the recording
+id and the file name (run.rrd and estimates.rrd share a recording id and are merged by the viewer, so they
+must not share a chunk or row id), and without `log_time`. The logging stream never flushes on its own
+(ChunkBatcherConfig.NEVER), so the cut of rows into chunks is the same every time.
+
+What rerun-sdk 0.41 still stamps with the clock, with no public API to set it: the row id of each
+SetStoreInfo message (16 bytes each), the blueprint's store (its random id, chunk and row ids, `log_time`) and
+the footer's manifest (which also lists schema metadata in hash-map order, so it differs between processes).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import rerun as rr
+import rerun.blueprint as rrb
+from rerun.chunk import Chunk, RrdReader
+
+from twin.config.scenario import Scenario, scenario_to_toml
+from twin.view.rerun_columns import APPLICATION_ID
+
+RECORDINGS = uuid.UUID("5f0c1d2e-7a41-4b6e-9c3d-2b8e6f1a4c70")
+"""Namespace of the recording ids (uuid5 of the resolved scenario)."""
+WALL_CLOCK = ("log_time",)
+"""Timelines Rerun fills from the clock, left out of the written recording."""
+ROW_ID = "rerun.controls.RowId"
+CHUNK_ID = b"rerun:id"
+
+
+def recording_id(scn: Scenario) -> str:
+    """The recording id of a run: from its resolved scenario (seed included), so a run and its re-run share it."""
+    return str(uuid.uuid5(RECORDINGS, scenario_to_toml(scn)))
+
+
+def _base(recording: str, name: str) -> int:
+    """The TUID time field of a file's ids: from the recording id and file name, below 2^63."""
+    return int.from_bytes(hashlib.sha256(f"{recording}/{name}".encode()).digest()[:8], "big") >> 1
+
+
+def _tuids(high: int, low: np.ndarray) -> pa.Array:
+    """TUIDs (16 bytes: time, counter; big-endian) with time field `high` and counters `low`."""
+    words = np.empty((low.size, 2), ">u8")
+    words[:, 0], words[:, 1] = high, low
+    return pa.FixedSizeBinaryArray.from_buffers(pa.binary(16), low.size, [None, pa.py_buffer(words.tobytes())])
+
+
+def _row_words(column: pa.Array) -> np.ndarray:
+    """A row-id column as (n, 2) unsigned words (time, counter): sorting them sorts by logging order."""
+    data = np.frombuffer(column.buffers()[1], ">u8").reshape(-1, 2)
+    return data[column.offset:column.offset + len(column)]
+
+
+def _identified(chunks: list[Chunk], recording: str, name: str) -> list[Chunk]:
+    """The chunks with chunk ids numbered in file order and row ids in logging order, under `_base`, and
+    without the WALL_CLOCK timelines."""
+    batches = [chunk.to_record_batch() for chunk in chunks]
+    words = [_row_words(batch.column(ROW_ID)) for batch in batches]
+    stacked = np.concatenate(words) if words else np.zeros((0, 2), np.uint64)
+    rank = np.empty(len(stacked), np.uint64)
+    rank[np.lexsort((stacked[:, 1], stacked[:, 0]))] = np.arange(1, len(stacked) + 1, dtype=np.uint64)
+    base, out, start = _base(recording, name), [], 0
+    for k, batch in enumerate(batches):
+        n = batch.num_rows
+        keep = [i for i, f in enumerate(batch.schema) if f.name not in WALL_CLOCK]
+        schema = pa.schema([batch.schema.field(i) for i in keep])
+        schema = schema.with_metadata({**batch.schema.metadata, CHUNK_ID: f"chunk_{base + 1:016X}{k:016x}".encode()})
+        columns = [_tuids(base, rank[start:start + n]) if batch.schema.field(i).name == ROW_ID else batch.column(i)
+                   for i in keep]
+        out += Chunk.from_record_batch(pa.RecordBatch.from_arrays(columns, schema=schema))
+        start += n
+    return out
+
+
+def _pin_blueprint_ids(node: rrb.Container | rrb.View, place: str = "root") -> None:
+    """Views and containers get ids from their place in the blueprint (the SDK draws uuid4s)."""
+    node.id = uuid.uuid5(RECORDINGS, place)
+    if isinstance(node, rrb.Container):
+        for k, child in enumerate(node.contents):
+            _pin_blueprint_ids(child, f"{place}/{k}")
+
+
+@contextmanager
+def recording_stream(path: Path, recording: str, blueprint: rrb.Blueprint | None = None
+                     ) -> Iterator[rr.RecordingStream]:
+    """A stream to log into; on leaving without an exception, `path` is written reproducibly (module
+    docstring) with `blueprint` as its default blueprint. The scratch file `.NAME.chunks` beside `path` is
+    removed either way."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    scratch = path.with_name(f".{path.name}.chunks")
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording, send_properties=False,
+                             batcher_config=rr.ChunkBatcherConfig.NEVER())
+    try:
+        rec.save(scratch)
+        try:
+            yield rec
+            rec.flush()
+        finally:
+            rec.disconnect()
+        chunks = _identified(RrdReader(scratch).stream().to_chunks(), recording, path.name)
+        if blueprint is not None:
+            _pin_blueprint_ids(blueprint.root_container)
+        out = rr.RecordingStream(APPLICATION_ID, recording_id=recording, send_properties=False)
+        out.save(path, default_blueprint=blueprint)
+        try:
+            out.send_chunks(chunks)
+            out.flush()
+        finally:
+            out.disconnect()
+    finally:
+        scratch.unlink(missing_ok=True)
