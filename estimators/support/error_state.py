@@ -161,6 +161,8 @@ def _tilt_update(p, dx, ph, innov, s, up, k):
 @nb.njit(cache=True, parallel=True, fastmath=FASTMATH)
 def _ours_kernel(gyro, accel, mag, dt, m_upd, q0, p0, qd, field_n, w_ie_n, g_norm, var_acc, var_mag_angle_t2,
                  accel_gate, norm_tol, dip_tol, gate, relock, zaru_gate, var_zaru, out_q, out_b, out_flag, out_sigma):
+    """The module's filter for each unit f (prange): per sample the propagation, every m_upd samples the updates
+    and the reset, whose results go to row u of the outputs."""
     nf, nk = gyro.shape[0], gyro.shape[1]
     bn = np.sqrt(field_n[0] ** 2 + field_n[1] ** 2 + field_n[2] ** 2)
     bh2 = field_n[0] ** 2 + field_n[1] ** 2

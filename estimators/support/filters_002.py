@@ -8,8 +8,8 @@ of independent filters (supports, or the Q candidates of the tuning, estimators.
 
 The models are estimators.support.unit_model's. The kernels allocate each filter's state and scratch once
 (nothing in the sample loop), run the filters of a batch in parallel (prange) and use fast-math flags short of
-assuming finite values (kernel_math.FASTMATH); a filter's result does not depend on the batch it runs in but
-for fast-math's lane differences (~1e-12).
+reassociating or assuming finite values (kernel_math.FASTMATH); a filter's result does not depend on the batch
+it runs in, nor on whether the kernel was compiled in the process or loaded from numba's cache.
 """
 
 from __future__ import annotations

@@ -6,9 +6,13 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
-"""LLVM fast-math flags of the support kernels: reassociation and contraction, no finite-math assumption (nnan,
-ninf)."""
+FASTMATH = {"nsz", "arcp", "contract", "afn"}
+"""LLVM fast-math flags of the support kernels: contraction (FMA) and reciprocals, but no reassociation and no
+finite-math assumption (nnan, ninf). A prange kernel's loop body is compiled once on its own, and the copy linked
+into the kernel is optimised again: the process that compiles runs the first, the on-disk cache holds the second.
+Reassociation lets that second pass reorder the sums, so a cached kernel's numbers would differ from a fresh one's
+(~1e-16 to 1e-11); without it both copies do the same arithmetic and give the same bytes
+(tests/estimators/support/test_compile_determinism.py)."""
 
 
 @nb.njit(cache=True, inline="always", fastmath=FASTMATH)
