@@ -29,6 +29,11 @@ from estimators.kalman.error_state import (
 from estimators.nav.earth import nav_rates, radii_nb
 from estimators.nav.rotations import cross3, quat_mat, rotvec_mat, skew3
 
+FIX_SD_FLOOR = 1e-3
+"""Least one-sigma [m] of a position fix's coordinate (position_fix). A survey stated exact (sigma 0) is valid input,
+but it would leave the position covariance singular, which the federated fusion inverts (estimators.kalman.
+fusion) and the detectors divide by; a millimetre is below any survey of a face."""
+
 
 @nb.njit(cache=True)
 def odometer_velocity(nav, cal, disp, w_sum, lever, t_span, d_odo, nominal, r_vel, tau_fwd, n):
@@ -99,7 +104,7 @@ def zero_rate(nav, w_sum, t_span, r_zaru, n):
 def position_fix(nav, lever, fix_llh, fix_r, n):
     """Position fix (survey or CPOEM point, 001 eqs. 21-22) of the body reference point p = p_imu - C_b^n l:
     z = body-point position of the SINS minus the fix fix_llh (lat, lon, h), ENU metres;
-    H = [0, -[(C_b^n l) x], I, 0 ...]; R = fix_r (3, 3), ENU."""
+    H = [0, -[(C_b^n l) x], I, 0 ...]; R = fix_r (3, 3), ENU, its variances floored at FIX_SD_FLOOR^2."""
     lat, hgt = nav[LAT], nav[HGT]
     r_m, r_n = radii_nb(lat)
     off = quat_mat(nav[QUAT]) @ lever
@@ -108,6 +113,8 @@ def position_fix(nav, lever, fix_llh, fix_r, n):
                   nav[HGT] - fix_llh[2] - off[2]])
     h = np.zeros((3, n))
     h[:, PHI] = -skew3(off)
+    r = fix_r.copy()
     for i in range(3):
         h[i, DP.start + i] = 1.0
-    return z, h, fix_r
+        r[i, i] = max(r[i, i], FIX_SD_FLOOR ** 2)
+    return z, h, r

@@ -86,6 +86,13 @@ class Config:
     r_odometer: float = 0.002  # odometer velocity noise besides quantization [m/s]
     r_zupt: float = 0.002  # [m/s]
     r_zaru: float = 5e-4  # zero-rate noise: idle vibration of the machine [rad/s]
+    stand_settle_s: float = 1.0
+    """A stand begins this long after the odometer last counted or showed a haulage direction, and ends this long
+    before it does again. A machine coasting to a stop moves by less than a pulse for several epochs (a 2 mm pulse
+    in 0.1 s is 20 mm/s) while its direction signal is already off, and creeps before the signal comes on at a
+    start (the twin's reports a direction above 5 mm/s); a zero-velocity update there takes the motion for a
+    velocity error, which the odometer scale's correlation with the along-face velocity turns into a position
+    jump (25 cm on an error-free north-south run of the twin). The epochs in between get no update."""
     advance_sd: float = 0.005  # advance from the ram strokes [m]
     ram_noise_sd: float = 1e-4  # one-sigma noise of a push-ram reading [m]
     path_sd: float = 0.03  # the pans' running line between cycles beyond the measured advance [m]
@@ -122,6 +129,12 @@ class Config:
     the spans over which the level and the accelerometer bias are told apart. With 5e-4 the attitude ANEES on
     seed001 was 4.39, above its 95 % band (4.16); with 1e-3 it is 4.06, the positions unchanged."""
     mag: MagSettings = MagSettings()
+    health_max_speed_m_s: float = 1.0
+    """The health monitor (estimators.shearer.health): a speed no shearer hauls at (they cut at 0.05-0.5 m/s)."""
+    health_jump_sigma: float = 10.0
+    """The health monitor: a position correction beyond this many sigma of the prior is a lost track ..."""
+    health_jump_floor_m: float = 0.05
+    """... if it is also larger than this (a survey or CPOEM fix of a well-known state moves it by millimetres)."""
     chute_length_m: float = 0.0
     """Point spacing of the rail kinematics model (004: one point per chute); 0 takes cpoem_spacing_m."""
     end_zone_m: float = 0.0

@@ -14,6 +14,7 @@ from pathlib import Path
 from estimators.io.log import Log
 from estimators.shearer.adaptive_federated_mag import run_mag
 from estimators.shearer.config import Config, PositioningError
+from estimators.shearer.health import assess
 from estimators.shearer.positioning import dead_reckoning, rts_offline, run_kf
 from estimators.shearer.prepare import prepare
 from estimators.shearer.rail_kinematics import run_rail
@@ -23,7 +24,8 @@ METHODS = ("dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offlin
 
 
 def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS) -> dict[str, Solution]:
-    """Run the requested methods on a log; returns method -> Solution."""
+    """Run the requested methods on a log; returns method -> Solution, each through the health monitor
+    (estimators.shearer.health)."""
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise PositioningError(f"unknown method '{unknown[0]}' (methods: {', '.join(METHODS)})")
@@ -52,4 +54,6 @@ def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS) -> dict[
         out["afkf"] = run_mag(log, cfg, prep, federated=True)
     if "fkf_rail" in methods:
         out["fkf_rail"] = run_rail(log, cfg, prep, cfg.isolate_by)
+    for name, sol in out.items():
+        assess(sol, cfg, name)
     return {m: out[m] for m in methods}

@@ -74,6 +74,16 @@ from estimators.sins.error_model import (
 )
 from estimators.sins.strapdown import strapdown_step
 
+# The odometer channel of an epoch (t[j-1], t[j]] (estimators.shearer.prepare decides it from the odometer).
+MODE_NO_DATA = -1
+"""The odometer is missing (outside its log or in a dropout): no update, flagged skipped."""
+MODE_STANDING = 0
+"""The machine stands: zero velocity and zero rate."""
+MODE_MOVING = 1
+"""The machine moves: odometer velocity with the motion constraints."""
+MODE_SETTLING = 2
+"""The odometer has stopped counting but the machine may still coast (Config.stand_settle_s): no update."""
+
 # Indices of the kernel's parameter vector.
 P_R_LATERAL, P_R_ALONG, P_R_VERTICAL, P_R_ZUPT, P_R_ZARU, P_TAU_FWD, P_TAU_FORCE, P_LEVER = range(8)
 N_PARAMS = 11  # the lever arm takes 7..9, one spare
@@ -169,21 +179,24 @@ def transition(nav, nominal, f_sum, t_span, q_psd, tau_force):
 @nb.njit(cache=True)
 def odometer_aiding(x, p, mode, nav, cal, disp, w_sum, lever, t_span, d_odo, nominal, r_vel, params):
     """The epoch's odometer-channel updates of (x, P) (estimators.kalman.measurements, Joseph form) by mode
-    (run_filter's odo_mode): the odometer velocity while moving (1), zero velocity and zero rate at a stand (0),
-    none (-1). Returns (flag bits, velocity innovation (3,), NaN unless moving)."""
+    (run_filter's odo_mode, MODE_*): the odometer velocity while moving, zero velocity and zero rate at a stand,
+    none while settling or without data (then flagged skipped). Returns (flag bits, velocity innovation (3,),
+    NaN unless moving)."""
     innov = np.full(3, np.nan)
-    if mode == 1:
+    if mode == MODE_MOVING:
         z, h, r = odometer_velocity(nav, cal, disp, w_sum, lever, t_span, d_odo, nominal, r_vel,
                                     params[P_TAU_FWD], x.size)
         innov = z - h @ x
         joseph_update(x, p, z, h, r)
         return FLAG_VELOCITY, innov
-    if mode == 0:
+    if mode == MODE_STANDING:
         z, h, r = zero_velocity(disp, t_span, nominal, params[P_R_ZUPT], x.size)
         joseph_update(x, p, z, h, r)
         z, h, r = zero_rate(nav, w_sum, t_span, params[P_R_ZARU], x.size)
         joseph_update(x, p, z, h, r)
         return FLAG_ZUPT, innov
+    if mode == MODE_SETTLING:
+        return 0, innov
     return FLAG_SKIPPED, innov
 
 
@@ -207,7 +220,7 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
                vel_innov):
     """Filter epochs j0+1 .. j1 (epoch j ends mechanization step j * steps); state (nav, cal, p) in place.
 
-    odo_mode[j]: 1 moving with a valid odometer over (j-1, j], 0 standing, -1 odometer missing (skipped).
+    odo_mode[j]: the odometer channel over (j-1, j], MODE_*.
     nominal (N_NOMINAL,): the running means of the odometer speed and of the specific force in n that H and F are
     evaluated at, and the last odometer speed (carried across calls).
     Fixes (fix_epoch sorted, fix_llh (F, 3) lat/lon/h, fix_r (F, 3, 3) ENU covariance, fix_gate (F,) the largest

@@ -27,14 +27,23 @@ from estimators.nav.rotations import (
 )
 from estimators.shearer.config import Config, PositioningError
 from estimators.shearer.cpoem import RamLog
+from estimators.shearer.odometer_filter import (
+    MODE_MOVING,
+    MODE_NO_DATA,
+    MODE_SETTLING,
+    MODE_STANDING,
+)
 from estimators.sins.fine_alignment import fine_align
 from estimators.sins.strapdown import compensated_increments
 
 
-def _odometer_at(log: Log, t_kf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Odometer distance at the epochs and the mode of each interval (t[j-1], t[j]]: 1 moving, 0 standing, -1 no
-    data. An interval has no data outside the log or where it overlaps a dropout: two consecutive samples more
-    than 2.5 nominal periods apart."""
+def _odometer_at(log: Log, t_kf: np.ndarray, settle_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Odometer distance at the epochs and the odometer channel of each interval (t[j-1], t[j]]
+    (estimators.shearer.odometer_filter MODE_*): moving where the odometer counted or showed a haulage direction;
+    standing where it shows neither from settle_s before the interval to settle_s after it (the machine may still
+    coast at a stop, or creep before its direction signal comes on at a start), settling in between; no data
+    outside the log or where the interval overlaps a dropout (two consecutive samples more than 2.5 nominal
+    periods apart). The look-ahead makes a stand known settle_s late, which an online run waits for."""
     t = log.odo_t
     dist = np.interp(t_kf, t, log.odo_distance)
     lo, hi = t_kf[:-1], t_kf[1:]
@@ -48,8 +57,15 @@ def _odometer_at(log: Log, t_kf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             covered &= ~((k < gap.size) & (gap_start[np.minimum(k, gap.size - 1)] < hi))
     moving = np.concatenate([[0], np.cumsum(log.odo_direction != 0)])[np.searchsorted(t, t_kf, side="right")]
     moved = (np.diff(moving) > 0) | (np.abs(np.diff(dist)) > 0)
-    mode = np.where(covered, np.where(moved, 1, 0), -1)
-    return dist, np.concatenate([[0], mode]).astype(np.int8)
+    active = (log.odo_direction != 0) | (np.diff(log.odo_distance, prepend=log.odo_distance[:1]) != 0)
+    t_active = t[active]
+    last = np.searchsorted(t_active, lo, side="right") - 1  # the last sample showing motion up to the start
+    after = np.searchsorted(t_active, hi, side="left")  # the first one from the end on
+    settled = (((last < 0) | (lo - t_active[np.maximum(last, 0)] >= settle_s))
+               & ((after >= t_active.size) | (t_active[np.minimum(after, t_active.size - 1)] - hi >= settle_s)))
+    still = np.where(settled, MODE_STANDING, MODE_SETTLING)
+    mode = np.where(covered, np.where(moved, MODE_MOVING, still), MODE_NO_DATA)
+    return dist, np.concatenate([[MODE_STANDING], mode]).astype(np.int8)
 
 
 STRAIGHT_CUT_FRACTION = 0.8
@@ -61,7 +77,7 @@ def straight_cuts(u: np.ndarray, mode: np.ndarray, face_travel: float) -> list[t
     """(first, last) epochs of each run of travel in one direction longer than STRAIGHT_CUT_FRACTION of the
     face."""
     du = np.diff(u, prepend=u[0])
-    moving = np.flatnonzero((mode == 1) & (du != 0))
+    moving = np.flatnonzero((mode == MODE_MOVING) & (du != 0))
     if moving.size == 0:
         return []
     sign = np.sign(du[moving])
@@ -80,7 +96,7 @@ def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndar
     (estimators.sins.fine_alignment, EKF) over the stand, whose mean attitude over its last seconds and bias estimates
     start the filter. A stand the fine alignment finds moving is levelled only (noted)."""
     notes = []
-    first_move = np.flatnonzero(mode == 1)
+    first_move = np.flatnonzero(mode == MODE_MOVING)
     stand_end = (first_move[0] - 1) * steps if first_move.size else dv_b.shape[0]
     dt = t_mech[1] - t_mech[0]
     n = int(min(stand_end, cfg.level_window_s / dt))
@@ -168,7 +184,7 @@ def prepare(log: Log, cfg: Config) -> Prepared:
     n_kf = (t_mech.size - 1) // steps
     t_mech = t_mech[: n_kf * steps + 1]
     t_kf = t_mech[::steps]
-    odo, mode = _odometer_at(log, t_kf)
+    odo, mode = _odometer_at(log, t_kf, cfg.stand_settle_s)
     nav0, cal0, notes = _initial_state(log, t_mech, dv_b, mode, steps, cfg)
     u = odo - odo[0]
     if log.survey_t.size >= 2:

@@ -1,0 +1,73 @@
+"""The health monitor every shearer method goes through (estimators.shearer.health): a lost track is flagged and
+said, a healthy one is left alone."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from estimators.io.logformat import FLAG_UNHEALTHY, FLAG_VELOCITY
+from estimators.nav import earth
+from estimators.shearer.config import Config, ImuNoise
+from estimators.shearer.health import assess
+from estimators.shearer.solution import N_SD, SD_POS, Solution
+
+CFG = Config(imu=ImuNoise(gyro_arw=1e-4, accel_vrw=1e-3, gyro_bias=1e-5, accel_bias=1e-3))
+LAT0 = np.radians(-30.0)
+
+
+def _solution(east: np.ndarray, v_e: np.ndarray, sd_pos: float = 0.01) -> Solution:
+    """A Solution at 10 Hz moving east by `east` [m] with velocity v_e [m/s] and a position one-sigma sd_pos."""
+    t = np.arange(east.size) / 10.0
+    _r_m, r_n = earth.radii(LAT0)
+    llh = np.column_stack([np.full(t.size, LAT0), east / (r_n * np.cos(LAT0)), np.zeros(t.size)])
+    v_n = np.column_stack([v_e, np.zeros(t.size), np.zeros(t.size)])
+    sd = np.full((t.size, N_SD), 0.001)
+    sd[:, SD_POS] = sd_pos
+    return Solution(t, llh, v_n, np.tile([1.0, 0, 0, 0], (t.size, 1)), sd, np.full(t.size, FLAG_VELOCITY, np.int32))
+
+
+def test_a_steady_pass_is_healthy():
+    v = np.full(600, 0.3)
+    sol = _solution(np.cumsum(v) / 10.0 - v[0] / 10.0, v)
+    assert assess(sol, CFG, "kf") == 0
+    assert not np.any(sol.flags & FLAG_UNHEALTHY) and sol.notes == []
+
+
+def test_a_correction_far_beyond_the_covariance_is_a_lost_track():
+    """A 0.8 m position change the velocity does not carry, at a one-sigma of 1 cm (the error-free fkf_rail's
+    jump after a zero-sigma face-end fix): that epoch is flagged and the note names the method, when and how far."""
+    v = np.full(600, 0.3)
+    east = np.cumsum(v) / 10.0
+    east[300:] += 0.8
+    sol = _solution(east, v)
+    assert assess(sol, CFG, "fkf_rail") == 1
+    assert np.flatnonzero(sol.flags & FLAG_UNHEALTHY).tolist() == [300]
+    assert sol.flags[300] & FLAG_VELOCITY  # the filter's own flags are kept
+    (note,) = sol.notes
+    assert note.startswith("health: fkf_rail lost track at 1 epoch (") and "t 30.0-30.0 s" in note and "sigma" in note
+
+
+def test_the_same_correction_inside_a_wide_covariance_is_not():
+    """The same 0.8 m at a one-sigma of 0.5 m is what a fix does to an uncertain filter: healthy."""
+    v = np.full(600, 0.3)
+    east = np.cumsum(v) / 10.0
+    east[300:] += 0.8
+    assert assess(_solution(east, v, sd_pos=0.5), CFG, "kf") == 0
+
+
+@pytest.mark.parametrize("speed, bad", [(0.9, False), (2.8, True)])
+def test_a_speed_no_shearer_hauls_at_is_a_lost_track(speed, bad):
+    v = np.full(100, speed)
+    sol = _solution(np.cumsum(v) / 10.0, v, sd_pos=np.nan)  # dead reckoning: no covariance
+    assert (assess(sol, CFG, "dr") > 0) == bad
+    assert any("faster than 1 m/s" in n for n in sol.notes) == bad
+
+
+def test_a_state_that_is_not_finite_is_a_lost_track():
+    v = np.full(100, 0.3)
+    sol = _solution(np.cumsum(v) / 10.0, v)
+    sol.llh[60:, 0] = np.nan
+    assert assess(sol, CFG, "kf") >= 40
+    assert np.all(sol.flags[60:] & FLAG_UNHEALTHY)
+    assert any("not finite" in n for n in sol.notes)
