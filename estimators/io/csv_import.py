@@ -61,6 +61,8 @@ import pyarrow.csv as pacsv
 from estimators.io.csv_locate import ARROW_TYPES, UTF8_FIX, locate_read_error
 from estimators.io.csvio import SCENARIO_FILE, header_name
 from estimators.io.logformat import (
+    MARKER,
+    MARKER_TEXT,
     STREAMS,
     LogError,
     Stream,
@@ -166,6 +168,7 @@ def import_csv(csv_dir: Path, run_dir: Path, block_bytes: int = BLOCK_BYTES) -> 
         if report.scenario:
             shutil.copyfile(scenario, tmp / SCENARIO_FILE)
         (tmp / REPORT_FILE).write_text(json.dumps(report.to_dict(), indent=1) + "\n")
+        (tmp / MARKER).write_text(MARKER_TEXT)
         if run_dir.exists():
             run_dir.rmdir()  # empty (checked above); rename cannot replace it portably
         os.rename(tmp, run_dir)

@@ -236,6 +236,10 @@ FACE_SURVEY = Stream(
     time_order="nondecreasing",
 )
 
+MARKER = ".longwall-run"
+"""The file that makes a directory a run directory (simulated or imported) `longwall run --force` may replace."""
+MARKER_TEXT = "a longwall-twin run directory: `longwall run --force` may replace this directory\n"
+
 # Bits of the estimates' `flags` column.
 FLAG_VELOCITY = 1  # odometer / motion-constraint velocity update applied
 FLAG_POSITION = 2  # position fix (CPOEM point or survey) applied

@@ -12,10 +12,10 @@ import time
 
 import pytest
 
+from estimators.io.logformat import MARKER, MARKER_TEXT
 from tests.conftest import SCENARIO_DIR
 from twin.cli import EXIT_SIGTERM, main
 from twin.pipeline import api
-from twin.pipeline.rundir import MARKER, MARKER_TEXT
 
 
 def short(tmp_path, name: str = "default"):

@@ -21,9 +21,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-MARKER = ".longwall-run"
-"""The file that makes a directory a run directory `--force` may replace."""
-MARKER_TEXT = "a longwall-twin run directory: `longwall run --force` may replace this directory\n"
+from estimators.io.logformat import MARKER, MARKER_TEXT
+
 TIMING = "timing.json"
 """Wall-clock figures of a run (they differ from run to run, so they stay out of metrics.json)."""
 MAX_NAME = 80

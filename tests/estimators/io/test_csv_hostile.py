@@ -17,9 +17,10 @@ import pyarrow.csv as pacsv
 import pytest
 
 from estimators.io.csvio import header_name
-from estimators.io.logformat import IMU, make_table, stream_writer
+from estimators.io.logformat import IMU, MARKER, make_table, stream_writer
 from estimators.io.time_steps import time_steps
 from twin.cli import main
+from twin.pipeline.rundir import check_target
 
 
 @pytest.fixture(scope="module")
@@ -158,9 +159,12 @@ def test_flagged_defects_are_imported_and_shown(case, exported, tmp_path, capsys
 
 
 def test_the_exported_run_imports_clean(exported, tmp_path, capsys):
+    """...as a run directory the project made: `longwall run --force` may replace it (and only such a one)."""
     rc, out, err = _import(exported, tmp_path / "run", capsys)
     assert rc == 0, err
     assert "skipped" not in out and "gaps" not in out, out
+    assert (tmp_path / "run" / MARKER).is_file()
+    check_target(tmp_path / "run", force=True)  # refuses (RunDirError) a directory without the marker
 
 
 # ------------------------------------------------------------------------------------------ bounded memory

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from estimators.io.logformat import MARKER
 from twin.pipeline.rundir import (
-    MARKER,
     MAX_NAME,
     RunDirError,
     atomic_run_dir,
