@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from estimators.io.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT
+from estimators.io.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_UNHEALTHY, FLAG_ZUPT
 from estimators.io.metrics import (
     enu_offset_to_geodetic,
     self_assessment,
@@ -27,6 +27,7 @@ def test_distance_sigmas_and_flag_counts():
     flags[[3, 9]] = FLAG_POSITION
     flags[[9, 10, 11]] |= FLAG_ZUPT
     flags[-1] = FLAG_SKIPPED
+    flags[[20, 21]] |= FLAG_UNHEALTHY
     own = self_assessment(offset_estimate(truth, t, [0.0, 0.0, 0.0], sd=0.04, flags=flags))
     assert own["samples"] == t.size and own["t_end"] == pytest.approx(100.0)
     assert own["distance_m"] == pytest.approx(100.0 * np.sqrt(0.1 ** 2 + 0.02 ** 2 + 0.001 ** 2), rel=1e-6)
@@ -34,7 +35,7 @@ def test_distance_sigmas_and_flag_counts():
     assert own["final_sd_horizontal_m"] == pytest.approx(0.04 * np.sqrt(2))
     assert own["final_sd_att_deg"]["u"] == pytest.approx(np.degrees(0.04))
     assert own["flags"] == {"velocity_updates": 0, "position_fixes": 2, "zupts": 3, "skipped": 1,
-                           "covariance_repaired": 0, "mag_updates": 0, "isolated": 0}
+                           "covariance_repaired": 0, "mag_updates": 0, "isolated": 0, "unhealthy": 2}
     assert "survey_residuals" not in own
 
 
