@@ -67,11 +67,6 @@ TABLE1 = {
 NAMES = {"ekf": "EKF", "ukf": "UKF", "optimized_ukf": "optimized UKF"}
 
 
-def psd(sigma: float, tau: float) -> float:
-    """Random-walk PSD for the bias states matching a Gauss-Markov in-run bias: 2 sigma^2 / tau."""
-    return 2 * sigma ** 2 / tau if sigma > 0 else 0.0
-
-
 def settled(ok: np.ndarray, t: np.ndarray) -> float:
     """First time from which `ok` holds to the end (nan if it does not hold at the end)."""
     if not ok[-1]:
@@ -113,8 +108,8 @@ def run_grade(gname: str, seed: int) -> dict:
         t0 = time.perf_counter()
         res = fine_align(dtheta, dv, 1 / RATE, LAT, q0, (g.gyro_arw, g.accel_vrw), ERR0, m, h=H,
                          gyro_bias_sigma=g.gyro_bias, accel_bias_sigma=acc_sigma, update_rate=10.0,
-                         gyro_bias_psd=psd(g.gyro_bias_instability, g.gyro_bias_tau),
-                         accel_bias_psd=psd(g.accel_bias_instability, g.accel_bias_tau))
+                         gyro_bias_psd=g.gyro_bias_psd,
+                         accel_bias_psd=g.accel_bias_psd)
         el = time.perf_counter() - t0
         fl, _ = alignment_floors(quat_to_mat(res.attitude(WINDOW)), acc, gyr, LAT, acc_sigma, g.gyro_bias, H, **kw)
         phi_t = np.stack(mat_to_euler(c_true @ np.swapaxes(quat_to_mat(res.q_nb), -1, -2)), axis=-1)

@@ -120,6 +120,17 @@ class ImuGrade:
             if getattr(self, f"{sensor}_bias_instability") > 0 and getattr(self, f"{sensor}_bias_tau") <= 0:
                 raise ValueError(f"ImuGrade.{sensor}_bias_tau must be > 0 when {sensor}_bias_instability > 0")
 
+    @property
+    def gyro_bias_psd(self) -> float:
+        """Random-walk density [rad^2/s^3] of a filter's gyro bias state matching the Gauss-Markov in-run bias:
+        2 sigma^2 / tau (0 without one)."""
+        return 2 * self.gyro_bias_instability ** 2 / self.gyro_bias_tau if self.gyro_bias_instability > 0 else 0.0
+
+    @property
+    def accel_bias_psd(self) -> float:
+        """The same for the accelerometer bias [m^2/s^5]."""
+        return 2 * self.accel_bias_instability ** 2 / self.accel_bias_tau if self.accel_bias_instability > 0 else 0.0
+
 
 def _par(gyro_bias_deg_h=0.0, gyro_rw_deg_sqrt_h=0.0, accel_bias_mg=0.0, accel_rw_mg_sqrt_hz=0.0) -> ImuGrade:
     """A row of 001 Table 2 ("Error parameters to be accumulated"): constant bias and random walk only."""

@@ -36,11 +36,6 @@ PAPER_TABLE1 = {  # "Filtering Results of error angle" (units not stated in 000)
 }
 
 
-def _bias_psd(sigma: float, tau: float) -> float:
-    """Random-walk PSD for the bias states matching a Gauss-Markov in-run bias: 2 sigma^2 / tau."""
-    return 2 * sigma ** 2 / tau if sigma > 0 else 0.0
-
-
 ALIGN_WINDOW_S = 10.0
 """Window of the mean attitude reported as a fine alignment's result [s]."""
 
@@ -50,8 +45,8 @@ def _fine_align(p: AlignmentParams, g, dtheta, dv, lat: float, h: float, q0, met
     return fine_align(dtheta, dv, 1 / p.rate_hz, lat, q0, (g.gyro_arw, g.accel_vrw),
                       np.asarray(p.initial_error_deg) * DEG, method, h=h, gyro_bias_sigma=g.gyro_bias,
                       accel_bias_sigma=g.accel_bias, velocity_sigma=p.velocity_sigma_m_s, update_rate=p.update_hz,
-                      gyro_bias_psd=_bias_psd(g.gyro_bias_instability, g.gyro_bias_tau),
-                      accel_bias_psd=_bias_psd(g.accel_bias_instability, g.accel_bias_tau))
+                      gyro_bias_psd=g.gyro_bias_psd,
+                      accel_bias_psd=g.accel_bias_psd)
 
 
 def run_alignment(exp: AlignmentExperiment) -> ExperimentResult:

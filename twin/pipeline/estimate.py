@@ -37,11 +37,6 @@ from twin.config.scenario import Scenario
 from twin.face.layout import support_stations
 
 
-def _psd(sigma: float, tau: float) -> float:
-    """Random-walk density matching a Gauss-Markov in-run bias over its correlation time: 2 sigma^2 / tau."""
-    return 2 * sigma ** 2 / tau if sigma > 0 and tau > 0 else 0.0
-
-
 def positioning_config(scn: Scenario) -> Config:
     """The filter configuration a user would write for this face and machine."""
     est = scn.estimators.shearer
@@ -68,8 +63,8 @@ def positioning_config(scn: Scenario) -> Config:
     imu = ImuNoise(gyro_arw=max(g.gyro_arw, 1e-6), accel_vrw=max(g.accel_vrw, 1e-5),
                    gyro_bias=max(g.gyro_bias, g.gyro_bias_instability, 1e-7),
                    accel_bias=max(g.accel_bias, g.accel_bias_instability, 1e-5),
-                   gyro_bias_psd=_psd(g.gyro_bias_instability, g.gyro_bias_tau),
-                   accel_bias_psd=_psd(g.accel_bias_instability, g.accel_bias_tau),
+                   gyro_bias_psd=g.gyro_bias_psd,
+                   accel_bias_psd=g.accel_bias_psd,
                    accel_nonorth=max(g.accel_nonorth, 1e-6))
     return Config(imu=imu, **kw)
 

@@ -374,3 +374,13 @@ def test_preset_values_in_si():
     ideal = grade("ideal")
     assert all(getattr(ideal, f) == 0 for f in ("gyro_bias", "gyro_arw", "accel_bias", "accel_vrw", "gyro_quant"))
     assert math.isinf(ideal.gyro_range) and math.isinf(ideal.accel_range)
+
+
+def test_bias_psd_is_the_random_walk_matching_the_gauss_markov_bias():
+    """A filter's random-walk bias state grows like the Gauss-Markov bias over its correlation time:
+    q tau = 2 sigma^2 (the bias's variance doubled), and no in-run bias gives none."""
+    g = grade("mti-g-700")
+    assert g.gyro_bias_instability > 0 and g.accel_bias_instability > 0
+    assert g.gyro_bias_psd * g.gyro_bias_tau == pytest.approx(2 * g.gyro_bias_instability ** 2, rel=1e-15)
+    assert g.accel_bias_psd * g.accel_bias_tau == pytest.approx(2 * g.accel_bias_instability ** 2, rel=1e-15)
+    assert grade("ideal").gyro_bias_psd == 0.0 == grade("ideal").accel_bias_psd
