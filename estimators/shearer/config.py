@@ -96,9 +96,6 @@ class Config:
     advance_sd: float = 0.005  # advance from the ram strokes [m]
     ram_noise_sd: float = 1e-4  # one-sigma noise of a push-ram reading [m]
     path_sd: float = 0.03  # the pans' running line between cycles beyond the measured advance [m]
-    path_along_sd: float = 0.05
-    """The same along the face [m]: the odometer counts path length, and the cut-out runs diagonally through the
-    snake (a web over a snake of 8 pans adds about 5 cm), so a face coordinate shifts at every face end."""
     fix_gate: float = 40.0  # normalized innovation squared above which a CPOEM fix is rejected (3 dof); surveyed
     # face ends are trusted, never gated
     sd_velocity0: float = 0.01

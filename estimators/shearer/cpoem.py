@@ -8,11 +8,18 @@ position fix (001 eq. 6, with C of eq. 7 turning the ENU increment into latitude
 
     p_i,j+1 = p_i,j + C C_b^n C_m^b [d, 0, 0]^T
 
+The fix carries no information along the face (ALONG_FACE_SD): the point's face coordinate is the odometer's
+count on the earlier pass, and the two passes' path lengths to the same place on the face part by the diagonal
+entry of every cut-out (a 0.8 m web over a 15 m snake adds 2.6 cm, with the sign of the direction of travel).
+The point is moved square to the face line (`advance_direction`), as the supports' rams push the pans, not along
+the shearer's body x, which the diagonal entry turns and the roll tilts.
+
 The advance comes from the push-ram stroke sensors of the supports on either side of the point (interpolated
 along the face): between two passes each pan is pushed once, so the ram of a support shows one stroke of the
 web, in one or several partial strokes, whatever the order of push and support advance
 (`ram_stroke`). A point without a valid stroke on both neighbouring supports (dropout, missing support) is
-skipped and reported, never guessed.
+skipped and reported, never guessed; a point beyond the outermost supports (the face ends, half a support
+spacing) has one neighbour only and is not used.
 """
 
 from __future__ import annotations
@@ -80,6 +87,15 @@ def record(u: np.ndarray, t: np.ndarray, llh: np.ndarray, cov_enu: np.ndarray, c
     w = np.where(np.abs(du) > 0, (marks - u[j - 1]) / np.where(du == 0, 1, du), 1.0)[:, None]
     return Points(marks, t[j - 1] + w[:, 0] * (t[j] - t[j - 1]), llh[j - 1] + w * (llh[j] - llh[j - 1]),
                   cov_enu[j], c_nb[j])
+
+
+ALONG_FACE_SD = 1e3
+"""One-sigma [m] along the face of a fix from an earlier pass's point: none of its information is along the face.
+Held at the 5 cm a cut-out's path length suggests, each pass kept the last one's along-face error, which the first
+cut makes (seed004 trial 5: 0.2-0.3 m east rms in cycles 2-5 from a first cut's 1.3 m; 0.03-0.06 m without), and
+the odometer scale followed the cut-outs' path length (+6e-4 to +1.3e-3 on error-free independent trajectories,
+tests/estimators/shearer/test_independent_trajectories.py). Along the face the shearer is placed by the odometer,
+its scale calibrated by the face-end fixes of every cut."""
 
 
 RAM_WINDOW = 3
@@ -170,35 +186,55 @@ class RamLog:
         return (1 - w) * a + w * b
 
 
+def advance_direction(points: Points) -> np.ndarray:
+    """The direction the pans were pushed (ENU, unit, horizontal): the supports' rams push square to the face line,
+    which is the least-squares line through the points' horizontal positions, towards the coal wall (the side of
+    the points' body x). Not the shearer's body x: in the diagonal entry of a cut-out it is turned by the snake
+    (0.1 rad for a 0.8 m web over 15 m), and tilted by its roll."""
+    x_n = points.c_nb[:, :, 0].mean(axis=0)
+    if points.u.size < 2:
+        side = np.array([x_n[0], x_n[1], 0.0])
+        return side / np.linalg.norm(side)
+    lat0, lon0, h0 = points.llh[0]
+    enu = earth.lla_to_enu(points.llh[:, 0], points.llh[:, 1], points.llh[:, 2], lat0, lon0, h0)[:, :2]
+    _, _, vt = np.linalg.svd(enu - enu.mean(axis=0), full_matrices=False)
+    normal = np.array([-vt[0, 1], vt[0, 0], 0.0])
+    return normal if normal @ x_n >= 0 else -normal
+
+
 def predict_fixes(points: Points, u: np.ndarray, t: np.ndarray, epochs: np.ndarray, marks: np.ndarray,
-                  rams: RamLog, advance_sd: float, path_sd: float,
-                  path_along_sd: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  rams: RamLog, advance_sd: float,
+                  path_sd: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Fixes for the crossings (epochs, marks) of the current pass from the previous pass's points (001 eq. 6).
 
     The predicted point is moved along the face (body y at the point) by u[j] - u_i so that it refers to the
-    epoch where it is applied. R = point covariance + the change of the path between the passes, in the body axes
-    at the point: advance_sd and path_sd across the face (x), path_along_sd along it (y), path_sd vertically (z).
+    epoch where it is applied, and square to the face line by the pans' advance. R = point covariance + the change of
+    the path between the passes, in the body axes at the point: advance_sd and path_sd across the face (x),
+    ALONG_FACE_SD along it (y), path_sd vertically (z).
     Returns (epochs, llh (F, 3), R (F, 3, 3), skipped face coordinates, advance direction in n at each point
-    (F, 3), the direction along which the ram stroke moved it)."""
-    path_b = np.diag([advance_sd ** 2 + path_sd ** 2, path_along_sd ** 2, path_sd ** 2])
+    (F, 3): the direction along which the ram stroke moved it, made square to the point's along-face axis so that a
+    test of the innovation along it (rail_fix_update) sees none of the fix's along-face sigma)."""
+    path_b = np.diag([advance_sd ** 2 + path_sd ** 2, ALONG_FACE_SD ** 2, path_sd ** 2])
+    adv_n = advance_direction(points)
     idx = {round(v / 1e-6): k for k, v in enumerate(points.u)}
     out_j, out_llh, out_r, out_adv, skipped = [], [], [], [], []
     for j, m in zip(epochs, marks):
         k = idx.get(round(m / 1e-6))
-        if k is None:
+        if k is None or not rams.u[0] <= m <= rams.u[-1]:
             continue
         d = rams.advance(m, points.t[k], t[j])
         if not np.isfinite(d):
             skipped.append(m)
             continue
         c = points.c_nb[k]
-        shift = c[:, 0] * d + c[:, 1] * (u[j] - m)
+        shift = adv_n * d + c[:, 1] * (u[j] - m)
         lat, lon, h = points.llh[k]
         r_m, r_n = earth.radii(lat)
         out_j.append(j)
         out_llh.append([lat + shift[1] / (r_m + h), lon + shift[0] / ((r_n + h) * np.cos(lat)), h + shift[2]])
         out_r.append(points.cov[k] + c @ path_b @ c.T)
-        out_adv.append(c[:, 0])
+        across = adv_n - (adv_n @ c[:, 1]) * c[:, 1]  # square to the fix's loose axis, which R leaves at 1e3 m
+        out_adv.append(across / np.linalg.norm(across))
     if not out_j:
         return np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.array(skipped), np.zeros((0, 3))
     return np.array(out_j, np.int64), np.array(out_llh), np.array(out_r), np.array(skipped), np.array(out_adv)

@@ -12,11 +12,12 @@ import numpy as np
 
 from estimators.faults.detectors import fsprt_state
 from estimators.io.log import Log
-from estimators.io.logformat import FLAG_MAG
+from estimators.io.logformat import FLAG_MAG, FLAG_SKIPPED
 from estimators.kalman import error_state as es
 from estimators.shearer import federated_filter as fk
 from estimators.shearer import rail_fix_update as rf
 from estimators.shearer.config import Config
+from estimators.shearer.health import filter_lost, fix_fallbacks, run_checked
 from estimators.shearer.position_fixes import Fixes
 from estimators.shearer.positioning import (
     initial_covariance,
@@ -26,8 +27,8 @@ from estimators.shearer.positioning import (
 from estimators.shearer.prepare import Prepared
 from estimators.shearer.solution import Solution, make_solution
 
-PassFixes = tuple[Fixes, np.ndarray, np.ndarray]
-"""A pass's rail-model fixes with each one's scale_h (F, 3) and var_floor (F,) (rf.rail_fix_update)."""
+PassFixes = tuple[Fixes, np.ndarray]
+"""A pass's rail-model fixes with each one's var_floor (F,) (rf.rail_fix_update)."""
 
 
 class FederatedRun:
@@ -59,18 +60,47 @@ class FederatedRun:
         self.state = fk.FilterState(prep.nav0.copy(), prep.cal0.copy(), p_sub, beta, np.zeros(es.N_NOMINAL),
                                     np.zeros((cfg.mag.window, 1, 1)), np.zeros(1, np.int64), detectors)
         self.mode = fk.FEDERATED if federated else fk.CENTRALIZED
+        self.health_notes: list[str] = []  # what the health monitor did (run_pass)
 
     def run_pass(self, a: int, b: int, rail: PassFixes | None = None) -> np.ndarray:
-        """The filter over epochs (a, b] with the pass's rail fixes (none: None); returns their detector
-        statistics (F, 3) (NaN for a fix not tested)."""
-        fixes, scale_h, var_floor = rail if rail is not None else (Fixes.empty(), np.zeros((0, 3)), np.zeros(0))
+        """The filter over epochs (a, b] with the pass's rail fixes (none: None), under the health monitor
+        (estimators.shearer.health.run_checked: a pass that loses track runs again from its start with fewer
+        fixes, then without the magnetometer); returns the fixes' detector statistics (F, 3) (NaN for a fix not
+        tested or left out)."""
+        fixes, var_floor = rail if rail is not None else (Fixes.empty(), np.zeros(0))
         self.state.det.counts[rf.COUNT_TESTED] = 0  # rail fixes tested in this pass (rail_kinematics.ARM_FIXES)
-        results = rf.RailResults(np.full((fixes.epoch.size, 3), np.nan), np.zeros(fixes.epoch.size, np.int8))
-        kernel_fixes = rf.RailFixes(fixes.epoch, fixes.llh, fixes.r, scale_h, fixes.advance, var_floor,
-                                    ~np.isfinite(fixes.gate))
-        fk.run_afkf(self.mode, a, b, self.sensors, kernel_fixes, results, self.tuning, self.state, self.out)
-        self.fixes.append((fixes.epoch, fixes.llh, results.stats, results.applied))
-        return results.stats
+        start = _copied(self.state)
+        mag = np.isfinite(self.sensors.mag_b[a + 1:b + 1]).any()
+        everything = np.ones(fixes.epoch.size, bool)
+        fallbacks = [(label, (keep, True)) for label, keep in fix_fallbacks(fixes)]
+        if mag:
+            fallbacks.append(("without any position fix or the magnetometer", (~everything, False)))
+
+        def run(arg):
+            keep, use_mag = arg
+            sensors = self.sensors
+            if not use_mag:
+                mag_b = sensors.mag_b.copy()
+                mag_b[a + 1:b + 1] = np.nan
+                sensors = sensors._replace(mag_b=mag_b)
+            results = rf.RailResults(np.full((int(keep.sum()), 3), np.nan), np.zeros(int(keep.sum()), np.int8))
+            taken = fixes.take(keep)
+            kernel_fixes = rf.RailFixes(taken.epoch, taken.llh, taken.r, taken.advance, var_floor[keep],
+                                        ~np.isfinite(taken.gate))
+            fk.run_afkf(self.mode, a, b, sensors, kernel_fixes, results, self.tuning, self.state, self.out)
+            return results
+
+        def lost(_results):
+            return filter_lost(self.prep.t_kf[a:b + 1], self.out.nav[a:b + 1], self.out.sd[a:b + 1], self.cfg)
+
+        results, (keep, _) = run_checked(run, lost, lambda: _restore(self.state, start), (everything, True),
+                                         fallbacks, self.prep.t_kf[a:b + 1], self.health_notes)
+        self.out.flags[fixes.epoch[~keep]] |= FLAG_SKIPPED
+        stats = np.full((fixes.epoch.size, 3), np.nan)
+        applied = np.zeros(fixes.epoch.size, np.int8)
+        stats[keep], applied[keep] = results.stats, results.applied
+        self.fixes.append((fixes.epoch, fixes.llh, stats, applied))
+        return stats
 
     def solution(self, notes: list[str]) -> Solution:
         """The run's Solution (notes: the method's so far; the fusion's are added) with its fusion columns."""
@@ -83,7 +113,7 @@ class FederatedRun:
 
     def _notes(self) -> list[str]:
         mag_flags = self.out.mag_flags
-        notes = []
+        notes = list(self.health_notes)
         disturbed = int(np.sum(mag_flags & fk.MAG_DISTURBED > 0))
         if disturbed:
             first = self.prep.t_kf[np.argmax(mag_flags & fk.MAG_DISTURBED > 0)]
@@ -93,6 +123,20 @@ class FederatedRun:
         if invalid:
             notes.append(f"fusion: a sub-filter's covariance was unusable at {invalid} epochs (weight 0, restarted)")
         return notes
+
+
+def _copied(state):
+    """A deep copy of a (nested) NamedTuple of arrays."""
+    return type(state)(*(_copied(v) if isinstance(v, tuple) else v.copy() for v in state))
+
+
+def _restore(state, saved) -> None:
+    """Put `saved` (_copied) back into the arrays of `state`, in place."""
+    for v, w in zip(state, saved):
+        if isinstance(v, tuple):
+            _restore(v, w)
+        else:
+            v[...] = w
 
 
 def fusion_columns(t, beta, r_yaw, innov, mag_flags, delta) -> dict[str, np.ndarray]:

@@ -264,8 +264,7 @@ def run_afkf(mode, j0, j1, sensors, fixes, results, tuning, state, out):
             mflag, out.yaw_innov[j], r_count[0] = mag_update(x2, p2, nav, mag_b[j], mag_params, r_yaw, r_buf,
                                                               r_count[0], check)
         fix_flag, k_fix, rejected_until, back = rail_fixes_at(j, k_fix, rejected_until, fixes, results, x2, p2, nav,
-                                                              cal, lever, x_od, p_od, det_params, det, snaps,
-                                                              snap_count)
+                                                              lever, x_od, p_od, det_params, det, snaps, snap_count)
         flag |= fix_flag
         if back >= 0:
             j, k_fix = restore_snapshot(snaps, back, state)

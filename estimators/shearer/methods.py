@@ -43,7 +43,7 @@ def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS) -> dict[
             if "kf_cpoem_rts" in methods:
                 out["kf_cpoem_rts"] = smoothed
             if "rts_offline" in methods:
-                out["rts_offline"] = rts_offline(prep, cfg, fwd)
+                out["rts_offline"] = rts_offline(prep, cfg, fwd, smoothed.notes)
         if "dr_compensated" in methods:
             out["dr_compensated"] = dead_reckoning(log, cfg, prep, smoothed.cal[-1])
     if "dr" in methods:

@@ -13,7 +13,12 @@ from estimators.io.log import Log
 from estimators.kalman import error_state as es
 from estimators.nav.rotations import quat_to_mat
 from estimators.shearer.config import Config
-from estimators.shearer.cpoem import Points, crossings, predict_fixes, record
+from estimators.shearer.cpoem import (
+    Points,
+    crossings,
+    predict_fixes,
+    record,
+)
 from estimators.shearer.face_line import fit_face_line
 from estimators.shearer.prepare import Prepared
 from estimators.shearer.solution import body_llh
@@ -57,7 +62,7 @@ def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Poi
             lo, hi = max(first - 1, a), min(last, b)
             epochs, marks = crossings(u, cfg.cpoem_spacing_m, lo, hi)
             fj, fllh, fr, skipped, fadv = predict_fixes(points, u, prep.t_kf, epochs, marks, prep.rams,
-                                                        cfg.advance_sd, cfg.path_sd, cfg.path_along_sd)
+                                                        cfg.advance_sd, cfg.path_sd)
             j += list(fj)
             llh += list(fllh)
             r += list(fr)
@@ -72,26 +77,36 @@ def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Poi
     return Fixes(np.array(j, np.int64), np.array(llh), np.array(r), np.array(gate), np.array(advance)).take(order)
 
 
-def face_survey_points(log: Log, prep: Prepared) -> tuple[Points, np.ndarray]:
+def face_survey_points(log: Log, prep: Prepared) -> Points:
     """The installed face line (FACE_SURVEY) as CPOEM points of the first cut, smoothed by a local quadratic fit
-    along the face (estimators.shearer.face_line: the survey's independent point errors averaged over +-14.5 m with
-    tricube weights), with the fit's covariance; and the line's direction d enu / d u (K, 3) at each point. Its face
-    coordinate is a true distance, the filter's the odometer's: the two part by the odometer's scale error, which
-    the rail-model filter puts in the fix's measurement model
-    (estimators.shearer.rail_fix_update.rail_fix_measurement)."""
+    along the face (estimators.shearer.face_line: the survey's independent point errors averaged over a window its
+    noise and the line's undulation choose, with tricube weights), with the fit's covariance, and the line's own
+    frame at each point (`line_frames`: y along the fitted line, x level and square to it), in which a fix's
+    along-face sigma lies."""
     if log.face_u.size == 0 or not prep.cuts:
-        return Points.empty(), np.zeros((0, 3))
+        return Points.empty()
     first, last = prep.cuts[0]
     sign = 1.0 if prep.odo[last] >= prep.odo[first - 1] else -1.0  # the odometer counts the first cut this way
     order = np.argsort(log.face_u, kind="stable")
     u = sign * log.face_u[order]
-    line = fit_face_line(log.face_llh[order], log.face_u[order])
-    c_nb = np.broadcast_to(quat_to_mat(prep.nav0[es.QUAT]), (u.size, 3, 3))
+    line = fit_face_line(log.face_llh[order], log.face_u[order], log.face_sd[order])
+    c_nb = line_frames(sign * line.direction, quat_to_mat(prep.nav0[es.QUAT])[:, 0])
     sd_h, sd_v = log.face_sd[order, 0], log.face_sd[order, 1]
     cov = np.zeros((u.size, 3, 3))
     cov[:, [0, 1, 2], [0, 1, 2]] = line.gain[:, None] * np.column_stack([sd_h ** 2, sd_h ** 2, sd_v ** 2])
-    points = Points(u, np.full(u.size, prep.t_kf[0]), line.llh(), cov, c_nb.copy())
-    return points, sign * line.direction
+    return Points(u, np.full(u.size, prep.t_kf[0]), line.llh(), cov, c_nb)
+
+
+def line_frames(direction: np.ndarray, x_n: np.ndarray) -> np.ndarray:
+    """Body-like frames (K, 3, 3) along a line, C_b^n with y along `direction` (K, 3; d enu / d u in the sense of
+    travel), x square to it and level, on the side of x_n (the start attitude's body x, towards the coal wall),
+    z = x cross y. A point without a direction (a one-point line) takes y level and square to x_n."""
+    y = np.where(np.isfinite(direction), direction, np.array([-x_n[1], x_n[0], 0.0]))
+    y = y / np.linalg.norm(y, axis=1, keepdims=True)
+    x = np.column_stack([y[:, 1], -y[:, 0], np.zeros(len(y))])
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    x *= np.where(x @ x_n >= 0, 1.0, -1.0)[:, None]
+    return np.stack([x, y, np.cross(x, y)], axis=2)
 
 
 def segment_points(prep: Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, cov_enu: np.ndarray) -> Points:

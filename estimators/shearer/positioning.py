@@ -17,12 +17,13 @@ Methods (estimators.shearer.methods runs them by name, each an estimates/NAME st
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
 from estimators.io.log import Log
-from estimators.io.logformat import FLAG_SMOOTHED
+from estimators.io.logformat import FLAG_SKIPPED, FLAG_SMOOTHED
 from estimators.kalman import error_state as es
 from estimators.kalman.rts import rts_backward
 from estimators.nav import earth
@@ -30,6 +31,7 @@ from estimators.nav.rotations import quat_rotate, quat_to_mat, rotvec_to_quat
 from estimators.shearer import odometer_filter as kf
 from estimators.shearer.config import Config
 from estimators.shearer.cpoem import Points
+from estimators.shearer.health import filter_lost, fix_fallbacks, innovations_inconsistent, run_checked
 from estimators.shearer.position_fixes import Fixes, fixes_for, segment_points
 from estimators.shearer.prepare import Prepared, body_increments
 from estimators.shearer.solution import N_SD, Solution, make_solution
@@ -119,6 +121,60 @@ class _Forward:
             self.saved.append((a, a + x_post.shape[0] - 1))
 
 
+class _Segment(NamedTuple):
+    """One pass (epochs a..b, row 0 the previous pass's last) of the filter kernel: posterior error states and
+    covariances, predicted covariances and transitions (for the smoother), navigation and calibration rows, flags
+    each fix's row in the pass, NIS gate and NIS."""
+
+    x_post: np.ndarray
+    p_post: np.ndarray
+    p_pred: np.ndarray
+    phi: np.ndarray
+    nav: np.ndarray
+    cal: np.ndarray
+    flags: np.ndarray
+    fix_row: np.ndarray
+    gate: np.ndarray
+    nis: np.ndarray
+
+
+def _run_segment(prep: Prepared, a: int, b: int, fixes: Fixes, q_psd: np.ndarray, params: np.ndarray,
+                 nav: np.ndarray, cal: np.ndarray, p: np.ndarray, nominal: np.ndarray) -> _Segment:
+    """The filter kernel (odometer_filter.run_filter) over epochs (a, b] with `fixes`, from (nav, cal, p,
+    nominal), which it leaves at epoch b."""
+    m = b - a + 1
+    seg = _Segment(np.zeros((m, es.N_STATES)), np.zeros((m, es.N_STATES, es.N_STATES)),
+                   np.zeros((m, es.N_STATES, es.N_STATES)), np.zeros((m, es.N_STATES, es.N_STATES)),
+                   np.zeros((m, es.N_NAV)), np.zeros((m, es.N_CAL)), np.zeros(m, np.int32), fixes.epoch - a,
+                   fixes.gate, np.full(fixes.epoch.size, np.nan))
+    seg.p_post[0], seg.p_pred[0], seg.phi[0] = p, p, np.eye(es.N_STATES)
+    seg.nav[0], seg.cal[0] = nav, cal
+    kf.run_filter(0, m - 1, prep.steps, prep.t_mech[a * prep.steps:], prep.phi_b[a * prep.steps:],
+                  prep.dv_b[a * prep.steps:], prep.odo[a:b + 1], prep.mode[a:b + 1], seg.fix_row, fixes.llh,
+                  fixes.r, fixes.gate, q_psd, params, nav, cal, p, nominal, seg.nav, seg.cal, seg.x_post, seg.p_post,
+                  seg.p_pred, seg.phi, seg.flags, seg.nis, np.full((m, 3), np.nan))
+    return seg
+
+
+def _checked_segment(prep: Prepared, cfg: Config, a: int, b: int, fixes: Fixes, q_psd: np.ndarray,
+                     params: np.ndarray, state: tuple[np.ndarray, ...], notes: list[str]) -> tuple[_Segment, Fixes]:
+    """_run_segment from state = (nav, cal, p, nominal) under the health monitor (health.run_checked): a pass that
+    loses track runs again from its start with fewer fixes; the epochs of the fixes it left out are flagged
+    FLAG_SKIPPED. Returns the segment kept and its fixes."""
+    start = tuple(arr.copy() for arr in state)
+
+    def restore():
+        for arr, value in zip(state, start):
+            arr[...] = value
+
+    seg, kept = run_checked(lambda keep: _run_segment(prep, a, b, fixes.take(keep), q_psd, params, *state),
+                            lambda s: filter_lost(prep.t_kf[a:b + 1], s.nav, _sd(s.p_post), cfg)
+                            | innovations_inconsistent(s.nis, s.gate, s.fix_row, b - a + 1), restore,
+                            np.ones(fixes.epoch.size, bool), fix_fallbacks(fixes), prep.t_kf[a:b + 1], notes)
+    seg.flags[fixes.epoch[~kept] - a] |= FLAG_SKIPPED
+    return seg, fixes.take(kept)
+
+
 def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
            keep_dir: Path | None = None) -> tuple[Solution, Solution | None, _Forward]:
     """One forward run; with `smooth`, the online RTS at each pass end (its output and CPOEM points)."""
@@ -138,38 +194,23 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
     n_fixes = n_gated = 0
     for a, b in prep.segments:
         fixes = fixes_for(prep, cfg, log, a, b, points, notes) if cpoem else Fixes.empty()
-        m = b - a + 1
-        x_post = np.zeros((m, es.N_STATES))
-        p_post = np.zeros((m, es.N_STATES, es.N_STATES))
-        p_pred = np.zeros_like(p_post)
-        phi = np.zeros_like(p_post)
-        p_post[0], p_pred[0], phi[0] = p, p, np.eye(es.N_STATES)
-        nis_out = np.full(fixes.epoch.size, np.nan)
-        seg_nav = np.zeros((m, es.N_NAV))
-        seg_cal = np.zeros((m, es.N_CAL))
-        seg_nav[0], seg_cal[0] = nav, cal
-        seg_flags = np.zeros(m, np.int32)
-        seg_innov = np.full((m, 3), np.nan)
-        kf.run_filter(0, m - 1, prep.steps, prep.t_mech[a * prep.steps:], prep.phi_b[a * prep.steps:],
-                      prep.dv_b[a * prep.steps:], prep.odo[a:b + 1], prep.mode[a:b + 1], fixes.epoch - a, fixes.llh,
-                      fixes.r, fixes.gate, q_psd, params, nav, cal, p, nominal, seg_nav, seg_cal, x_post, p_post, p_pred,
-                      phi, seg_flags, nis_out, seg_innov)
+        seg, fixes = _checked_segment(prep, cfg, a, b, fixes, q_psd, params, (nav, cal, p, nominal), notes)
         n_fixes += fixes.epoch.size
-        n_gated += int(np.sum(~(nis_out <= fixes.gate)))
-        fwd.nav[a + 1:b + 1], fwd.cal[a + 1:b + 1] = seg_nav[1:], seg_cal[1:]
-        fwd.sd[a + 1:b + 1], fwd.flags[a + 1:b + 1] = _sd(p_post[1:]), seg_flags[1:]
-        fwd.save_segment(a, x_post, p_post, p_pred, phi)
+        n_gated += int(np.sum(~(seg.nis <= fixes.gate)))
+        fwd.nav[a + 1:b + 1], fwd.cal[a + 1:b + 1] = seg.nav[1:], seg.cal[1:]
+        fwd.sd[a + 1:b + 1], fwd.flags[a + 1:b + 1] = _sd(seg.p_post[1:]), seg.flags[1:]
+        fwd.save_segment(a, seg.x_post, seg.p_post, seg.p_pred, seg.phi)
         if smooth:
-            x_s, p_s = np.empty_like(x_post), np.empty_like(p_post)
-            x_post[0] = 0.0  # the segment starts from the previous posterior
-            rts_backward(x_post, p_post, np.zeros_like(x_post), p_pred, phi, x_s, p_s)
-            s_nav, s_cal = seg_nav.copy(), seg_cal.copy()
-            _apply_rows(s_nav, s_cal, x_s - x_post)
+            x_s, p_s = np.empty_like(seg.x_post), np.empty_like(seg.p_post)
+            seg.x_post[0] = 0.0  # the segment starts from the previous posterior
+            rts_backward(seg.x_post, seg.p_post, np.zeros_like(seg.x_post), seg.p_pred, seg.phi, x_s, p_s)
+            s_nav, s_cal = seg.nav.copy(), seg.cal.copy()
+            _apply_rows(s_nav, s_cal, x_s - seg.x_post)
             smooth_nav[a + 1:b + 1], smooth_sd[a + 1:b + 1] = s_nav[1:], _sd(p_s[1:])
             if cpoem:
                 points = segment_points(prep, cfg, a, b, s_nav, p_s[:, es.DP, es.DP])
         elif cpoem:
-            points = segment_points(prep, cfg, a, b, seg_nav, p_post[:, es.DP, es.DP])
+            points = segment_points(prep, cfg, a, b, seg.nav, seg.p_post[:, es.DP, es.DP])
     if n_gated:
         notes.append(f"{n_gated} of {n_fixes} position fixes rejected by the innovation gate")
     missing = np.flatnonzero(prep.mode[1:] < 0) + 1
@@ -183,8 +224,9 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
     return forward, smoothed, fwd
 
 
-def rts_offline(prep: Prepared, cfg: Config, fwd: _Forward) -> Solution:
-    """One backward pass (001 eqs. 29-31) over the whole forward run, segment by segment from the end.
+def rts_offline(prep: Prepared, cfg: Config, fwd: _Forward, notes: list[str]) -> Solution:
+    """One backward pass (001 eqs. 29-31) over the whole forward run, segment by segment from the end (`notes`: the
+    forward run's).
 
     Row 0 of a stored segment is the previous segment's last epoch: its update is that segment's last row, and
     the smoothed value at a segment's last epoch is the one the later segment's pass computed."""
@@ -205,7 +247,7 @@ def rts_offline(prep: Prepared, cfg: Config, fwd: _Forward) -> Solution:
         _apply_rows(nav[a:b], cal[a:b], x_s[:-1] - x_post[:-1])
         sd[a:b] = _sd(p_s[:-1])
         x_known, p_known = x_s[0], p_s[0]
-    return make_solution(prep.t_kf, cfg, nav, sd, fwd.flags | FLAG_SMOOTHED, cal, [])
+    return make_solution(prep.t_kf, cfg, nav, sd, fwd.flags | FLAG_SMOOTHED, cal, notes)
 
 
 def dead_reckoning(log: Log, cfg: Config, prep: Prepared, cal: np.ndarray | None = None) -> Solution:

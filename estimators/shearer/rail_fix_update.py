@@ -1,7 +1,8 @@
 """The rail kinematics model's position fixes inside the federated filter kernel (004; estimators.shearer.
-federated_filter.run_afkf), numba: the fix's measurement (004 eq. 9, with the odometer scale for a face-survey
-point), the three fault detectors on its innovation (004 section IV, eqs. 15-24) and the isolation of the model
-while a fault holds, and the snapshots the filter goes back to when the fading SPRT raises a fault.
+federated_filter.run_afkf), numba: the fix's measurement (004 eq. 9: the body point's position fix,
+estimators.kalman.measurements.position_fix), the three fault detectors on its innovation (004 section IV,
+eqs. 15-24) and the isolation of the model while a fault holds, and the snapshots the filter goes back to when
+the fading SPRT raises a fault.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from estimators.faults.detectors import (
     hysteresis,
 )
 from estimators.io.logformat import FLAG_POSITION, FLAG_SKIPPED
-from estimators.kalman.error_state import CAL_SCALE, DP, ODO_SCALE
+from estimators.kalman.error_state import DP
 from estimators.kalman.measurements import position_fix
 from estimators.kalman.update import joseph_update
 
@@ -46,7 +47,6 @@ class RailFixes(NamedTuple):
     epoch: np.ndarray  # (F,) filter epoch
     llh: np.ndarray  # (F, 3) predicted point, lat/lon/h
     r: np.ndarray  # (F, 3, 3) ENU covariance
-    scale_h: np.ndarray  # (F, 3)
     advance: np.ndarray  # (F, 3) unit advance direction in n
     var_floor: np.ndarray  # (F,)
     trusted: np.ndarray  # (F,) bool: a surveyed face end, applied without the detectors
@@ -85,20 +85,7 @@ class Snapshots(NamedTuple):
 
 
 @nb.njit(cache=True)
-def rail_fix_measurement(nav, cal, lever, fix_llh, fix_r, scale_h, n):
-    """(z, H, R) of a rail-model fix (004 eq. 9): the body point's position fix (estimators.kalman.measurements.
-    position_fix) with, for a point whose face coordinate is a true distance (the face survey), scale_h (3,) the
-    along-face direction in n times the odometer travel u at the fix. Such a fix lies u k_true along the face from
-    where the odometer (scale k) puts the shearer, so z += scale_h k_est and H on the scale state (truth - estimate,
-    as in the odometer update) is -scale_h: the face survey calibrates the odometer."""
-    z, h, r = position_fix(nav, lever, fix_llh, fix_r, n)
-    z += scale_h * cal[CAL_SCALE]
-    h[:, ODO_SCALE] = -scale_h
-    return z, h, r
-
-
-@nb.njit(cache=True)
-def rail_fix_update(x, p, nav, cal, lever, fixes, k, x_other, p_other, det_params, det, stats):
+def rail_fix_update(x, p, nav, lever, fixes, k, x_other, p_other, det_params, det, stats):
     """Fix k of `fixes` (RailFixes) with the three detectors on its innovation (004 eqs. 15-24): residual
     chi-square, dual-state chi-square against the other sub-filter (x_other, p_other), fading SPRT (with its
     hysteresis in det.isolated[0]). stats[:] = the three statistics. Applied unless the isolating detector holds a
@@ -120,7 +107,7 @@ def rail_fix_update(x, p, nav, cal, lever, fixes, k, x_other, p_other, det_param
     correlated along the face over +-14.5 m (estimators.shearer.face_line), and the filter, riding the INS, does
     not follow its swings; in a calm stretch of the survey kappa takes sigma_k down to D_SD_FLOOR (5 mm), where a
     4 cm swing over three chutes read as a fault (seed004 trials 9 and 10)."""
-    z, h, r = rail_fix_measurement(nav, cal, lever, fixes.llh[k], fixes.r[k], fixes.scale_h[k], x.size)
+    z, h, r = position_fix(nav, lever, fixes.llh[k], fixes.r[k], x.size)
     if fixes.trusted[k]:
         joseph_update(x, p, z, h, r)
         stats[:] = np.nan
@@ -169,7 +156,7 @@ def rail_fix_update(x, p, nav, cal, lever, fixes, k, x_other, p_other, det_param
 
 
 @nb.njit(cache=True)
-def rail_fixes_at(j, k_fix, rejected_until, fixes, results, x, p, nav, cal, lever, x_other, p_other, det_params,
+def rail_fixes_at(j, k_fix, rejected_until, fixes, results, x, p, nav, lever, x_other, p_other, det_params,
                   det, snaps, snap_count):
     """The rail fixes of epoch j from fix k_fix on (rail_fix_update) into (x, p); a fix at or before
     rejected_until, rolled back over, is left out. Returns (filter flag bits, next k_fix, rejected_until, the
@@ -184,7 +171,7 @@ def rail_fixes_at(j, k_fix, rejected_until, fixes, results, x, p, nav, cal, leve
             k_fix += 1
             continue
         was = det.isolated[0]
-        if rail_fix_update(x, p, nav, cal, lever, fixes, k_fix, x_other, p_other, det_params, det,
+        if rail_fix_update(x, p, nav, lever, fixes, k_fix, x_other, p_other, det_params, det,
                            results.stats[k_fix]):
             results.applied[k_fix] = 1
             flag |= FLAG_POSITION

@@ -22,7 +22,7 @@ from estimators.io.logformat import FLAG_ISOLATED
 from estimators.kalman import error_state as es
 from estimators.shearer import rail_fix_update as rf
 from estimators.shearer.config import Config, PositioningError
-from estimators.shearer.cpoem import Points
+from estimators.shearer.cpoem import Points, advance_direction
 from estimators.shearer.federated import FederatedRun, PassFixes
 from estimators.shearer.position_fixes import (
     face_survey_points,
@@ -40,12 +40,6 @@ faults. A fault flag raised earlier holds over them."""
 CAP = 1.25
 """The fading SPRT's statistic is held at or below CAP * t_on: a fault of any size keeps the flag raised, and once
 it has gone the statistic falls to t_off in ln(CAP t_on / t_off) / ln(1 / fading) clean fixes (3 at 12, 5, 0.6)."""
-ALONG_FACE_SD = 1e3
-"""One-sigma [m] along the face of a rail-model fix from an earlier pass's point: none of its information is along
-the face. The point's along-face position is the filter's own of that pass, from the same odometer; taken at
-cpoem's path_along_sd (0.05 m) it held each pass to the last one's along-face error, which the first cut makes
-(seed004 trial 5: 0.2-0.3 m east rms in cycles 2-5 from a first cut's 1.3 m; 0.03-0.06 m without). Along the face
-the shearer is placed by the odometer, its scale calibrated by the face-end fixes of every cut."""
 STROKE_SD_PER_NOISE = 0.5
 """One-sigma of a measured stroke per unit of the ram reading noise (cfg.ram_noise_sd): each level of a stroke is
 the median of 30-60 readings (estimators.shearer.cpoem.ram_stroke), 7.2 mm for 0.02 m readings; against the truth
@@ -87,16 +81,16 @@ def run_rail(log: Log, cfg: Config, prep: Prepared, isolate_by: str | None = "fs
                                    advance_sd=cfg.rail_advance_sd or cfg.advance_sd)
     notes = list(prep.notes)
     run = FederatedRun(log, cfg, prep, True, det_params=det_params)
-    points, direction = face_survey_points(log, prep)
+    points, surveyed = face_survey_points(log, prep), True
     for a, b in prep.segments:
-        fixes, scale_h, var_floor = _rail_fixes(prep, rail_cfg, log, a, b, points, direction, notes)
-        stats = run.run_pass(a, b, (fixes, scale_h, var_floor))
+        fixes, var_floor = _rail_fixes(prep, rail_cfg, log, a, b, points, surveyed, notes)
+        stats = run.run_pass(a, b, (fixes, var_floor))
         cov = np.zeros((b - a + 1, 3, 3))
         cov[:, [0, 1, 2], [0, 1, 2]] = run.out.sd[a:b + 1, es.DP] ** 2
         points = next_pass_points(segment_points(prep, rail_cfg, a, b, run.out.nav[a:b + 1], cov),
                                   prep.t_kf[a:b + 1], run.out.flags[a:b + 1],
                                   prep.t_kf[fixes.epoch[np.isfinite(stats[:, rf.DET_FSPRT])]])
-        direction = np.zeros((0, 3))
+        surveyed = False
     sol = run.solution(notes)
     sol.detectors = detector_columns(prep, run)
     return sol
@@ -114,36 +108,33 @@ def next_pass_points(points: Points, t: np.ndarray, flags: np.ndarray, t_tested:
     return points.take(~held[np.clip(np.searchsorted(t, points.t), 0, t.size - 1)])
 
 
-def _rail_fixes(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Points, direction: np.ndarray,
+def _rail_fixes(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Points, surveyed: bool,
                 notes: list[str]) -> PassFixes:
-    """The rail kinematics model's fixes over epochs (a, b] (none within cfg.end_zone_m of a face end unless from
-    the face survey, before any push; along the face at ALONG_FACE_SD unless from the face survey) with the surveyed
-    face ends, and each fix's scale_h and var_floor (estimators.shearer.rail_fix_update): for points of the face
-    survey, which come with the line's `direction` d enu / d u at each point (K, 3; empty for points of an earlier
-    pass), that direction times the odometer travel (zero for the others); var_floor, the error the filter does not
-    share: the stroke's (STROKE_SD_PER_NOISE), or the smoothed survey point's variance along the advance direction
-    where that is larger; zero for the surveyed face ends."""
-    surveyed = direction.shape[0] > 0
-    if not surveyed:
-        cfg = dataclasses.replace(cfg, path_along_sd=ALONG_FACE_SD)
+    """The rail kinematics model's fixes over epochs (a, b] (none within cfg.end_zone_m of a face end unless
+    `surveyed`: the points are the face survey's, before any push) with the surveyed face ends, and each fix's
+    var_floor (estimators.shearer.rail_fix_update), the error the filter does not share: the stroke's
+    (STROKE_SD_PER_NOISE), or the smoothed survey point's variance along the advance direction where that is larger;
+    zero for the surveyed face ends. Like every point's, a survey point's fix says nothing along the face
+    (cpoem.ALONG_FACE_SD): the survey's face coordinate is a distance along the pans, the odometer's the path of
+    the body point (on the twin's error-free north-south face the two part by +-1.8 cm as the machine pitches over
+    the floor), and an odometer scale error moves the shearer and the point it is compared with alike, so the fix
+    cannot see it; the along-face information it seemed to give was that registration noise, which walked the
+    filter 13 cm along the face over the first cut at an along-face sigma of 0.44 m."""
     fixes = fixes_for(prep, cfg, log, a, b, points, notes)
     u = prep.odo - prep.odo[0]
     lo, hi = u.min() + cfg.end_zone_m, u.max() - cfg.end_zone_m
     keep = ((u[fixes.epoch] >= lo) & (u[fixes.epoch] <= hi)) | ~np.isfinite(fixes.gate) | surveyed
     fixes = fixes.take(keep)
-    scale_h = np.zeros((fixes.epoch.size, 3))
     rail = np.isfinite(fixes.gate)
     var_floor = np.where(rail, (STROKE_SD_PER_NOISE * cfg.ram_noise_sd) ** 2, 0.0)
     if surveyed and points.u.size >= 2 and rail.any():
         # The direction comes from the survey itself: the fixes carry the ram strokes, and a faulty one bends them.
         order = np.argsort(points.u)
         u_fix = u[fixes.epoch[rail]]
-        along = np.column_stack([np.interp(u_fix, points.u[order], direction[order, i]) for i in range(3)])
-        scale_h[rail] = along * u_fix[:, None]
-        across = points.c_nb[order, :, 0]  # the advance direction at each point (cpoem.predict_fixes)
-        var_point = np.einsum("ki,kij,kj->k", across, points.cov[order], across)
+        across = advance_direction(points)  # as cpoem.predict_fixes moves the points
+        var_point = np.einsum("i,kij,j->k", across, points.cov[order], across)
         var_floor[rail] = np.maximum(var_floor[rail], np.interp(u_fix, points.u[order], var_point))
-    return fixes, scale_h, var_floor
+    return fixes, var_floor
 
 
 def detector_columns(prep: Prepared, run: FederatedRun) -> dict[str, np.ndarray]:
