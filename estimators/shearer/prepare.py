@@ -61,8 +61,11 @@ def _odometer_at(log: Log, t_kf: np.ndarray, settle_s: float) -> tuple[np.ndarra
     t_active = t[active]
     last = np.searchsorted(t_active, lo, side="right") - 1  # the last sample showing motion up to the start
     after = np.searchsorted(t_active, hi, side="left")  # the first one from the end on
-    settled = (((last < 0) | (lo - t_active[np.maximum(last, 0)] >= settle_s))
-               & ((after >= t_active.size) | (t_active[np.minimum(after, t_active.size - 1)] - hi >= settle_s)))
+    if t_active.size == 0:  # the machine never moves in this log
+        settled = np.ones(lo.size, bool)
+    else:
+        settled = (((last < 0) | (lo - t_active[np.maximum(last, 0)] >= settle_s))
+                   & ((after >= t_active.size) | (t_active[np.minimum(after, t_active.size - 1)] - hi >= settle_s)))
     still = np.where(settled, MODE_STANDING, MODE_SETTLING)
     mode = np.where(covered, np.where(moved, MODE_MOVING, still), MODE_NO_DATA)
     return dist, np.concatenate([[MODE_STANDING], mode]).astype(np.int8)

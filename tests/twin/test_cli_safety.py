@@ -88,3 +88,38 @@ def test_sigterm_stops_a_run_with_one_line_exit_143_and_no_directory(tmp_path):
     assert proc.returncode == EXIT_SIGTERM
     assert err.count("\n") == 1 and "SIGTERM" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["short.toml"]
+
+
+def _tree(path):
+    """Every file under `path` (relative path -> bytes)."""
+    return {str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}
+
+
+def test_an_interrupted_estimate_leaves_the_run_directory_as_it_was(short_default_run, tmp_path, monkeypatch):
+    """`longwall estimate` writes beside a copy of the run (estimates/, estimates.rrd, metrics.json, timing.json
+    anew): interrupted half-way (Ctrl-C, or SIGTERM, which the CLI turns into the same), the run directory holds
+    every file it held, byte for byte, and no staging copy is left beside it. Finished, the inputs are the same
+    files (hard links), not copies."""
+    import shutil
+
+    import twin.pipeline.estimate as estimate_module
+
+    run = tmp_path / "run"
+    shutil.copytree(short_default_run, run)
+    api.estimate(run)
+    before = _tree(run)
+
+    def interrupted(run_dir, scn, recording=True):
+        (run_dir / "estimates").mkdir()
+        (run_dir / "estimates" / "kf.parquet").write_bytes(b"half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(estimate_module, "run_estimators", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        api.estimate(run)
+    assert _tree(run) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+    monkeypatch.undo()
+    inode = (run / "imu.parquet").stat().st_ino
+    api.estimate(run)
+    assert (run / "imu.parquet").stat().st_ino == inode and _tree(run).keys() == before.keys()

@@ -33,6 +33,7 @@ class ExperimentResult:
     paper: dict
     table: list[str]
     series: list[Series] = field(default_factory=list)
+    timing: dict = field(default_factory=dict)  # wall-clock figures (timing.json, not metrics.json)
 
 
 def attitude_error(q_true: np.ndarray, q_est: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ import pyarrow.parquet as pq
 from twin.config.experiments import EXPERIMENT_KIND, Experiment
 from twin.config.scenario import scenario_to_toml
 from twin.papers.sins_results import ExperimentResult, Series
+from twin.pipeline.rundir import write_timing
 
 UNITS = {"attitude": ("deg", np.degrees), "sigma": ("deg", np.degrees), "coning": ("rad", np.asarray),
          "velocity": ("m/s", np.asarray), "position": ("m", np.asarray)}
@@ -80,10 +81,13 @@ def _json_ready(obj):
 
 
 def write_run(staging: Path, exp: Experiment, result: ExperimentResult) -> None:
-    """metrics.json {"experiment", "ours", "paper"}, errors.parquet, run.rrd and the resolved scenario.toml."""
+    """metrics.json {"experiment", "ours", "paper"}, errors.parquet, run.rrd, the resolved scenario.toml and the
+    wall-clock figures in timing.json."""
     (staging / "scenario.toml").write_text(scenario_to_toml(exp))
     metrics = {"experiment": {"name": exp.name, "kind": EXPERIMENT_KIND, "experiment": exp.experiment,
                               "seed": exp.seed}, "ours": result.ours, "paper": result.paper}
     (staging / "metrics.json").write_text(json.dumps(_json_ready(metrics), indent=2) + "\n")
+    if result.timing:
+        write_timing(staging, **result.timing)
     pq.write_table(series_table(result.series), staging / "errors.parquet")
     write_experiment_recording(staging / "run.rrd", result)

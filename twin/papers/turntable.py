@@ -54,6 +54,7 @@ from twin.config.turntable import (
     Turntable,
     is_turntable,
 )
+from twin.pipeline.rundir import write_timing
 
 __all__ = [
     "FILTERS",
@@ -282,12 +283,13 @@ def _errors_table(res: dict) -> pa.Table:
 
 def write_run(staging: Path, tt: Turntable, res: dict) -> None:
     """The turntable's run directory: scenario.toml, metrics.json (ours and 002's), errors.parquet, the states of
-    ours (flags, gyro bias)."""
+    ours (flags, gyro bias), and the methods' run times in timing.json."""
     (staging / "scenario.toml").write_text(scenario_to_toml(tt))
     metrics = {"experiment": {"name": tt.name, "kind": TURNTABLE_KIND, "seed": tt.seed}, "ours": res["metrics"],
-               "tuning": res["tuning"], "detection": res["detection"], "seconds": res["seconds"],
+               "tuning": res["tuning"], "detection": res["detection"],
                "paper": PAPER, "targets": TARGETS}
     (staging / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    write_timing(staging, seconds=res["seconds"])
     pq.write_table(_errors_table(res), staging / "errors.parquet")
     t, flags = res["ours_flags"]
     pq.write_table(pa.table({"t": t, "flags": flags.astype(np.int8),

@@ -22,6 +22,7 @@ from tqdm import tqdm
 
 from estimators.io.logformat import (
     ESTIMATE,
+    ESTIMATES_DIR,
     STREAMS,
     LogError,
     make_table,
@@ -41,11 +42,13 @@ from twin.config.scenario import (
 )
 from twin.config.turntable import Turntable
 from twin.pipeline.rundir import (
+    TIMING,
     RunDirError,
     atomic_run_dir,
     check_target,
     default_run_dir,
     run_lock,
+    staged_update,
     write_timing,
 )
 
@@ -233,6 +236,7 @@ def estimate(run_dir: str | Path, quiet: bool = True) -> Run:
     hold what each says of itself, marked "truth": false (twin.pipeline.estimate.run_estimators)."""
     from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
     from twin.pipeline.log_layout import check_run_dir
+    from twin.view.recording import ESTIMATES_RRD
 
     run_dir = Path(run_dir)
     scenario = run_dir / "scenario.toml"
@@ -241,9 +245,10 @@ def estimate(run_dir: str | Path, quiet: bool = True) -> Run:
                             f"odometer pulse length, supports) from the run's scenario.toml")
     scn = load_face_scenario(scenario)
     check_run_dir(run_dir, scn)
-    with run_lock(run_dir):
-        estimated = run_estimators(run_dir, scn)
-        write_metrics(run_dir, estimated)
+    with run_lock(run_dir), staged_update(run_dir, fresh=(ESTIMATES_DIR, ESTIMATES_RRD),
+                                          copied=("metrics.json", TIMING)) as staging:
+        estimated = run_estimators(staging, scn)  # written beside a copy: an interrupted one leaves run_dir as it was
+        write_metrics(staging, estimated)
     if not quiet:
         print(format_estimators(estimated, scn.name))
     return Run(run_dir)

@@ -116,6 +116,7 @@ def atomic_run_dir(path: Path, force: bool = False) -> Iterator[Path]:
         check_target(path, force)
         staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
         try:
+            staging.chmod(0o777 & ~_umask())  # as mkdir makes it (mkdtemp: owner only)
             (staging / MARKER).write_text(MARKER_TEXT)
             yield staging
             check_target(path, force)  # a directory something other than longwall made meanwhile
@@ -123,6 +124,43 @@ def atomic_run_dir(path: Path, force: bool = False) -> Iterator[Path]:
             shutil.rmtree(staging, ignore_errors=True)
             raise
         _swap_in(staging, path)
+
+
+@contextmanager
+def staged_update(path: Path, fresh: tuple[str, ...], copied: tuple[str, ...]) -> Iterator[Path]:
+    """Yield a staging copy of run directory `path` to rewrite some of it in: every file hard-linked (copied where
+    the file system cannot link), but the top-level entries `fresh` left out (written anew) and `copied` copied
+    (updated in place, which a link would pass through to `path`). On success the copy replaces `path`
+    (_swap_in); on any exception, SIGTERM included, `path` is left as it was. The caller holds run_lock."""
+    path = Path(path)
+    staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
+    try:
+        staging.chmod(path.stat().st_mode & 0o7777)
+        for src in sorted(path.rglob("*")):
+            rel = src.relative_to(path)
+            dst = staging / rel
+            if rel.parts[0] in fresh:
+                continue
+            if src.is_dir():
+                dst.mkdir(parents=True, exist_ok=True)
+            elif rel.parts[0] in copied:
+                shutil.copy2(src, dst)
+            else:
+                try:
+                    os.link(src, dst)
+                except OSError:
+                    shutil.copy2(src, dst)
+        yield staging
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        raise
+    _swap_in(staging, path)
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def _swap_in(staging: Path, path: Path) -> None:
@@ -141,6 +179,12 @@ def _swap_in(staging: Path, path: Path) -> None:
         shutil.rmtree(trash, ignore_errors=True)
 
 
-def write_timing(run_dir: Path, **figures: float) -> None:
-    """Wall-clock figures (seconds, rates) into run_dir/TIMING."""
-    (Path(run_dir) / TIMING).write_text(json.dumps(figures, indent=2) + "\n")
+def write_timing(run_dir: Path, **figures) -> None:
+    """Wall-clock figures (seconds, rates; or a section of them) into run_dir/TIMING, beside those it holds: the
+    one file of a run directory that differs from run to run (metrics.json holds none)."""
+    path = Path(run_dir) / TIMING
+    try:
+        held = json.loads(path.read_text()) if path.is_file() else {}
+    except (OSError, ValueError):
+        held = {}
+    path.write_text(json.dumps({**(held if isinstance(held, dict) else {}), **figures}, indent=2) + "\n")

@@ -37,6 +37,7 @@ from estimators.support.unit_model import UnitModel, wrap
 from twin.config.imu_grades import G0, grade
 from twin.config.scenario import Scenario
 from twin.face.layout import support_stations
+from twin.pipeline.rundir import write_timing
 from twin.sensors.magnetometer import site_field_n
 from twin.sensors.support_imu import canopy_attitude_n, shearer_disturbance
 
@@ -237,9 +238,10 @@ def support_attitude(run_dir: Path, scn: Scenario) -> SupportAttitude | None:
         write_estimate(run_dir, name, _estimate_columns(batch, t_out[name], q_nc, euler[name], *extra),
                        ESTIMATE_SUPPORT_ATTITUDE)
 
+    write_timing(run_dir, support_attitude_s=seconds)  # wall clock: not in metrics.json
     classes = {int(j): support_class(scn, int(j)) for j in batch.supports}
     metrics = {"truth": q_true is not None, "methods": list(q), "supports": batch.supports.tolist(),
-               "skipped": batch.skipped, "classes": classes, "tuning": tuning, "seconds": seconds, "notes": notes,
+               "skipped": batch.skipped, "classes": classes, "tuning": tuning, "notes": notes,
                "own": _own(batch, euler, res)}
     near = None if scale is None else scale > NEAR_FRACTION
     if near is not None:

@@ -48,3 +48,18 @@ def test_a_coasting_stop_settles_before_the_zero_velocity_update():
     assert speed[mode == MODE_STANDING].max() < cfg.r_zupt / 2  # within the zero-velocity update's noise
     longer = prepare(log, dataclasses.replace(cfg, stand_settle_s=2 * cfg.stand_settle_s))
     assert (longer.mode == MODE_SETTLING).sum() > (prep.mode == MODE_SETTLING).sum()
+
+
+def test_a_log_in_which_the_machine_never_moves_is_all_stand():
+    """The default run up to 2 s before the haulage first moves (the alignment stand): every epoch is a stand,
+    none settling or moving (there was an IndexError: no odometer sample showed motion)."""
+    scn, result = simulated("default")
+    streams = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), 0)
+    odo = streams["odometer"]
+    t_end = odo["t"][np.argmax(odo["direction"] != 0)] - 2.0
+    cut = {name: {k: v[streams[name]["t"] <= t_end] for k, v in streams[name].items()}
+           for name in ("imu", "odometer")}
+    log = log_from_columns(cut["imu"], cut["odometer"], streams["survey"])
+    assert not np.any(log.odo_direction) and np.ptp(log.odo_distance) == 0
+    prep = prepare(log, positioning_config(scn))
+    assert np.all(prep.mode == MODE_STANDING) and prep.cuts == []
