@@ -85,7 +85,7 @@ def test_sigterm_stops_a_run_with_one_line_exit_143_and_no_directory(tmp_path):
     assert proc.poll() is None, proc.stderr.read()
     proc.send_signal(signal.SIGTERM)
     _, err = proc.communicate(timeout=60)
-    assert proc.returncode == EXIT_SIGTERM
+    assert proc.returncode == EXIT_SIGTERM, err
     assert err.count("\n") == 1 and "SIGTERM" in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["short.toml"]
 

@@ -61,7 +61,8 @@ def test_the_face_survey_fixes_the_first_cut_and_calibrates_the_odometer(face, t
     assert d["applied"].all() and np.sum(d["t"] <= cut_end) >= 0.8 * log.face_u.size
     assert not (rail.flags & FLAG_ISOLATED).any() and (rail.flags & FLAG_POSITION).any()
     truth = true_states(scn)["odo_scale"]
-    # The face survey's points lie at true distances: the odometer scale (0.3 %) becomes observable.
+    # The surveyed face ends calibrate the odometer scale (0.3 %), the face survey's fixes across the face and
+    # vertically holding the path between them; the odometer filter without fixes keeps its error.
     assert abs(rail.cal[-1, 9] - truth) < 0.25 * abs(truth) < abs(odo.cal[-1, 9] - truth)
     errs = []
     for sol in (odo, rail):  # over the first cut, on the surveyed face line
