@@ -11,6 +11,7 @@ from rerun.chunk import RrdReader
 
 from estimators.io.logformat import STREAMS, read_stream
 from tests.conftest import SCENARIO_DIR
+from tests.twin.rrd_equal import assert_same_rrd
 from twin.cli import main
 
 TRUTH_FILES = ("truth_shearer.parquet", "truth_pans.parquet", "truth_supports.parquet", "truth_cycles.parquet")
@@ -80,28 +81,6 @@ def short_scenario(tmp_path, seed: int):
     out = tmp_path / f"seed{seed}-{len(list(tmp_path.iterdir()))}"
     assert main(["run", str(path), "--out", str(out), "--seed", str(seed), "--quiet"]) == 0
     return out
-
-
-def rrd_content(path):
-    """An .rrd's stores: the recording's chunks with their ids (twin.view.rrd_stream numbers them); the blueprint's
-    without the store id, chunk and row ids and log_time rerun-sdk 0.41 stamps from the clock there."""
-    reader = RrdReader(str(path))
-    stores = [[(c.id, c.entity_path, c.to_record_batch()) for c in reader.stream(store=s).to_chunks()]
-              for s in reader.recordings()]
-    for store in reader.blueprints():
-        chunks = [(c.entity_path, c.to_record_batch()) for c in reader.stream(store=store).to_chunks()]
-        stores.append(sorted(((entity, batch.drop_columns(["rerun.controls.RowId", "log_time"])
-                               .replace_schema_metadata(None)) for entity, batch in chunks), key=lambda x: x[0]))
-    return [store.recording_id for store in reader.recordings()], stores
-
-
-def assert_same_rrd(a, b):
-    (ids_a, stores_a), (ids_b, stores_b) = rrd_content(a), rrd_content(b)
-    assert ids_a == ids_b and len(stores_a) == len(stores_b)
-    for store_a, store_b in zip(stores_a, stores_b):
-        assert [x[:-1] for x in store_a] == [x[:-1] for x in store_b]
-        for x, y in zip(store_a, store_b):
-            assert x[-1].equals(y[-1], check_metadata=True), x[:-1]
 
 
 def test_same_seed_gives_bit_identical_truth_and_another_seed_does_not(tmp_path):

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import uuid
 from pathlib import Path
 
 import numpy as np
@@ -39,15 +38,15 @@ def entity_path(s: Series) -> str:
     return "/".join(x for x in ("errors", s.group, s.quantity, s.variant) if x)
 
 
-def write_experiment_recording(path: Path, result: ExperimentResult, rate_hz: float = 20.0) -> None:
+def write_experiment_recording(path: Path, result: ExperimentResult, recording: str, rate_hz: float = 20.0) -> None:
     """The error time series as Rerun Scalars (one send_columns per entity `errors/[group/]quantity[/variant]`,
     decimated to about `rate_hz`; errors.parquet keeps every sample), with a blueprint of one time-series view per
     group and quantity (compensated beside uncompensated; for the alignment, the attitude errors and the filter's
-    sigma of each filter)."""
-    import rerun as rr
+    sigma of each filter); written reproducibly as recording `recording` (twin.view.rrd_stream)."""
     import rerun.blueprint as rrb
 
-    from twin.view.rerun_columns import APPLICATION_ID, decimate, series
+    from twin.view.rerun_columns import decimate, series
+    from twin.view.rrd_stream import recording_stream
 
     views: dict[str, str] = {}
     for s in result.series:
@@ -56,18 +55,13 @@ def write_experiment_recording(path: Path, result: ExperimentResult, rate_hz: fl
                                  f"{s.quantity if result.experiment != 'alignment' else 'attitude error and sigma'}")
     blueprint = rrb.Blueprint(rrb.Grid(*[rrb.TimeSeriesView(name=name, origin=origin)
                                          for origin, name in views.items()]), collapse_panels=True)
-    rec = rr.RecordingStream(APPLICATION_ID, recording_id=uuid.uuid4())
-    rec.save(path, default_blueprint=blueprint)
-    try:
+    with recording_stream(path, recording, blueprint) as rec:
         rec.send_recording_name(result.name)
         for s in result.series:
             unit, convert = UNITS[s.quantity]
             label = f"{s.quantity}{' ' + s.variant if s.variant else ''}"
             keep = decimate(s.t, rate_hz)
             series(rec, entity_path(s), s.t[keep], convert(s.values[keep]), [f"{label} {a} [{unit}]" for a in "ENU"])
-        rec.flush()
-    finally:
-        rec.disconnect()
 
 
 def _json_ready(obj):
@@ -90,4 +84,6 @@ def write_run(staging: Path, exp: Experiment, result: ExperimentResult) -> None:
     if result.timing:
         write_timing(staging, **result.timing)
     pq.write_table(series_table(result.series), staging / "errors.parquet")
-    write_experiment_recording(staging / "run.rrd", result)
+    from twin.view.rrd_stream import recording_id
+
+    write_experiment_recording(staging / "run.rrd", result, recording_id(exp))

@@ -16,6 +16,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from tests.conftest import EXPERIMENTS, SCENARIO_DIR, SCENARIOS
+from tests.twin.rrd_equal import assert_same_rrd
 from twin.cli import main
 from twin.config.experiments import is_experiment, load_experiment, parse_experiment
 from twin.config.scenario import scenario_to_toml
@@ -104,6 +105,10 @@ def test_longwall_run_writes_metrics_parquet_and_recording(name, tmp_path, capsy
     chunks = RrdReader(out / "run.rrd").stream().to_chunks()
     found = {c.entity_path for c in chunks}
     assert set(entities) <= found, set(entities) - found
+    # Run again: the recording's id comes from the scenario and seed, its chunks and rows are the same.
+    again = tmp_path / "again"
+    assert main(["run", str(path), "--out", str(again), "--quiet"]) == 0
+    assert_same_rrd(out / "run.rrd", again / "run.rrd")
 
 
 def test_alignment_converges_from_the_paper_errors(tmp_path):
