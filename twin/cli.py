@@ -112,7 +112,7 @@ def _command(args: argparse.Namespace) -> int:
     elif args.command == "estimate":
         api.estimate(args.run_dir, args.quiet)
     elif args.command == "view":
-        from twin.view.recording import open_viewer
+        from twin.view.layout import open_viewer
         open_viewer(args.run_dir)
     elif args.command == "import":
         report = import_csv(args.csv_dir, args.out)

@@ -11,7 +11,6 @@ from rerun.chunk import RrdReader
 
 from estimators.io.logformat import STREAMS, read_stream
 from tests.conftest import SCENARIO_DIR
-from tests.twin.rrd_equal import assert_same_rrd
 from twin.cli import main
 
 TRUTH_FILES = ("truth_shearer.parquet", "truth_pans.parquet", "truth_supports.parquet", "truth_cycles.parquet")
@@ -87,15 +86,14 @@ def test_same_seed_gives_bit_identical_truth_and_another_seed_does_not(tmp_path)
     a, b = short_scenario(tmp_path, 7), short_scenario(tmp_path, 7)
     for name in TRUTH_FILES:
         assert filecmp.cmp(a / name, b / name, shallow=False), name
-    # Every file of the run directory: the same bytes, but the wall-clock figures (timing.json); the
-    # recordings the same chunks with the same ids.
+    # Every file of the run directory, the recordings included: the same bytes, but the wall-clock figures
+    # (timing.json).
     files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
     assert files == sorted(p.relative_to(b) for p in b.rglob("*") if p.is_file())
     assert "wall_s" not in (a / "metrics.json").read_text() and (a / "timing.json").is_file()
+    assert any(name.suffix == ".rrd" for name in files)
     for name in files:
-        if name.suffix == ".rrd":
-            assert_same_rrd(a / name, b / name)
-        elif name.name != "timing.json":
+        if name.name != "timing.json":
             assert filecmp.cmp(a / name, b / name, shallow=False), name
     c = short_scenario(tmp_path, 8)
     # Rows at t = 0 are the initial pans; their bends come from the seed.

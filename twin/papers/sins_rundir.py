@@ -38,24 +38,30 @@ def entity_path(s: Series) -> str:
     return "/".join(x for x in ("errors", s.group, s.quantity, s.variant) if x)
 
 
-def write_experiment_recording(path: Path, result: ExperimentResult, recording: str, rate_hz: float = 20.0) -> None:
-    """The error time series as Rerun Scalars (one send_columns per entity `errors/[group/]quantity[/variant]`,
-    decimated to about `rate_hz`; errors.parquet keeps every sample), with a blueprint of one time-series view per
-    group and quantity (compensated beside uncompensated; for the alignment, the attitude errors and the filter's
-    sigma of each filter); written reproducibly as recording `recording` (twin.view.rrd_stream)."""
+def experiment_blueprint(experiment: str, groups_quantities: list[tuple[str, str]]):
+    """The viewer's layout of an experiment's recording: one time-series view per group and quantity of its
+    series (compensated beside uncompensated; for the alignment, the attitude errors and the filter's sigma of
+    each filter), in the order given."""
     import rerun.blueprint as rrb
 
+    views: dict[str, str] = {}
+    for group, quantity in groups_quantities:
+        origin = "/".join(x for x in ("errors", group, quantity if experiment != "alignment" else "") if x)
+        views.setdefault(origin, f"{group + ' ' if group else ''}"
+                                 f"{quantity if experiment != 'alignment' else 'attitude error and sigma'}")
+    return rrb.Blueprint(rrb.Grid(*[rrb.TimeSeriesView(name=name, origin=origin) for origin, name in views.items()]),
+                         collapse_panels=True)
+
+
+def write_experiment_recording(path: Path, result: ExperimentResult, recording: str, rate_hz: float = 20.0) -> None:
+    """The error time series as Rerun Scalars (one send_columns per entity `errors/[group/]quantity[/variant]`,
+    decimated to about `rate_hz`; errors.parquet keeps every sample), written reproducibly as recording
+    `recording` (twin.view.rrd_stream); its layout is experiment_blueprint's, which `longwall view` gives the
+    viewer."""
     from twin.view.rerun_columns import decimate, series
     from twin.view.rrd_stream import recording_stream
 
-    views: dict[str, str] = {}
-    for s in result.series:
-        origin = "/".join(x for x in ("errors", s.group, s.quantity if result.experiment != "alignment" else "") if x)
-        views.setdefault(origin, f"{s.group + ' ' if s.group else ''}"
-                                 f"{s.quantity if result.experiment != 'alignment' else 'attitude error and sigma'}")
-    blueprint = rrb.Blueprint(rrb.Grid(*[rrb.TimeSeriesView(name=name, origin=origin)
-                                         for origin, name in views.items()]), collapse_panels=True)
-    with recording_stream(path, recording, blueprint) as rec:
+    with recording_stream(path, recording) as rec:
         rec.send_recording_name(result.name)
         for s in result.series:
             unit, convert = UNITS[s.quantity]

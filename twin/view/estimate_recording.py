@@ -1,8 +1,8 @@
 """The estimators' Rerun recording: `estimates.rrd` beside a run's `run.rrd`, merged with it by the viewer.
 
 The file carries the application id and the recording id of run.rrd (read from it; the scenario's when the run has
-none, e.g. an imported log; written reproducibly by twin.view.rrd_stream), so `longwall view` shows the truth replay and the estimates as one recording. Its
-default blueprint is the run's with a second "Estimates" tab of plots. A run without truth (truth_shearer None, e.g.
+none, e.g. an imported log; written reproducibly by twin.view.rrd_stream), so `longwall view` shows the truth replay and the estimates as one recording, in
+the run's layout with a second "Estimates" tab of plots (twin.view.layout). A run without truth (truth_shearer None, e.g.
 a real face's log) gets everything but the errors: paths, sigmas, flags, sensor states, fusion, detectors.
 Everything is logged column-wise with `send_columns` on the `sim_time` timeline; plots are decimated to at most
 `PLOT_RATE_HZ`.
@@ -69,7 +69,7 @@ from estimators.shearer.federated_filter import MAG_DISTURBED, MAG_GATED, MAG_US
 from twin.config.imu_grades import DEG, DEG_PER_H, MG
 from twin.config.scenario import Scenario
 from twin.pipeline.support_estimate import ANGLES, FLAG_NAMES, SupportAttitude
-from twin.view.recording import blueprint, run_recording_id
+from twin.view.recording import run_recording_id
 from twin.view.rerun_columns import decimate, series, time_column
 from twin.view.rrd_stream import recording_id, recording_stream
 
@@ -255,10 +255,10 @@ SUPPORT_PLOT_RATE_HZ = 2.0
 many units."""
 
 
-def support_attitude_views(supports: SupportAttitude | None) -> tuple[rrb.View, ...]:
-    """Views of the supports' canopy attitude: each angle and its error over all supports and methods, ours'
-    magnetometer flags beside the shearer's field, the GD-UKF objective."""
-    if supports is None:
+def support_attitude_views(supports: bool) -> tuple[rrb.View, ...]:
+    """Views of the supports' canopy attitude (none without `supports`): each angle and its error over all
+    supports and methods, ours' magnetometer flags beside the shearer's field, the GD-UKF objective."""
+    if not supports:
         return ()
     root = "plots/support_attitude"
     return (*(rrb.TimeSeriesView(name=f"Support {a} [deg]", origin=f"{root}/angles/{a}") for a in ANGLES),
@@ -324,10 +324,7 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
     if not rate_hz > 0:
         raise ValueError(f"write_estimate_recording: rate_hz must be positive, got {rate_hz}")
     run_id = run_recording_id(Path(path).parent)
-    # The supports' views after the shearer's.
-    views = estimate_views(list(estimates), list(states), list(fusion), list(detectors),
-                           truth_shearer is not None) if estimates else ()
-    with recording_stream(path, run_id or recording_id(scn), blueprint(views + support_attitude_views(supports))) as rec:
+    with recording_stream(path, run_id or recording_id(scn)) as rec:
         if run_id is None:  # no run.rrd to merge with: this recording is the whole view
             rec.send_recording_name(scn.name)
             rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)

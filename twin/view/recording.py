@@ -21,9 +21,7 @@ Entities (fixed names, checked by tests):
 
 from __future__ import annotations
 
-import shutil
-import subprocess
-import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -306,7 +304,7 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
         raise KeyError(f"write_recording: missing truth streams {', '.join(missing)}")
     if not shearer_rate_hz > 0:
         raise ValueError(f"write_recording: shearer_rate_hz must be positive, got {shearer_rate_hz}")
-    with recording_stream(path, recording_id(scn), blueprint()) as rec:
+    with recording_stream(path, recording_id(scn)) as rec:
         rec.send_recording_name(scn.name)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         _log_floor(rec, floor_mesh)
@@ -321,23 +319,9 @@ def run_recording_id(run_dir: Path) -> str | None:
     this id and APPLICATION_ID merge with it in the viewer."""
     rrd = Path(run_dir) / RUN_RRD
     try:
-        recordings = RrdReader(rrd).recordings() if rrd.is_file() else []
+        with warnings.catch_warnings():  # our recordings have no footer, on purpose (twin.view.rrd_stream)
+            warnings.simplefilter("ignore")
+            recordings = RrdReader(rrd).recordings() if rrd.is_file() else []
     except (OSError, ValueError, RuntimeError):
         return None
     return recordings[0].recording_id if recordings else None
-
-
-def open_viewer(run_dir: Path) -> None:
-    """Open `run_dir/run.rrd` and `estimates.rrd` beside it, whichever it holds (a run without truth, e.g. imported,
-    has estimates.rrd only), in the Rerun viewer (a detached `rerun` process)."""
-    files = [str(p) for p in (Path(run_dir) / RUN_RRD, Path(run_dir) / ESTIMATES_RRD) if p.is_file()]
-    if not files:
-        raise FileNotFoundError(f"{run_dir}: no {RUN_RRD} or {ESTIMATES_RRD}; `longwall run` writes both, and "
-                                f"`longwall estimate {run_dir}` writes {ESTIMATES_RRD} for an imported log")
-    beside = Path(sys.executable).parent / "rerun"
-    exe = str(beside) if beside.is_file() else shutil.which("rerun")
-    if exe is None:
-        raise FileNotFoundError(f"rerun viewer executable not found next to {sys.executable} or on PATH "
-                                "(pip install rerun-sdk)")
-    subprocess.Popen([exe, *files], start_new_session=True,
-                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

@@ -1,4 +1,4 @@
-"""Rerun recordings written reproducibly: the same scenario and seed, the same recording.
+"""Rerun recordings written reproducibly: the same scenario and seed, the same bytes.
 
 Rerun stamps what it logs with time-based ids (TUIDs: nanoseconds since the epoch plus a per-thread random
 counter), one per row and one per chunk, and adds the wall-clock timeline `log_time` to `log` calls that are
@@ -9,11 +9,16 @@ id and the file name (run.rrd and estimates.rrd share a recording id and are mer
 must not share a chunk or row id), and without `log_time`. The logging stream never flushes on its own
 (ChunkBatcherConfig.NEVER), so the cut of rows into chunks is the same every time.
 
-What rerun-sdk 0.41 still stamps with the clock, with no public API to set it: the row id of each
-SetStoreInfo message (16 bytes each), the blueprint's store (its random id, chunk and row ids, `log_time`) and
-the footer's manifest (which also lists schema metadata in hash-map order, so it differs between processes).
-"""
+Three things rerun-sdk 0.41 writes from the clock or a hash map, with no API to set them, are dealt with so:
 
+* the row id of each SetStoreInfo message (16 bytes of a protobuf TUID, fixed width): rewritten in place in the
+  finished file (`_pin_store_info`), from the same base;
+* the footer's manifest (schema metadata in hash-map order, different in every process): cut off with the
+  end-of-stream message that carries it, which leaves the file write_footer=False writes (without the SDK's
+  warning about it); the viewer and rerun.chunk.RrdReader read such a file whole, as any footerless .rrd;
+* the blueprint's store (a random store id, chunk and row ids): not in the file. `longwall view` builds the
+  blueprint from the run directory and hands it to the viewer (twin.view.layout).
+"""
 from __future__ import annotations
 
 import hashlib
@@ -25,7 +30,6 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import rerun as rr
-import rerun.blueprint as rrb
 from rerun.chunk import Chunk, RrdReader
 
 from twin.config.scenario import Scenario, scenario_to_toml
@@ -83,20 +87,37 @@ def _identified(chunks: list[Chunk], recording: str, name: str) -> list[Chunk]:
     return out
 
 
-def _pin_blueprint_ids(node: rrb.Container | rrb.View, place: str = "root") -> None:
-    """Views and containers get ids from their place in the blueprint (the SDK draws uuid4s)."""
-    node.id = uuid.uuid5(RECORDINGS, place)
-    if isinstance(node, rrb.Container):
-        for k, child in enumerate(node.contents):
-            _pin_blueprint_ids(child, f"{place}/{k}")
+STORE_INFO, END = 1, 0
+"""Kinds of the SetStoreInfo and the end-of-stream message (which carries the footer) in the .rrd stream: after
+the 12-byte file header, each message is its kind and payload length as little-endian u64, then its payload."""
+FILE_HEADER = 12
+TUID_FIELD = b"\x0a\x12\x09"
+"""A SetStoreInfo payload starts with its row id: field 1, 18 bytes, a TUID of two fixed64 (tags 0x09, 0x11)."""
+
+
+def _pin_store_info(path: Path, recording: str) -> None:
+    """Rewrite the row id of every SetStoreInfo message of `path` as (`_base`, message number), 16 bytes each in
+    place, and cut the file at its end-of-stream message (the footer)."""
+    data = bytearray(path.read_bytes())
+    base, off, k = _base(recording, f"{path.name}/store_info"), FILE_HEADER, 0
+    while off + 16 <= len(data):
+        kind, size = (int(v) for v in np.frombuffer(bytes(data[off:off + 16]), "<u8"))
+        if kind == END:
+            del data[off:]
+            break
+        body = off + 16
+        if kind == STORE_INFO and data[body:body + 3] == TUID_FIELD and data[body + 11] == 0x11:
+            k += 1
+            data[body + 3:body + 11] = base.to_bytes(8, "little")
+            data[body + 12:body + 20] = k.to_bytes(8, "little")
+        off = body + size
+    path.write_bytes(bytes(data))
 
 
 @contextmanager
-def recording_stream(path: Path, recording: str, blueprint: rrb.Blueprint | None = None
-                     ) -> Iterator[rr.RecordingStream]:
-    """A stream to log into; on leaving without an exception, `path` is written reproducibly (module
-    docstring) with `blueprint` as its default blueprint. The scratch file `.NAME.chunks` beside `path` is
-    removed either way."""
+def recording_stream(path: Path, recording: str) -> Iterator[rr.RecordingStream]:
+    """A stream to log into; on leaving without an exception, `path` is written reproducibly (module docstring).
+    The scratch file `.NAME.chunks` beside `path` is removed either way."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     scratch = path.with_name(f".{path.name}.chunks")
@@ -110,14 +131,13 @@ def recording_stream(path: Path, recording: str, blueprint: rrb.Blueprint | None
         finally:
             rec.disconnect()
         chunks = _identified(RrdReader(scratch).stream().to_chunks(), recording, path.name)
-        if blueprint is not None:
-            _pin_blueprint_ids(blueprint.root_container)
         out = rr.RecordingStream(APPLICATION_ID, recording_id=recording, send_properties=False)
-        out.save(path, default_blueprint=blueprint)
+        out.save(path)
         try:
             out.send_chunks(chunks)
             out.flush()
         finally:
             out.disconnect()
+        _pin_store_info(path, recording)
     finally:
         scratch.unlink(missing_ok=True)

@@ -116,7 +116,7 @@ def test_truth_does_not_change_an_estimate(run_dir, imported, estimated, tmp_pat
 
 
 def test_report_and_view_on_a_run_without_truth(imported, estimated, monkeypatch):
-    from twin.view import recording
+    from twin.view import layout
     from twin.view.report import REPORT_DIR, REPORT_HTML
 
     assert main(["report", str(imported)]) == 0
@@ -124,11 +124,12 @@ def test_report_and_view_on_a_run_without_truth(imported, estimated, monkeypatch
     page = (imported / REPORT_DIR / REPORT_HTML).read_text()
     assert "no errors scored" in page and "errors against time" in page and "survey [m]" in page
     launched = []
-    monkeypatch.setattr(recording.subprocess, "Popen", lambda args, **kw: launched.append(args))
-    monkeypatch.setattr(recording.shutil, "which", lambda name: "/usr/bin/rerun")
-    monkeypatch.setattr(recording.sys, "executable", str(imported / "no-bin" / "python"))
+    monkeypatch.setattr(layout.subprocess, "Popen", lambda args, **kw: launched.append(args))
+    monkeypatch.setattr(layout.shutil, "which", lambda name: "/usr/bin/rerun")
+    monkeypatch.setattr(layout.sys, "executable", str(imported / "no-bin" / "python"))
     assert main(["view", str(imported)]) == 0
-    assert launched == [["/usr/bin/rerun", str(imported / ESTIMATES_RRD)]]
+    [args] = launched
+    assert args[:2] == ["/usr/bin/rerun", str(imported / ESTIMATES_RRD)] and args[2].endswith(".rbl")
 
 
 def test_python_api_estimates_without_truth(run_dir, tmp_path):

@@ -69,7 +69,7 @@ def test_same_recording_as_the_run(run_dir):
     run, est = RrdReader(run_dir / RUN_RRD).recordings()[0], RrdReader(run_dir / ESTIMATES_RRD).recordings()[0]
     assert est.application_id == run.application_id == "longwall-twin"
     assert est.recording_id == run.recording_id
-    assert len(RrdReader(run_dir / ESTIMATES_RRD).blueprints()) == 1
+    assert RrdReader(run_dir / ESTIMATES_RRD).blueprints() == []
 
 
 def test_entities_and_logged_errors_equal_the_offset(run_dir):
@@ -108,14 +108,16 @@ def test_flags_survive_decimation_and_states_carry_the_truth(run_dir):
 
 
 def test_view_opens_both_files(run_dir, monkeypatch):
-    from twin.view import recording
+    from twin.view import layout
 
     launched = []
-    monkeypatch.setattr(recording.subprocess, "Popen", lambda args, **kw: launched.append(args))
-    monkeypatch.setattr(recording.shutil, "which", lambda name: "/usr/bin/rerun")
-    monkeypatch.setattr(recording.sys, "executable", str(run_dir / "no-bin" / "python"))
-    recording.open_viewer(run_dir)
-    assert launched == [["/usr/bin/rerun", str(run_dir / RUN_RRD), str(run_dir / ESTIMATES_RRD)]]
+    monkeypatch.setattr(layout.subprocess, "Popen", lambda args, **kw: launched.append(args))
+    monkeypatch.setattr(layout.shutil, "which", lambda name: "/usr/bin/rerun")
+    monkeypatch.setattr(layout.sys, "executable", str(run_dir / "no-bin" / "python"))
+    layout.open_viewer(run_dir)
+    [args] = launched
+    assert args[:3] == ["/usr/bin/rerun", str(run_dir / RUN_RRD), str(run_dir / ESTIMATES_RRD)]
+    assert args[3].endswith(".rbl") and len(RrdReader(args[3]).blueprints()) == 1  # the layout (twin.view.layout)
 
 
 def test_fusion_series_show_the_subfilters_and_the_disturbed_reading(run_dir):
@@ -153,3 +155,32 @@ def test_detector_series_carry_their_thresholds(tmp_path):
     np.testing.assert_allclose(res[:, 0], np.linspace(0, 20, k))
     np.testing.assert_allclose(res[:, 1], 16.3)
     assert any(c.entity_path == "/world/estimates/fkf_rail/rail" and c.is_static for c in chunks)
+
+
+def test_the_layout_comes_from_what_the_run_directory_holds(tmp_path):
+    """twin.view.layout: the run's 3-D view and twin plots, an Estimates tab with a method's views when
+    estimates/METHOD.parquet is there, its sensor states with METHOD_states.parquet, the one-sigma instead of the
+    error without truth."""
+    import rerun.blueprint as rrb
+
+    from twin.view.layout import run_blueprint
+
+    def view_names(bp):
+        out, todo = [], [bp.root_container]
+        while todo:
+            node = todo.pop()
+            if isinstance(node, rrb.Container):
+                todo += list(node.contents)
+            else:
+                out.append(str(node.name))
+        return out
+
+    bare = view_names(run_blueprint(tmp_path))
+    assert "Face" in bare and not any("Position" in n for n in bare)
+    (tmp_path / "estimates").mkdir()
+    (tmp_path / "estimates" / "kf.parquet").write_bytes(b"")
+    (tmp_path / "truth_shearer.parquet").write_bytes(b"")
+    names = view_names(run_blueprint(tmp_path))
+    assert any("Position error" in n for n in names) and not any("Sensor" in n and "kf" in n for n in names)
+    (tmp_path / "truth_shearer.parquet").unlink()
+    assert any("Position one-sigma" in n for n in view_names(run_blueprint(tmp_path)))

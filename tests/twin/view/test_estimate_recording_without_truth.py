@@ -79,12 +79,13 @@ def test_subfilters_are_drawn_as_offsets_from_the_global_estimate(recorded):
 
 
 def test_view_opens_the_estimates_alone(recorded, monkeypatch):
-    from twin.view import recording
+    from twin.view import layout
 
     run_dir = recorded[1].parent
     launched = []
-    monkeypatch.setattr(recording.subprocess, "Popen", lambda args, **kw: launched.append(args))
-    monkeypatch.setattr(recording.shutil, "which", lambda name: "/usr/bin/rerun")
-    monkeypatch.setattr(recording.sys, "executable", str(run_dir / "no-bin" / "python"))
-    recording.open_viewer(run_dir)
-    assert launched == [["/usr/bin/rerun", str(recorded[1])]]
+    monkeypatch.setattr(layout.subprocess, "Popen", lambda args, **kw: launched.append(args))
+    monkeypatch.setattr(layout.shutil, "which", lambda name: "/usr/bin/rerun")
+    monkeypatch.setattr(layout.sys, "executable", str(run_dir / "no-bin" / "python"))
+    layout.open_viewer(run_dir)
+    [args] = launched
+    assert args[:2] == ["/usr/bin/rerun", str(recorded[1])] and args[2].endswith(".rbl")

@@ -102,7 +102,7 @@ def test_entities_and_times(recording):
     reader = RrdReader(recording)
     assert len(reader.recordings()) == 1
     assert reader.recordings()[0].application_id == "longwall-twin"
-    assert len(reader.blueprints()) == 1
+    assert reader.blueprints() == []  # the layout is handed to the viewer (twin.view.layout), not stored
     chunks = reader.stream().to_chunks()
     entities = {c.entity_path for c in chunks}
     expected = {"/world/floor", "/world/pans", "/world/supports", "/world/rams", "/world/shearer",
@@ -152,15 +152,15 @@ def test_decimate():
 
 
 def test_open_viewer_errors(tmp_path, monkeypatch):
-    import twin.view.recording as recording
+    import twin.view.layout as layout
 
     with pytest.raises(FileNotFoundError, match="run.rrd"):
-        recording.open_viewer(tmp_path)
+        layout.open_viewer(tmp_path)
     (tmp_path / "run.rrd").write_bytes(b"")
-    monkeypatch.setattr(recording.sys, "executable", str(tmp_path / "bin" / "python"))
-    monkeypatch.setattr(recording.shutil, "which", lambda name: None)
+    monkeypatch.setattr(layout.sys, "executable", str(tmp_path / "bin" / "python"))
+    monkeypatch.setattr(layout.shutil, "which", lambda name: None)
     with pytest.raises(FileNotFoundError, match="rerun viewer executable not found"):
-        recording.open_viewer(tmp_path)
+        layout.open_viewer(tmp_path)
 
 
 def test_latest_rows_forward_fill():

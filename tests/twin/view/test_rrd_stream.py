@@ -1,11 +1,10 @@
-"""Reproducible Rerun recordings (twin.view.rrd_stream): the same content, the same chunks and ids."""
+"""Reproducible Rerun recordings (twin.view.rrd_stream): the same content, the same bytes."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import rerun as rr
-import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
 from tests.conftest import capped
@@ -15,7 +14,7 @@ ROW_ID = "rerun.controls.RowId"
 
 
 def write(path, recording="fixed"):
-    with recording_stream(path, recording, rrb.Blueprint(rrb.TimeSeriesView(origin="plots"))) as rec:
+    with recording_stream(path, recording) as rec:
         rec.send_recording_name("test")
         rec.log("world/a", rr.Points3D([[1.0, 2.0, 3.0]]), static=True)
         rec.send_columns("plots/x", indexes=[rr.TimeColumn("sim_time", duration=np.arange(5.0))],
@@ -33,6 +32,45 @@ def test_the_same_content_twice_gives_the_same_chunks_ids_and_rows(tmp_path):
         assert x.equals(y, check_metadata=True), entity
     assert all("log_time" not in batch.schema.names for _, _, batch in a)
     assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["run.rrd"]  # no scratch file left
+
+
+WRITER = """
+import sys
+sys.path.insert(0, {root!r})
+from pathlib import Path
+from tests.twin.view.test_rrd_stream import write
+write(Path({path!r}))
+"""
+
+
+def test_two_processes_write_the_same_bytes(tmp_path):
+    """Every id Rerun stamps from the clock, the footer's hash-map order and the blueprint's random store id are
+    gone: two processes (each with its own hash seed and clock) write byte-identical files, with no footer and no
+    blueprint, whose SetStoreInfo row ids are the ones twin.view.rrd_stream gives them."""
+    import filecmp
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import twin.view.rrd_stream as rrd_stream
+
+    root = str(Path(__file__).resolve().parents[3])
+    paths = [tmp_path / name / "run.rrd" for name in ("a", "b")]
+    for path in paths:
+        subprocess.run([sys.executable, "-c", WRITER.format(root=root, path=str(path))], check=True)
+    assert filecmp.cmp(*paths, shallow=False)
+    assert RrdReader(str(paths[0])).blueprints() == []
+    data = paths[0].read_bytes()
+    messages, off = [], rrd_stream.FILE_HEADER
+    while off < len(data):
+        kind, size = (int(v) for v in np.frombuffer(data[off:off + 16], "<u8"))
+        messages.append((kind, data[off + 16:off + 16 + size]))
+        off += 16 + size
+    assert off == len(data) and rrd_stream.END not in [k for k, _ in messages]  # no footer
+    infos = [body for kind, body in messages if kind == rrd_stream.STORE_INFO]
+    base = rrd_stream._base("fixed", "run.rrd/store_info")
+    assert [(int.from_bytes(b[3:11], "little"), int.from_bytes(b[12:20], "little")) for b in infos] == [
+        (base, k + 1) for k in range(len(infos))] and infos
 
 
 def test_row_ids_keep_the_logging_order(tmp_path):

@@ -1,0 +1,88 @@
+"""`longwall view`: the Rerun viewer opened on a run directory's recordings, with their layout (the blueprint)
+built from what the directory holds.
+
+It is built from what the directory holds, not stored in it: rerun-sdk 0.41 gives a blueprint a random store id
+(and chunk and row ids from the clock), so a blueprint in the .rrd would make two runs of the same scenario and
+seed differ (twin.view.rrd_stream). A face run gets the run's layout (twin.view.recording.blueprint) with an
+"Estimates" tab of the estimators found in estimates/ (twin.view.estimate_recording: each method's errors, or
+sigmas without truth, its sensor states, fusion and detectors, the supports' canopy attitude); a SINS experiment
+one time-series view per group and quantity of its errors.parquet (twin.papers.sins_rundir).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import rerun.blueprint as rrb
+
+from estimators.io.logformat import ESTIMATES_DIR
+from estimators.shearer.methods import METHODS
+from twin.config.experiments import EXPERIMENT_KIND
+from twin.view.estimate_recording import estimate_views, support_attitude_views
+from twin.view.recording import ESTIMATES_RRD, RUN_RRD, blueprint
+from twin.view.rerun_columns import APPLICATION_ID
+
+SUFFIXES = ("states", "fusion", "detectors")
+"""The estimates/METHOD_SUFFIX.parquet tables a method's Estimates views come from, besides METHOD.parquet."""
+
+
+def _experiment(run_dir: Path) -> str | None:
+    """The SINS experiment a run directory holds (metrics.json), None for a face run."""
+    try:
+        meta = json.loads((run_dir / "metrics.json").read_text()).get("experiment", {})
+    except (OSError, ValueError, AttributeError):
+        return None
+    return meta.get("experiment") if isinstance(meta, dict) and meta.get("kind") == EXPERIMENT_KIND else None
+
+
+def run_blueprint(run_dir: Path) -> rrb.Blueprint:
+    """The layout of `run_dir`'s recordings (module docstring)."""
+    run_dir = Path(run_dir)
+    experiment = _experiment(run_dir)
+    if experiment is not None:
+        from twin.papers.sins_rundir import experiment_blueprint
+
+        table = pq.read_table(run_dir / "errors.parquet", columns=["group", "quantity"])
+        pairs = list(dict.fromkeys(zip(table.column("group").to_pylist(), table.column("quantity").to_pylist())))
+        return experiment_blueprint(experiment, pairs)
+    folder = run_dir / ESTIMATES_DIR
+    names = {p.stem for p in folder.glob("*.parquet")} if folder.is_dir() else set()
+    methods = [m for m in METHODS if m in names]
+    by_suffix = {suffix: [m for m in methods if f"{m}_{suffix}" in names] for suffix in SUFFIXES}
+    views = estimate_views(methods, by_suffix["states"], by_suffix["fusion"], by_suffix["detectors"],
+                           (run_dir / "truth_shearer.parquet").is_file()) if methods else ()
+    supports = any(name.endswith("_support_attitude") for name in names)
+    return blueprint(views + support_attitude_views(supports))
+
+
+def blueprint_file(run_dir: Path) -> Path:
+    """run_blueprint saved as an .rbl the viewer opens beside the recordings (in the temporary directory, one per
+    run directory, replaced each time)."""
+    key = hashlib.sha256(str(Path(run_dir).resolve()).encode()).hexdigest()[:16]
+    path = Path(tempfile.gettempdir()) / f"longwall-view-{key}.rbl"
+    run_blueprint(run_dir).save(APPLICATION_ID, path)
+    return path
+
+
+def open_viewer(run_dir: Path) -> None:
+    """Open `run_dir/run.rrd` and `estimates.rrd` beside it, whichever it holds (a run without truth, e.g. imported,
+    has estimates.rrd only), in the Rerun viewer (a detached `rerun` process), with the run's layout
+    (run_blueprint)."""
+    files = [str(p) for p in (Path(run_dir) / RUN_RRD, Path(run_dir) / ESTIMATES_RRD) if p.is_file()]
+    if not files:
+        raise FileNotFoundError(f"{run_dir}: no {RUN_RRD} or {ESTIMATES_RRD}; `longwall run` writes both, and "
+                                f"`longwall estimate {run_dir}` writes {ESTIMATES_RRD} for an imported log")
+    beside = Path(sys.executable).parent / "rerun"
+    exe = str(beside) if beside.is_file() else shutil.which("rerun")
+    if exe is None:
+        raise FileNotFoundError(f"rerun viewer executable not found next to {sys.executable} or on PATH "
+                                "(pip install rerun-sdk)")
+    subprocess.Popen([exe, *files, str(blueprint_file(run_dir))], start_new_session=True,
+                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
