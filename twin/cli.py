@@ -64,6 +64,7 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("scenario", nargs="?", type=Path, help="scenario TOML (default: the shipped default.toml)")
     p_run.add_argument("--out", type=Path, help="run directory (default: runs/NAME-seedN)")
     p_run.add_argument("--seed", type=int, help="override the scenario's random seed")
+    p_run.add_argument("--cycles", type=int, metavar="N", help="override a face scenario's number of cutting cycles")
     p_run.add_argument("--force", action="store_true", help="replace an existing non-empty run directory")
     p_run.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     p_run.add_argument("--trials", type=int, default=1,
@@ -108,7 +109,8 @@ def _command(args: argparse.Namespace) -> int:
     if args.command == "run":
         api.check_trials(args.trials, args.workers, args.ray, ("--trials", "--workers", "--ray"))
         api.run(args.scenario or default_scenario(), args.out, args.seed, args.trials, force=args.force,
-                quiet=args.quiet, sensors=not args.twin_only, workers=args.workers, ray_address=args.ray)
+                quiet=args.quiet, sensors=not args.twin_only, workers=args.workers, ray_address=args.ray,
+                cycles=args.cycles)
     elif args.command == "estimate":
         api.estimate(args.run_dir, args.quiet)
     elif args.command == "view":

@@ -123,3 +123,20 @@ def test_an_interrupted_estimate_leaves_the_run_directory_as_it_was(short_defaul
     inode = (run / "imu.parquet").stat().st_ino
     api.estimate(run)
     assert (run / "imu.parquet").stat().st_ino == inode and _tree(run).keys() == before.keys()
+
+
+def test_cycles_overrides_the_scenario_and_names_the_run(tmp_path, monkeypatch, capsys):
+    """`longwall run --cycles N`: the scenario with N cutting cycles, validated as the file's would be, into
+    runs/NAME-Ncycles-seedN; an experiment, a count the schema or the panel refuses: one line, exit 2."""
+    ran = []
+    monkeypatch.setattr(api, "_run_face", lambda scn, source, out, *args: ran.append((scn, out)))
+    monkeypatch.chdir(tmp_path)
+    assert main(["run", str(short(tmp_path)), "--cycles", "3", "--quiet"]) == 0
+    [(scn, out)] = ran
+    assert scn.cycles == 3 and out.as_posix() == "runs/default-3cycles-seed1"
+    for argv, says in ((["--cycles", "0"], "greater than or equal to 1"), (["--cycles", "13"], "panel_length_m"),
+                       ([str(SCENARIO_DIR / "seed000_coning.toml"), "--cycles", "2"], "no cutting cycles")):
+        assert main(["run", *argv, "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and says in err, err
+    assert len(ran) == 1

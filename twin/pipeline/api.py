@@ -95,9 +95,10 @@ def _seeded(scn, seed: int | None):
 
 def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Path | None = None,
         seed: int | None = None, trials: int = 1, *, force: bool = False, quiet: bool = True, sensors: bool = True,
-        workers: int = 1, ray_address: str | None = None) -> Run:
+        workers: int = 1, ray_address: str | None = None, cycles: int | None = None) -> Run:
     """Run a scenario (a TOML path, or what twin.load_scenario gave) into a run directory (default
-    runs/NAME-seedN).
+    runs/NAME-seedN; runs/NAME-Ncycles-seedN with `cycles`, which replaces a face scenario's number of cutting
+    cycles, validated as the file's would be).
 
     A face scenario is simulated: sensor trial 0 at the top of the directory; with `trials` > 1, trials 1..
     (sensor errors redrawn from the same truth) go to trials/NNN/ and their metrics to trials.parquet, run on
@@ -108,7 +109,13 @@ def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Pat
         source, scenario = str(scenario), load_scenario(scenario, seed)
     else:
         source, scenario = scenario.name, _seeded(scenario, seed)
-    out = Path(out) if out is not None else default_run_dir(scenario.name, scenario.seed)
+    name = scenario.name
+    if cycles is not None:
+        if not isinstance(scenario, Scenario):
+            raise ScenarioError(f"{source}: --cycles: an experiment has no cutting cycles; run it without --cycles")
+        scenario = parse_any({**scenario.model_dump(), "cycles": cycles}, f"{source} with --cycles {cycles}")
+        name = f"{scenario.name}-{cycles}cycles"
+    out = Path(out) if out is not None else default_run_dir(name, scenario.seed)
     if not isinstance(scenario, Scenario):
         check_resources(source, estimate_resources(scenario))
         return _run_paper(scenario, out, force, quiet)
