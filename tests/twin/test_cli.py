@@ -145,6 +145,10 @@ def test_run_writes_estimates_and_estimate_reruns_them(default_run, capsys):
     assert set(metrics["estimators"]) >= {"dr", "kf", "kf_cpoem", "kf_cpoem_rts"}
     assert len(metrics["estimators"]["kf"]["cycles"]) == 3  # two cycles and "all"
     assert (default_run / "estimates.rrd").is_file()
+    # The wall time by stage (timing.json; the summary prints it): every stage that ran, within the total.
+    timing = json.loads((default_run / "timing.json").read_text())
+    assert {"face", "shearer", "sensors", "recording", "estimators"} <= set(timing["stages_s"])
+    assert 0 < sum(timing["stages_s"].values()) <= timing["total_s"] and timing["wall_s"] < timing["total_s"]
     before = read_estimate(default_run, "kf_cpoem_rts").column("lat").to_numpy()
     assert main(["estimate", str(default_run)]) == 0
     assert "SEP per cutting cycle" in capsys.readouterr().out

@@ -187,13 +187,19 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
               "trials": 0.25 * len(mc_trials)}
     total = sum(stages.values())
     bar = tqdm(total=100, desc=f"longwall run {scn.name}", disable=quiet, leave=False,
-               bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}")
+               bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}")
     done = {k: 0.0 for k in stages}
+    stage_s = {k: 0.0 for k in stages}  # wall time of each stage: the time up to each report goes to its stage
+    last = [start]
 
     def progress(stage: str, frac: float) -> None:
+        now = time.perf_counter()
+        stage_s[stage] += now - last[0]
+        last[0] = now
         done[stage] = frac
         bar.n = round(100 * sum(stages[k] * v for k, v in done.items()) / total)
         bar.set_description(f"longwall run {scn.name} ({stage})")
+        bar.refresh()
 
     monte_carlo = None
     with atomic_run_dir(out, force) as staging, trial_runner(workers, ray_address) as runner:
@@ -224,12 +230,14 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
             monte_carlo = write_monte_carlo(staging, results, list(scn.estimators.shearer.methods),
                                             runner.description)
         bar.close()
+        write_timing(staging, total_s=time.perf_counter() - start, stages_s={k: v for k, v in stage_s.items() if v})
     if not quiet:
         print(format_summary(summary, wall_s))
         print(format_estimators(estimated, scn.name))
         if monte_carlo:
             print(format_monte_carlo(monte_carlo))
-        print(f"\nrun directory: {out}")
+        print(f"\nwall time {time.perf_counter() - start:.1f} s: "
+              + ", ".join(f"{k} {v:.1f} s" for k, v in stage_s.items() if v) + f"\nrun directory: {out}")
     if monte_carlo and monte_carlo["failed"]:
         print(f"longwall: warning: {monte_carlo['failed']} of {monte_carlo['trials']} Monte Carlo trials failed "
               f"(trial {monte_carlo['failures'][0]['trial']}: {monte_carlo['failures'][0]['error']}); "
