@@ -92,3 +92,16 @@ def benchmark_module(name: str) -> ModuleType:
     sys.modules.setdefault(name, module)  # dataclasses look the module up
     spec.loader.exec_module(module)
     return module
+
+
+@pytest.fixture
+def viewer_launches(monkeypatch) -> list:
+    """`longwall view` with the viewer's launch recorded instead of run (twin.view.layout.open_viewer): the list
+    each launch's argument list is appended to, the viewer found on PATH as /usr/bin/rerun."""
+    from twin.view import layout
+
+    launched: list = []
+    monkeypatch.setattr(layout.subprocess, "Popen", lambda args, **kw: launched.append(args))
+    monkeypatch.setattr(layout.shutil, "which", lambda name: "/usr/bin/rerun")
+    monkeypatch.setattr(layout.sys, "executable", "/nonexistent/bin/python")
+    return launched

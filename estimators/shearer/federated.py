@@ -17,7 +17,13 @@ from estimators.kalman import error_state as es
 from estimators.shearer import federated_filter as fk
 from estimators.shearer import rail_fix_update as rf
 from estimators.shearer.config import Config
-from estimators.shearer.health import filter_lost, fix_fallbacks, run_checked
+from estimators.shearer.health import (
+    filter_lost,
+    fix_fallbacks,
+    restore,
+    run_checked,
+    snapshot,
+)
 from estimators.shearer.position_fixes import Fixes
 from estimators.shearer.positioning import (
     initial_covariance,
@@ -69,7 +75,7 @@ class FederatedRun:
         tested or left out)."""
         fixes, var_floor = rail if rail is not None else (Fixes.empty(), np.zeros(0))
         self.state.det.counts[rf.COUNT_TESTED] = 0  # rail fixes tested in this pass (rail_kinematics.ARM_FIXES)
-        start = _copied(self.state)
+        start = snapshot(self.state)
         mag = np.isfinite(self.sensors.mag_b[a + 1:b + 1]).any()
         everything = np.ones(fixes.epoch.size, bool)
         fallbacks = [(label, (keep, True)) for label, keep in fix_fallbacks(fixes)]
@@ -93,7 +99,7 @@ class FederatedRun:
         def lost(_results):
             return filter_lost(self.prep.t_kf[a:b + 1], self.out.nav[a:b + 1], self.out.sd[a:b + 1], self.cfg)
 
-        results, (keep, _) = run_checked(run, lost, lambda: _restore(self.state, start), (everything, True),
+        results, (keep, _) = run_checked(run, lost, lambda: restore(self.state, start), (everything, True),
                                          fallbacks, self.prep.t_kf[a:b + 1], self.health_notes)
         self.out.flags[fixes.epoch[~keep]] |= FLAG_SKIPPED
         stats = np.full((fixes.epoch.size, 3), np.nan)
@@ -123,20 +129,6 @@ class FederatedRun:
         if invalid:
             notes.append(f"fusion: a sub-filter's covariance was unusable at {invalid} epochs (weight 0, restarted)")
         return notes
-
-
-def _copied(state):
-    """A deep copy of a (nested) NamedTuple of arrays."""
-    return type(state)(*(_copied(v) if isinstance(v, tuple) else v.copy() for v in state))
-
-
-def _restore(state, saved) -> None:
-    """Put `saved` (_copied) back into the arrays of `state`, in place."""
-    for v, w in zip(state, saved):
-        if isinstance(v, tuple):
-            _restore(v, w)
-        else:
-            v[...] = w
 
 
 def fusion_columns(t, beta, r_yaw, innov, mag_flags, delta) -> dict[str, np.ndarray]:

@@ -133,6 +133,20 @@ def innovations_inconsistent(nis: np.ndarray, gate: np.ndarray, epoch: np.ndarra
     return out
 
 
+def snapshot(state) -> list:
+    """Copies of the arrays of a filter state, a (nested) tuple of arrays, for `restore`."""
+    return [snapshot(v) if isinstance(v, tuple) else v.copy() for v in state]
+
+
+def restore(state, saved: list) -> None:
+    """Put a `snapshot` back into the arrays of `state`, in place (the kernels hold references to them)."""
+    for v, w in zip(state, saved):
+        if isinstance(v, tuple):
+            restore(v, w)
+        else:
+            v[...] = w
+
+
 Run = TypeVar("Run")
 Arg = TypeVar("Arg")
 

@@ -31,7 +31,14 @@ from estimators.nav.rotations import quat_rotate, quat_to_mat, rotvec_to_quat
 from estimators.shearer import odometer_filter as kf
 from estimators.shearer.config import Config
 from estimators.shearer.cpoem import Points
-from estimators.shearer.health import filter_lost, fix_fallbacks, innovations_inconsistent, run_checked
+from estimators.shearer.health import (
+    filter_lost,
+    fix_fallbacks,
+    innovations_inconsistent,
+    restore,
+    run_checked,
+    snapshot,
+)
 from estimators.shearer.position_fixes import Fixes, fixes_for, segment_points
 from estimators.shearer.prepare import Prepared, body_increments
 from estimators.shearer.solution import N_SD, Solution, make_solution
@@ -161,15 +168,11 @@ def _checked_segment(prep: Prepared, cfg: Config, a: int, b: int, fixes: Fixes, 
     """_run_segment from state = (nav, cal, p, nominal) under the health monitor (health.run_checked): a pass that
     loses track runs again from its start with fewer fixes; the epochs of the fixes it left out are flagged
     FLAG_SKIPPED. Returns the segment kept and its fixes."""
-    start = tuple(arr.copy() for arr in state)
-
-    def restore():
-        for arr, value in zip(state, start):
-            arr[...] = value
-
+    saved = snapshot(state)
     seg, kept = run_checked(lambda keep: _run_segment(prep, a, b, fixes.take(keep), q_psd, params, *state),
                             lambda s: filter_lost(prep.t_kf[a:b + 1], s.nav, _sd(s.p_post), cfg)
-                            | innovations_inconsistent(s.nis, s.gate, s.fix_row, b - a + 1), restore,
+                            | innovations_inconsistent(s.nis, s.gate, s.fix_row, b - a + 1),
+                            lambda: restore(state, saved),
                             np.ones(fixes.epoch.size, bool), fix_fallbacks(fixes), prep.t_kf[a:b + 1], notes)
     seg.flags[fixes.epoch[~kept] - a] |= FLAG_SKIPPED
     return seg, fixes.take(kept)

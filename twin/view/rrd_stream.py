@@ -97,21 +97,24 @@ TUID_FIELD = b"\x0a\x12\x09"
 
 def _pin_store_info(path: Path, recording: str) -> None:
     """Rewrite the row id of every SetStoreInfo message of `path` as (`_base`, message number), 16 bytes each in
-    place, and cut the file at its end-of-stream message (the footer)."""
-    data = bytearray(path.read_bytes())
-    base, off, k = _base(recording, f"{path.name}/store_info"), FILE_HEADER, 0
-    while off + 16 <= len(data):
-        kind, size = (int(v) for v in np.frombuffer(bytes(data[off:off + 16]), "<u8"))
-        if kind == END:
-            del data[off:]
-            break
-        body = off + 16
-        if kind == STORE_INFO and data[body:body + 3] == TUID_FIELD and data[body + 11] == 0x11:
-            k += 1
-            data[body + 3:body + 11] = base.to_bytes(8, "little")
-            data[body + 12:body + 20] = k.to_bytes(8, "little")
-        off = body + size
-    path.write_bytes(bytes(data))
+    place, and cut the file at its end-of-stream message (the footer); only the message headers are read."""
+    base, k = _base(recording, f"{path.name}/store_info"), 0
+    with open(path, "r+b") as f:
+        size_all, off = path.stat().st_size, FILE_HEADER
+        while off + 16 <= size_all:
+            f.seek(off)
+            kind, size = (int(v) for v in np.frombuffer(f.read(16), "<u8"))
+            if kind == END:
+                f.truncate(off)
+                break
+            head = f.read(20)
+            if kind == STORE_INFO and head[:3] == TUID_FIELD and head[11] == 0x11:
+                k += 1
+                f.seek(off + 16 + 3)
+                f.write(base.to_bytes(8, "little"))
+                f.seek(off + 16 + 12)
+                f.write(k.to_bytes(8, "little"))
+            off += 16 + size
 
 
 @contextmanager

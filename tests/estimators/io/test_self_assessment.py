@@ -7,7 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from estimators.io.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_UNHEALTHY, FLAG_ZUPT
+from estimators.io.logformat import (
+    FLAG_POSITION,
+    FLAG_SKIPPED,
+    FLAG_UNHEALTHY,
+    FLAG_ZUPT,
+)
 from estimators.io.metrics import (
     enu_offset_to_geodetic,
     self_assessment,

@@ -115,20 +115,15 @@ def test_truth_does_not_change_an_estimate(run_dir, imported, estimated, tmp_pat
         assert scored[name]["self"] == unscored[name]["self"]
 
 
-def test_report_and_view_on_a_run_without_truth(imported, estimated, monkeypatch):
-    from twin.view import layout
+def test_report_and_view_on_a_run_without_truth(imported, estimated, viewer_launches):
     from twin.view.report import REPORT_DIR, REPORT_HTML
 
     assert main(["report", str(imported)]) == 0
     assert {p.name for p in (imported / REPORT_DIR).glob("*.png")} == {"top_view.png"}
     page = (imported / REPORT_DIR / REPORT_HTML).read_text()
     assert "no errors scored" in page and "errors against time" in page and "survey [m]" in page
-    launched = []
-    monkeypatch.setattr(layout.subprocess, "Popen", lambda args, **kw: launched.append(args))
-    monkeypatch.setattr(layout.shutil, "which", lambda name: "/usr/bin/rerun")
-    monkeypatch.setattr(layout.sys, "executable", str(imported / "no-bin" / "python"))
     assert main(["view", str(imported)]) == 0
-    [args] = launched
+    [args] = viewer_launches
     assert args[:2] == ["/usr/bin/rerun", str(imported / ESTIMATES_RRD)] and args[2].endswith(".rbl")
 
 

@@ -107,15 +107,11 @@ def test_flags_survive_decimation_and_states_carry_the_truth(run_dir):
     np.testing.assert_allclose(scale, np.broadcast_to([1e-5, 0.003], scale.shape))
 
 
-def test_view_opens_both_files(run_dir, monkeypatch):
+def test_view_opens_both_files(run_dir, viewer_launches):
     from twin.view import layout
 
-    launched = []
-    monkeypatch.setattr(layout.subprocess, "Popen", lambda args, **kw: launched.append(args))
-    monkeypatch.setattr(layout.shutil, "which", lambda name: "/usr/bin/rerun")
-    monkeypatch.setattr(layout.sys, "executable", str(run_dir / "no-bin" / "python"))
     layout.open_viewer(run_dir)
-    [args] = launched
+    [args] = viewer_launches
     assert args[:3] == ["/usr/bin/rerun", str(run_dir / RUN_RRD), str(run_dir / ESTIMATES_RRD)]
     assert args[3].endswith(".rbl") and len(RrdReader(args[3]).blueprints()) == 1  # the layout (twin.view.layout)
 

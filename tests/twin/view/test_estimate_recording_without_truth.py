@@ -78,14 +78,9 @@ def test_subfilters_are_drawn_as_offsets_from_the_global_estimate(recorded):
                                                             offsets.shape))
 
 
-def test_view_opens_the_estimates_alone(recorded, monkeypatch):
+def test_view_opens_the_estimates_alone(recorded, viewer_launches):
     from twin.view import layout
 
-    run_dir = recorded[1].parent
-    launched = []
-    monkeypatch.setattr(layout.subprocess, "Popen", lambda args, **kw: launched.append(args))
-    monkeypatch.setattr(layout.shutil, "which", lambda name: "/usr/bin/rerun")
-    monkeypatch.setattr(layout.sys, "executable", str(run_dir / "no-bin" / "python"))
-    layout.open_viewer(run_dir)
-    [args] = launched
+    layout.open_viewer(recorded[1].parent)
+    [args] = viewer_launches
     assert args[:2] == ["/usr/bin/rerun", str(recorded[1])] and args[2].endswith(".rbl")
