@@ -183,7 +183,9 @@ class Estimators(Section):
 class Scenario(Section):
     name: Annotated[str, Field(min_length=1)]
     seed: Annotated[int, Field(ge=0)] = 0
-    cycles: Annotated[int, Field(ge=1, le=200)] = 1
+    cycles: Annotated[int, Field(ge=1)] = 1
+    """Cutting cycles of the run. No cap of its own: the panel bounds it (cycles * face.web_depth_m <=
+    face.panel_length_m) and the resource estimate (twin.config.resources) refuses a run this machine cannot hold."""
     site: Site = Site()
     face: Face = Face()
     supports: Supports = Supports()

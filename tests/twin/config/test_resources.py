@@ -41,7 +41,7 @@ def test_every_shipped_file_fits():
 
 
 def every_key_at_its_maximum() -> dict:
-    data = changed("default", "cycles", 200)
+    data = changed("default", "cycles", 4000)  # the panel's maximum: 6000 m of 1.5 m webs
     data["face"] |= {"pan_count": 400, "pan_length_m": 2.05, "web_depth_m": 1.5, "panel_length_m": 6000.0,
                      "bend_limit_horizontal_deg": 10.0}
     data["pattern"] = {"snake_length_pans": 40}
@@ -67,6 +67,18 @@ def test_over_a_limit_is_one_line_naming_the_figure_the_limit_and_the_keys(data,
     # memory is checked first: on a machine with less RAM than this one's 23 GB it may be the figure named
     assert figure in message or "peak memory" in message, message
     assert "over the limit of" in message and "reduce " in message, message
+
+
+def test_cycles_are_bounded_by_the_panel_and_the_resource_estimate_not_a_cap():
+    """More cycles than the old cap of 200 load when the panel holds them, and the resource estimate decides whether
+    the run fits this machine: today a run is held in memory, so 250 cycles of the default face do not."""
+    data = changed("default", "cycles", 250)
+    data["face"]["panel_length_m"] = 250.0
+    scn = parse_any(data, "long.toml")
+    assert scn.cycles == 250
+    with pytest.raises(ScenarioError, match="peak memory"):
+        check_resources("long.toml", estimate_resources(scn))
+    check_resources("fewer.toml", estimate_resources(parse_any(data | {"cycles": 50}, "fewer.toml")))
 
 
 def test_memory_limit_is_the_machines():
