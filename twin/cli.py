@@ -23,6 +23,7 @@ from twin.pipeline import api
 from twin.pipeline.api import default_scenario
 from twin.pipeline.montecarlo import MonteCarloError
 from twin.pipeline.rundir import RunDirError
+from twin.view.record_rate import FULL_SPELLING, RECORD_RATE_HZ, parse_record_rate
 
 EXIT_BAD_INPUT = 2
 EXIT_SIGINT, EXIT_SIGTERM = 128 + signal.SIGINT, 128 + signal.SIGTERM
@@ -33,6 +34,18 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str):
         self.exit(EXIT_BAD_INPUT, f"longwall: error: {message}; see `{self.prog} --help`\n")
+
+
+def record_rate(text: str) -> float | None:
+    """--record-rate's value (twin.view.record_rate); a bad one is a usage error (one line)."""
+    try:
+        return parse_record_rate(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+RECORD_RATE_HELP = ("rate of the time series and the replay in the Rerun recording%s [Hz] "
+                    f"(default {RECORD_RATE_HZ:g}; '{FULL_SPELLING}': every sample)")
 
 
 class Terminated(KeyboardInterrupt):
@@ -74,9 +87,13 @@ def main(argv: list[str] | None = None) -> int:
                        help="Monte Carlo: local processes for trials 1.. (default 1: sequential)")
     p_run.add_argument("--ray", metavar="ADDRESS",
                        help="Monte Carlo: run trials 1.. on the Ray cluster at ADDRESS (auto, HOST:PORT)")
+    p_run.add_argument("--record-rate", type=record_rate, default=RECORD_RATE_HZ, metavar="HZ",
+                       help=RECORD_RATE_HELP % "s run.rrd and estimates.rrd")
     p_est = sub.add_parser("estimate", help="re-run the estimators on a run directory (simulated or imported)")
     p_est.add_argument("run_dir", type=Path)
     p_est.add_argument("--quiet", action="store_true", help="no table")
+    p_est.add_argument("--record-rate", type=record_rate, default=RECORD_RATE_HZ, metavar="HZ",
+                       help=RECORD_RATE_HELP % " estimates.rrd")
     p_view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     p_view.add_argument("run_dir", type=Path)
     p_imp = sub.add_parser("import", help="turn CSV files (one per stream, name[unit] headers) into a run directory")
@@ -110,9 +127,9 @@ def _command(args: argparse.Namespace) -> int:
         api.check_trials(args.trials, args.workers, args.ray, ("--trials", "--workers", "--ray"))
         api.run(args.scenario or default_scenario(), args.out, args.seed, args.trials, force=args.force,
                 quiet=args.quiet, sensors=not args.twin_only, workers=args.workers, ray_address=args.ray,
-                cycles=args.cycles)
+                cycles=args.cycles, record_rate_hz=args.record_rate)
     elif args.command == "estimate":
-        api.estimate(args.run_dir, args.quiet)
+        api.estimate(args.run_dir, args.quiet, record_rate_hz=args.record_rate)
     elif args.command == "view":
         from twin.view.layout import open_viewer
         open_viewer(args.run_dir)

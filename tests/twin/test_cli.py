@@ -160,3 +160,53 @@ def test_estimate_without_a_scenario_is_one_line(tmp_path, capsys):
     assert main(["estimate", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "scenario.toml" in err
+
+
+def _bytes(paths) -> int:
+    return sum(p.stat().st_size for p in paths)
+
+
+def test_recordings_are_at_most_a_tenth_of_the_parquet(default_run):
+    """Issue 24 item 4: run.rrd and estimates.rrd together at most 10 % of the run's Parquet (the streams and
+    estimates/), at the default record rate, which metrics.json records."""
+    parquet = _bytes([*default_run.glob("*.parquet"), *default_run.glob("estimates/*.parquet")])
+    recordings = _bytes([default_run / "run.rrd", default_run / "estimates.rrd"])
+    assert recordings <= 0.1 * parquet, f"{recordings / 1e6:.1f} MB of recordings, {parquet / 1e6:.1f} MB of Parquet"
+    metrics = json.loads((default_run / "metrics.json").read_text())
+    assert metrics["recordings"] == {"run.rrd": 10.0, "estimates.rrd": 10.0}
+
+
+def _rows(rrd, entity: str) -> int:
+    return sum(c.num_rows for c in RrdReader(str(rrd)).stream().to_chunks()
+               if c.entity_path == entity and not c.is_static)
+
+
+def test_record_rate_full_logs_every_estimate_row_and_a_lower_rate_fewer(short_default_run, tmp_path):
+    import shutil
+
+    from estimators.io.logformat import read_estimate
+    from tests.conftest import SHORT_RUN_S
+
+    run = tmp_path / "run"
+    shutil.copytree(short_default_run, run)
+    assert main(["estimate", str(run), "--quiet", "--record-rate", "full"]) == 0
+    n = read_estimate(run, "kf").num_rows
+    assert n > 2 * SHORT_RUN_S + 2
+    for entity in ("/world/estimates/kf/position", "/plots/errors/kf/east", "/plots/sigma/kf/gyro_bias"):
+        assert _rows(run / "estimates.rrd", entity) == n, entity
+    assert json.loads((run / "metrics.json").read_text())["recordings"] == {"estimates.rrd": "full"}
+    assert main(["estimate", str(run), "--quiet", "--record-rate", "2"]) == 0
+    for entity in ("/world/estimates/kf/position", "/plots/errors/kf/east", "/plots/sigma/kf/gyro_bias"):
+        assert 2 <= _rows(run / "estimates.rrd", entity) <= 2 * SHORT_RUN_S + 2, entity  # and the last row
+    assert json.loads((run / "metrics.json").read_text())["recordings"] == {"estimates.rrd": 2.0}
+
+
+@pytest.mark.parametrize("value", ["0", "-5", "fast", "nan", "inf"])
+@pytest.mark.parametrize("command", ["run", "estimate"])
+def test_a_bad_record_rate_is_one_line_exit_2(tmp_path, capsys, command, value):
+    out = tmp_path / "out"
+    args = ["run", "--out", str(out)] if command == "run" else ["estimate", str(out)]
+    assert main([*args, f"--record-rate={value}"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--record-rate" in err and f"'{value}'" in err and "full" in err
+    assert not out.exists()

@@ -109,7 +109,7 @@ def test_an_interrupted_estimate_leaves_the_run_directory_as_it_was(short_defaul
     api.estimate(run)
     before = _tree(run)
 
-    def interrupted(run_dir, scn, recording=True):
+    def interrupted(run_dir, scn, recording=True, **settings):
         (run_dir / "estimates").mkdir()
         (run_dir / "estimates" / "kf.parquet").write_bytes(b"half")
         raise KeyboardInterrupt

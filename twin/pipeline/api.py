@@ -51,6 +51,7 @@ from twin.pipeline.rundir import (
     staged_update,
     write_timing,
 )
+from twin.view.record_rate import RECORD_RATE_HZ, check_record_rate, rate_label
 
 
 @dataclass(frozen=True)
@@ -95,7 +96,8 @@ def _seeded(scn, seed: int | None):
 
 def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Path | None = None,
         seed: int | None = None, trials: int = 1, *, force: bool = False, quiet: bool = True, sensors: bool = True,
-        workers: int = 1, ray_address: str | None = None, cycles: int | None = None) -> Run:
+        workers: int = 1, ray_address: str | None = None, cycles: int | None = None,
+        record_rate_hz: float | None = RECORD_RATE_HZ) -> Run:
     """Run a scenario (a TOML path, or what twin.load_scenario gave) into a run directory (default
     runs/NAME-seedN; runs/NAME-Ncycles-seedN with `cycles`, which replaces a face scenario's number of cutting
     cycles, validated as the file's would be).
@@ -104,7 +106,9 @@ def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Pat
     (sensor errors redrawn from the same truth) go to trials/NNN/ and their metrics to trials.parquet, run on
     `workers` local processes or on the Ray cluster at `ray_address`; `sensors=False` writes the truth only.
     000's SINS experiments and 002's turntable run their experiment. `quiet=False` shows the progress bar and
-    prints the summary tables, as `longwall run` does."""
+    prints the summary tables, as `longwall run` does. `record_rate_hz` is the rate of the face run's recordings
+    run.rrd and estimates.rrd (twin.view.record_rate: Hz, or None for every sample), recorded in metrics.json."""
+    record_rate_hz = _record_rate(record_rate_hz)
     if isinstance(scenario, str | Path):
         source, scenario = str(scenario), load_scenario(scenario, seed)
     else:
@@ -121,7 +125,7 @@ def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Pat
         return _run_paper(scenario, out, force, quiet)
     check_trials(trials, workers, ray_address)
     check_resources(source, estimate_resources(scenario, trials, sensors, workers))
-    return _run_face(scenario, source, out, force, quiet, trials, sensors, workers, ray_address)
+    return _run_face(scenario, source, out, force, quiet, trials, sensors, workers, ray_address, record_rate_hz)
 
 
 def check_trials(trials: int, workers: int, ray_address: str | None,
@@ -160,8 +164,26 @@ def _run_paper(exp: Experiment | Turntable, out: Path, force: bool, quiet: bool)
     return Run(out)
 
 
+def _record_rate(rate_hz: float | None) -> float | None:
+    """The record rate checked (twin.view.record_rate), a bad one as ScenarioError (one line)."""
+    try:
+        return check_record_rate(rate_hz)
+    except ValueError as err:
+        raise ScenarioError(str(err)) from None
+
+
+def note_recordings(run_dir: Path, rates: dict[str, float | None]) -> None:
+    """Record in metrics.json's "recordings" the rate each recording file of `rates` was written at (Hz, or "full"),
+    for the recordings that exist."""
+    path = Path(run_dir) / "metrics.json"
+    data = json.loads(path.read_text()) if path.is_file() else {}
+    noted = data.setdefault("recordings", {})
+    noted.update({name: rate_label(rate) for name, rate in rates.items() if (Path(run_dir) / name).is_file()})
+    path.write_text(json.dumps(data, indent=2) + "\n")
+
+
 def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, trials: int, sensors: bool,
-              workers: int, ray_address: str | None) -> Run:
+              workers: int, ray_address: str | None, record_rate_hz: float | None) -> Run:
     from twin.face.haulage import Timeline
     from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
     from twin.pipeline.montecarlo import (
@@ -173,7 +195,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     from twin.pipeline.montecarlo_table import format_monte_carlo, write_monte_carlo
     from twin.pipeline.simulate import simulate
     from twin.sensors.faults import check_faults_in_run
-    from twin.view.recording import write_recording
+    from twin.view.recording import ESTIMATES_RRD, RUN_RRD, write_recording
     from twin.view.summary import format_summary, twin_summary
 
     try:
@@ -214,16 +236,17 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
             progress("sensors", 1.0)
         (staging / "scenario.toml").write_text(scenario_to_toml(scn))
         progress("write", 1.0)
-        write_recording(staging / "run.rrd", scn, {k: v for k, v in tables.items() if k.startswith("truth_")},
-                        result.floor_grid.mesh_t(result.frame),
+        write_recording(staging / RUN_RRD, scn, {k: v for k, v in tables.items() if k.startswith("truth_")},
+                        result.floor_grid.mesh_t(result.frame), record_rate_hz,
                         sensors={k: v for k, v in tables.items() if not k.startswith("truth_")})
         progress("recording", 1.0)
         summary = twin_summary(scn, result.tables)
         wall_s = time.perf_counter() - start
         write_timing(staging, wall_s=wall_s, real_time_factor=summary["simulated_s"] / wall_s)
         (staging / "metrics.json").write_text(json.dumps({"twin": summary, "estimators": {}}, indent=2) + "\n")
-        estimated = run_estimators(staging, scn) if sensors else {}
+        estimated = run_estimators(staging, scn, record_rate_hz=record_rate_hz) if sensors else {}
         write_metrics(staging, estimated)
+        note_recordings(staging, {RUN_RRD: record_rate_hz, ESTIMATES_RRD: record_rate_hz})
         progress("estimators", 1.0)
         if mc_trials:
             results = [TrialResult(0, estimated), *runner.gather(lambda n: progress("trials", n / len(mc_trials)))]
@@ -245,14 +268,16 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     return Run(out)
 
 
-def estimate(run_dir: str | Path, quiet: bool = True) -> Run:
+def estimate(run_dir: str | Path, quiet: bool = True, record_rate_hz: float | None = RECORD_RATE_HZ) -> Run:
     """Re-run the estimators the run's scenario.toml names on an existing (simulated or imported) run directory;
-    `quiet=False` prints their table. Without truth (a real face's log) every estimate is written and the metrics
-    hold what each says of itself, marked "truth": false (twin.pipeline.estimate.run_estimators)."""
+    `quiet=False` prints their table; estimates.rrd is written at `record_rate_hz` (twin.view.record_rate: Hz, or
+    None for every row), recorded in metrics.json. Without truth (a real face's log) every estimate is written and
+    the metrics hold what each says of itself, marked "truth": false (twin.pipeline.estimate.run_estimators)."""
     from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
     from twin.pipeline.log_layout import check_run_dir
     from twin.view.recording import ESTIMATES_RRD
 
+    record_rate_hz = _record_rate(record_rate_hz)
     run_dir = Path(run_dir)
     scenario = run_dir / "scenario.toml"
     if not scenario.is_file():
@@ -262,8 +287,10 @@ def estimate(run_dir: str | Path, quiet: bool = True) -> Run:
     check_run_dir(run_dir, scn)
     with run_lock(run_dir), staged_update(run_dir, fresh=(ESTIMATES_DIR, ESTIMATES_RRD),
                                           copied=("metrics.json", TIMING)) as staging:
-        estimated = run_estimators(staging, scn)  # written beside a copy: an interrupted one leaves run_dir as it was
+        # Written beside a copy: an interrupted one leaves run_dir as it was.
+        estimated = run_estimators(staging, scn, record_rate_hz=record_rate_hz)
         write_metrics(staging, estimated)
+        note_recordings(staging, {ESTIMATES_RRD: record_rate_hz})
     if not quiet:
         print(format_estimators(estimated, scn.name))
     return Run(run_dir)

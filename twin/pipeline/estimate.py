@@ -35,6 +35,7 @@ from estimators.shearer.solution import Solution, estimate_columns, state_column
 from twin.config.imu_grades import grade
 from twin.config.scenario import Scenario
 from twin.face.layout import support_stations
+from twin.view.record_rate import RECORD_RATE_HZ
 
 
 def positioning_config(scn: Scenario) -> Config:
@@ -122,10 +123,12 @@ def _calibration(sol: Solution, states_truth: dict[str, float] | None) -> dict:
             "odo_mount_deg": {a: state(CAL_MOUNT.start + i, f"odo_mount_{a}", True) for i, a in enumerate("xyz")}}
 
 
-def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict:
-    """Run the scenario's shearer estimators on run_dir; writes estimates/, estimates.rrd (with `recording`) and
-    returns the metrics. A log the estimators cannot use raises PositioningError (one line). With instrumented
-    supports the metrics also hold their canopy attitude under SUPPORT_ATTITUDE (twin.pipeline.support_estimate).
+def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True,
+                   record_rate_hz: float | None = RECORD_RATE_HZ) -> dict:
+    """Run the scenario's shearer estimators on run_dir; writes estimates/, estimates.rrd (with `recording`, at
+    `record_rate_hz`: Hz, or None for every row; twin.view.record_rate) and returns the metrics. A log the
+    estimators cannot use raises PositioningError (one line). With instrumented supports the metrics also hold their
+    canopy attitude under SUPPORT_ATTITUDE (twin.pipeline.support_estimate).
 
     Each method's entry holds "truth" (whether truth_shearer was there to score against), its notes, what it says
     of itself (estimators.io.metrics.self_assessment, under "self") and, for the filters, the final odometer
@@ -138,7 +141,8 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
     supports = support_attitude(run_dir, scn)
     out = {} if supports is None else {SUPPORT_ATTITUDE: supports.metrics}
     if recording and supports is not None and not scn.estimators.shearer.methods:
-        write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, None, {}, {}, supports=supports)
+        write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, None, {}, {}, supports=supports,
+                                 rate_hz=record_rate_hz)
     methods = tuple(scn.estimators.shearer.methods)
     if not methods:
         return out
@@ -171,7 +175,7 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True) -> dict
         detectors = {name: (read_estimate(run_dir, name, ESTIMATE_DETECTORS), thresholds)
                      for name, sol in sols.items() if sol.detectors is not None}
         write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, truth, estimates, states, states_truth,
-                                 fusion=fusion, detectors=detectors, supports=supports)
+                                 rate_hz=record_rate_hz, fusion=fusion, detectors=detectors, supports=supports)
     return out
 
 

@@ -4,15 +4,17 @@ The file carries the application id and the recording id of run.rrd (read from i
 none, e.g. an imported log; written reproducibly by twin.view.rrd_stream), so `longwall view` shows the truth replay and the estimates as one recording, in
 the run's layout with a second "Estimates" tab of plots (twin.view.layout). A run without truth (truth_shearer None, e.g.
 a real face's log) gets everything but the errors: paths, sigmas, flags, sensor states, fusion, detectors.
-Everything is logged column-wise with `send_columns` on the `sim_time` timeline; plots are decimated to at most
-`PLOT_RATE_HZ`.
+Everything is logged column-wise with `send_columns` on the `sim_time` timeline, cut to what a person can see at the
+record rate (twin.view.rerun_columns.visible_rows: at most the rate, without the samples a plotted line passes within
+a pixel of; flags and alarms OR-ed over each interval so a brief one stays; every sample at FULL rate).
 
 Entities, per estimator METHOD (errors as estimators.io.metrics defines them: estimate - truth in East/North/Up at
 the truth point; attitude the psi-angle phi, C_b^n(true) = (I + [phi x]) C_b^n(est)):
 
 * `world/estimates/METHOD/path`       static LineStrips3D of the estimated body path in t, one strip per cycle
-                                      (one strip without truth)
-* `world/estimates/METHOD/position`   Points3D, the estimated body point in t at the plot rate
+                                      (one strip without truth), within PATH_TOLERANCE_M of every estimate
+* `world/estimates/METHOD/position`   Points3D, the estimated body point in t at the record rate, after each
+                                      MARKER_STEP_M of travel
 * `plots/errors/METHOD/{east,north,up}`               Scalars, position error [m]
 * `plots/attitude_errors/METHOD/{e,n,u}`              Scalars, attitude error phi [deg]
 * `plots/sigma/METHOD/position/{east,north,up}`       Scalars, +- one-sigma of the position [m]
@@ -37,9 +39,9 @@ and for a federated filter (ESTIMATE_FUSION, 003 section 4):
 
 and for the rail kinematics model's filter (ESTIMATE_DETECTORS, 004 section IV):
 
-* `plots/detectors/METHOD/{residual,dual_state,fsprt}`  Scalars, each detector's statistic per fix with its
-                                                      thresholds
-* `plots/detectors/METHOD/isolated`                   Scalars 0/1, the rail model isolated
+* `plots/detectors/METHOD/{residual,dual_state,fsprt}`  Scalars, each detector's statistic per fix (the largest in
+                                                      each interval of the record rate) with its thresholds
+* `plots/detectors/METHOD/isolated`                   Scalars 0/1, the rail model isolated (in each interval)
 * `world/estimates/METHOD/rail`                       static Points3D, the rail model's predicted points (the
                                                       shearer's path it predicts), beside the true path of run.rrd
 
@@ -69,12 +71,10 @@ from estimators.shearer.federated_filter import MAG_DISTURBED, MAG_GATED, MAG_US
 from twin.config.imu_grades import DEG, DEG_PER_H, MG
 from twin.config.scenario import Scenario
 from twin.pipeline.support_estimate import ANGLES, FLAG_NAMES, SupportAttitude
-from twin.view.recording import run_recording_id
-from twin.view.rerun_columns import decimate, series, time_column
+from twin.view.recording import path_strips, run_recording_id
+from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
+from twin.view.rerun_columns import decimate, marker_rows, series, time_column
 from twin.view.rrd_stream import recording_id, recording_stream
-
-PLOT_RATE_HZ = 10.0
-"""Largest rate of the logged plots and the moving estimate point."""
 
 POSITION_AXES = ("east", "north", "up")
 ATTITUDE_AXES = ("e", "n", "u")
@@ -96,87 +96,94 @@ def _names(group: str) -> list[str]:
     return [f"{group}_{a}" for a in axes] if axes else [group]
 
 
-def plot_rows(table: pa.Table, rate_hz: float) -> tuple[pa.Table, np.ndarray]:
-    """The rows kept for plotting (first of each 1/rate_hz interval and the last) and their times."""
+def plot_rows(table: pa.Table, rate_hz: float | None) -> tuple[pa.Table, np.ndarray]:
+    """The rows kept for plotting (first of each 1/rate_hz interval and the last; all at FULL rate) and their
+    times."""
     keep = decimate(column(table, "t"), rate_hz)
     sub = table.take(pa.array(keep))
     return sub, column(sub, "t")
 
 
-def _log_band(rec: rr.RecordingStream, entity: str, t: np.ndarray, sd: np.ndarray, label: str) -> None:
+def _log_band(rec: rr.RecordingStream, entity: str, t: np.ndarray, sd: np.ndarray, label: str,
+              rate_hz: float | None) -> None:
     """+- one-sigma of (K,) values as two series, unless there is no sigma at all (NaN throughout)."""
     if np.isfinite(sd).any():
-        series(rec, entity, t, np.column_stack([sd, -sd]), [f"+1 sigma {label}", f"-1 sigma {label}"])
+        series(rec, entity, t, np.column_stack([sd, -sd]), [f"+1 sigma {label}", f"-1 sigma {label}"],
+               rate_hz=rate_hz)
 
 
 def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method: str, table: pa.Table,
-                  rate_hz: float, color: np.ndarray) -> None:
+                  rate_hz: float | None, color: np.ndarray) -> None:
     if table.num_rows == 0:
         return
-    sub, t = plot_rows(table, rate_hz)
     site = scn.site
-    p_t = earth.lla_to_enu(column(sub, "lat"), column(sub, "lon"), column(sub, "h"), np.radians(site.lat_deg),
-                           np.radians(site.lon_deg), site.height_m).astype(np.float32)
+    t_all = column(table, "t")
+    p_all = earth.lla_to_enu(column(table, "lat"), column(table, "lon"), column(table, "h"), np.radians(site.lat_deg),
+                             np.radians(site.lon_deg), site.height_m)
     # With truth one strip per cycle, the cycle of the truth sample at or before each estimate time.
-    breaks = []
+    cycle = None
     if truth_shearer is not None:
         t_truth = column(truth_shearer, "t")
-        cycle = column(truth_shearer, "cycle")[np.clip(np.searchsorted(t_truth, t, side="right") - 1, 0, None)]
-        breaks = np.flatnonzero(np.diff(cycle)) + 1
-    rec.log(f"world/estimates/{method}/path", rr.LineStrips3D(np.split(p_t, breaks), radii=0.03, colors=color),
-            static=True)
+        cycle = column(truth_shearer, "cycle")[np.clip(np.searchsorted(t_truth, t_all, side="right") - 1, 0, None)]
+    rec.log(f"world/estimates/{method}/path", rr.LineStrips3D(path_strips(t_all, p_all, cycle, rate_hz), radii=0.03,
+                                                              colors=color), static=True)
+    moved = marker_rows(t_all, p_all, rate_hz)
     rec.log(f"world/estimates/{method}/position", rr.Points3D.from_fields(radii=0.15, colors=color), static=True)
-    rec.send_columns(f"world/estimates/{method}/position", indexes=[time_column(t)],
-                     columns=rr.Points3D.columns(positions=p_t))
+    rec.send_columns(f"world/estimates/{method}/position", indexes=[time_column(t_all[moved])],
+                     columns=rr.Points3D.columns(positions=p_all[moved].astype(np.float32)))
+    sub, t = plot_rows(table, rate_hz)
 
     if truth_shearer is not None:
         _, err = position_errors(sub, truth_shearer)
         _, phi = attitude_errors(sub, truth_shearer)
         for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
-            series(rec, f"plots/errors/{method}/{axis}", t, err[:, i:i + 1], [f"{method} {axis} [m]"])
+            series(rec, f"plots/errors/{method}/{axis}", t, err[:, i:i + 1], [f"{method} {axis} [m]"],
+                   rate_hz=rate_hz)
             series(rec, f"plots/attitude_errors/{method}/{a}", t, np.degrees(phi[:, i:i + 1]),
-                    [f"{method} phi_{a} [deg]"])
+                   [f"{method} phi_{a} [deg]"], rate_hz=rate_hz)
     sd_pos, sd_att = columns(sub, "sd_pos"), np.degrees(columns(sub, "sd_att"))
     for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
-        _log_band(rec, f"plots/sigma/{method}/position/{axis}", t, sd_pos[:, i], f"{method} {axis} [m]")
-        _log_band(rec, f"plots/sigma/{method}/attitude/{a}", t, sd_att[:, i], f"{method} phi_{a} [deg]")
+        _log_band(rec, f"plots/sigma/{method}/position/{axis}", t, sd_pos[:, i], f"{method} {axis} [m]", rate_hz)
+        _log_band(rec, f"plots/sigma/{method}/attitude/{a}", t, sd_att[:, i], f"{method} phi_{a} [deg]", rate_hz)
 
     _log_flags(rec, f"plots/flags/{method}", table, "flags", FLAG_SERIES, method, rate_hz)
 
 
 def _log_flags(rec: rr.RecordingStream, entity: str, table: pa.Table, name: str, bits, method: str,
-               rate_hz: float) -> None:
-    """Flags are events: OR them over each plot interval so a single-sample fix is not decimated away; `bits`
-    pairs a label with its flag bit."""
+               rate_hz: float | None) -> None:
+    """Flags are events: OR them over each plot interval so a single-sample fix is not decimated away (and the
+    0/1 steps keep their edges in visible_rows); `bits` pairs a label with its flag bit."""
     t_all = column(table, "t")
     keep = decimate(t_all, rate_hz)
     flags = np.bitwise_or.reduceat(np.asarray(table.column(name).to_numpy(), np.int64), keep)
     series(rec, entity, t_all[keep], np.column_stack([(flags & bit) != 0 for _, bit in bits]).astype(float),
-           [f"{method} {label}" for label, _ in bits])
+           [f"{method} {label}" for label, _ in bits], rate_hz=rate_hz, band=False)
 
 
 def _log_fusion(rec: rr.RecordingStream, truth_shearer, method: str, estimate: pa.Table, fusion: pa.Table,
-                rate_hz: float) -> None:
+                rate_hz: float | None) -> None:
     sub, t = plot_rows(fusion, rate_hz)
     root = f"plots/fusion/{method}"
-    series(rec, f"{root}/r_yaw", t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None], [f"{method} sd yaw [deg]"])
+    series(rec, f"{root}/r_yaw", t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None], [f"{method} sd yaw [deg]"],
+           rate_hz=rate_hz)
     series(rec, f"{root}/yaw_innovation", t, np.degrees(column(sub, "yaw_innovation"))[:, None],
-            [f"{method} yaw innovation [deg]"])
+           [f"{method} yaw innovation [deg]"], rate_hz=rate_hz)
     _log_flags(rec, f"{root}/magnetometer", fusion, "mag_flags", MAG_SERIES, method, rate_hz)
     beta = np.column_stack([column(sub, f"beta_{s}") for s in SUBFILTERS])
     if not np.isfinite(beta).any():
         return  # a centralized filter: no sub-filters
-    series(rec, f"{root}/beta", t, beta, [f"{method} beta {s}" for s in SUBFILTERS])
+    series(rec, f"{root}/beta", t, beta, [f"{method} beta {s}" for s in SUBFILTERS], rate_hz=rate_hz)
     est, _ = plot_rows(estimate, rate_hz)
     err = np.zeros((t.size, 3)) if truth_shearer is None else position_errors(est, truth_shearer)[1]
     for i, axis in enumerate(POSITION_AXES[:2]):
         d = np.column_stack([np.zeros(t.size)] + [column(sub, f"{s}_d_pos_{'en'[i]}") for s in SUBFILTERS])
         series(rec, f"{root}/subfilter_errors/{axis}", t, err[:, i:i + 1] + d,
-                [f"{method} global {axis} [m]"] + [f"{method} {s} sub-filter {axis} [m]" for s in SUBFILTERS])
+               [f"{method} global {axis} [m]"] + [f"{method} {s} sub-filter {axis} [m]" for s in SUBFILTERS],
+               rate_hz=rate_hz)
 
 
 def _log_states(rec: rr.RecordingStream, method: str, table: pa.Table, truth: dict[str, float] | None,
-                rate_hz: float) -> None:
+                rate_hz: float | None) -> None:
     if table.num_rows == 0:
         return
     sub, t = plot_rows(table, rate_hz)
@@ -189,25 +196,34 @@ def _log_states(rec: rr.RecordingStream, method: str, table: pa.Table, truth: di
             flat = np.broadcast_to(np.array([truth[n] for n in known]) / per_unit, (t.size, len(known)))
             values = np.column_stack([values, flat])
             labels += [f"{n} true [{unit}]" for n in known]
-        series(rec, f"plots/states/{method}/{group}", t, values, labels)
+        series(rec, f"plots/states/{method}/{group}", t, values, labels, rate_hz=rate_hz)
         sd = np.column_stack([column(sub, f"sd_{n}") for n in names]) / per_unit
         series(rec, f"plots/sigma/{method}/{group}", t, np.column_stack([sd, -sd]),
-                [f"{sign}1 sigma {n} [{unit}]" for sign in "+-" for n in names])
+               [f"{sign}1 sigma {n} [{unit}]" for sign in "+-" for n in names], rate_hz=rate_hz)
 
 
 def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, table: pa.Table,
-                   thresholds: dict[str, float]) -> None:
+                   thresholds: dict[str, float], rate_hz: float | None) -> None:
+    """Each statistic's largest value in each interval of the record rate (an alarm is a peak: it is not decimated
+    away), with its thresholds; the isolation as 0/1 in each interval."""
     if table.num_rows == 0:
         return
-    t = column(table, "t")
+    t_all = column(table, "t")
+    keep = decimate(t_all, rate_hz)
+    t = t_all[keep]
+
+    def peaks(name: str) -> np.ndarray:
+        return np.fmax.reduceat(np.asarray(column(table, name), float), keep)
+
     root = f"plots/detectors/{method}"
     for name in ("residual", "dual_state"):
-        series(rec, f"{root}/{name}", t, np.column_stack([column(table, name), np.full(t.size, thresholds[name])]),
-                [f"{method} {name}", f"{name} threshold"])
-    series(rec, f"{root}/fsprt", t, np.column_stack([column(table, "fsprt"), np.full(t.size, thresholds["t_on"]),
+        series(rec, f"{root}/{name}", t, np.column_stack([peaks(name), np.full(t.size, thresholds[name])]),
+               [f"{method} {name}", f"{name} threshold"], rate_hz=rate_hz)
+    series(rec, f"{root}/fsprt", t, np.column_stack([peaks("fsprt"), np.full(t.size, thresholds["t_on"]),
                                                       np.full(t.size, thresholds["t_off"])]),
-            [f"{method} fsprt", "fsprt T1 (fault)", "fsprt T0 (clear)"])
-    series(rec, f"{root}/isolated", t, column(table, "isolated")[:, None].astype(float), [f"{method} isolated"])
+           [f"{method} fsprt", "fsprt T1 (fault)", "fsprt T0 (clear)"], rate_hz=rate_hz)
+    series(rec, f"{root}/isolated", t, peaks("isolated")[:, None], [f"{method} isolated"], rate_hz=rate_hz,
+           band=False)
     site = scn.site
     p_t = earth.lla_to_enu(column(table, "lat"), column(table, "lon"), column(table, "h"), np.radians(site.lat_deg),
                            np.radians(site.lon_deg), site.height_m).astype(np.float32)
@@ -268,7 +284,7 @@ def support_attitude_views(supports: bool) -> tuple[rrb.View, ...]:
             rrb.BarChartView(name="GD-UKF objective per iteration [deg]", origin=f"{root}/gd_objective"))
 
 
-def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, rate_hz: float) -> None:
+def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, rate_hz: float | None) -> None:
     """Each support's angles (with the truth) and errors per method, ours' flags (OR-ed over each plot
     interval) with the shearer's field, the GD objective; decimated to rate_hz, sent column-wise."""
     root = "plots/support_attitude"
@@ -279,14 +295,14 @@ def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, ra
         for i, j in enumerate(supports.supports):
             for a, angle in enumerate(ANGLES):
                 series(rec, f"{root}/angles/{angle}/{j}/{name}", t[keep], est[i, :, a:a + 1],
-                        [f"support {j} {name} [deg]"])
+                       [f"support {j} {name} [deg]"], rate_hz=rate_hz)
                 if truth is not None:
                     series(rec, f"{root}/errors/{angle}/{j}/{name}", t[keep],
-                            ((est[i, :, a] - truth[i, :, a] + 180.0) % 360.0 - 180.0)[:, None],
-                            [f"support {j} {name} [deg]"])
+                           ((est[i, :, a] - truth[i, :, a] + 180.0) % 360.0 - 180.0)[:, None],
+                           [f"support {j} {name} [deg]"], rate_hz=rate_hz)
                     if name == "ours":
                         series(rec, f"{root}/angles/{angle}/{j}/truth", t[keep], truth[i, :, a:a + 1],
-                                [f"support {j} truth [deg]"])
+                               [f"support {j} truth [deg]"], rate_hz=rate_hz)
     t = supports.t["ours"]
     keep = decimate(t, rate_hz)
     for i, j in enumerate(supports.supports):
@@ -296,7 +312,8 @@ def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, ra
         if supports.near is not None:
             values.append(np.maximum.reduceat(supports.near[i], keep))
             labels.append(f"support {j} shearer's field / peak")
-        series(rec, f"{root}/magnetometer/{j}", t[keep], np.column_stack(values).astype(float), labels)
+        series(rec, f"{root}/magnetometer/{j}", t[keep], np.column_stack(values).astype(float), labels,
+               rate_hz=rate_hz, band=False)
     if supports.objective:
         rec.log(f"{root}/gd_objective", rr.BarChart(np.degrees(supports.objective)), static=True)
 
@@ -304,7 +321,7 @@ def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, ra
 
 def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates: dict[str, pa.Table],
                              states: dict[str, pa.Table], states_truth: dict[str, float] | None = None,
-                             rate_hz: float = PLOT_RATE_HZ, fusion: dict[str, pa.Table] | None = None,
+                             rate_hz: float | None = RECORD_RATE_HZ, fusion: dict[str, pa.Table] | None = None,
                              detectors: dict[str, tuple[pa.Table, dict[str, float]]] | None = None,
                              supports: SupportAttitude | None = None) -> None:
     """Write the estimators' outputs as `path` (normally RUN_DIR/estimates.rrd) with the recording id of
@@ -315,14 +332,14 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
     true values of the sensor states by ESTIMATE_STATES column name in SI units (e.g. "gyro_bias_x" [rad/s],
     "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters);
     `detectors`: method name -> (ESTIMATE_DETECTORS table, thresholds by statistic: residual, dual_state, t_on,
-    t_off); `supports`: the supports' canopy attitude (twin.pipeline.support_estimate.support_attitude).
+    t_off); `supports`: the supports' canopy attitude (twin.pipeline.support_estimate.support_attitude); `rate_hz`:
+    the record rate (twin.view.record_rate: Hz, or FULL for every row).
     With truth, estimate times must lie within its span (LogError otherwise); without (None) the errors are left
     out, and without a run.rrd beside `path` the recording gets the world's axes and the scenario's name itself.
     """
     fusion = fusion or {}
     detectors = detectors or {}
-    if not rate_hz > 0:
-        raise ValueError(f"write_estimate_recording: rate_hz must be positive, got {rate_hz}")
+    rate_hz = check_record_rate(rate_hz)
     run_id = run_recording_id(Path(path).parent)
     with recording_stream(path, run_id or recording_id(scn)) as rec:
         if run_id is None:  # no run.rrd to merge with: this recording is the whole view
@@ -335,6 +352,6 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
         for method, table in fusion.items():
             _log_fusion(rec, truth_shearer, method, estimates[method], table, rate_hz)
         for method, (table, thresholds) in detectors.items():
-            _log_detectors(rec, scn, method, table, thresholds)
+            _log_detectors(rec, scn, method, table, thresholds, rate_hz)
         if supports is not None:
-            _log_support_attitude(rec, supports, min(rate_hz, SUPPORT_PLOT_RATE_HZ))
+            _log_support_attitude(rec, supports, FULL if rate_hz is FULL else min(rate_hz, SUPPORT_PLOT_RATE_HZ))

@@ -11,12 +11,18 @@ Entities (fixed names, checked by tests):
 * `world/pans`              Boxes3D, one per pan, at every pan-update time (colour: horizontal bend vs limit)
 * `world/supports`          Boxes3D, one per support, at every support-update time (colour: set / lowered)
 * `world/rams`              LineStrips3D, support point to support point + ram * advance direction
-* `world/shearer`           Transform3D (t <- body) at `shearer_rate_hz`; static children `body`, `drums`
-* `world/shearer_path`      static LineStrips3D of the decimated path, one strip per cycle
+* `world/shearer`           Transform3D (t <- body) at the record rate, after each MARKER_STEP_M of travel; static
+                            children `body`, `drums`
+* `world/shearer_path`      static LineStrips3D of the path, one strip per cycle, within PATH_TOLERANCE_M of every
+                            sample (stops and reversals kept)
 * `plots/shearer_speed`     Scalars, horizontal ground speed [m/s]
 * `plots/cycle`             Scalars, cycle index
 * `plots/bend_horizontal_deg`, `plots/bend_vertical_deg`   BarChart per chute at every pan-update time
 * `plots/ram_length`        BarChart per support at every support-update time
+* `sensors/...`, `faults/...`   the sensor channels and the fault windows as time series
+
+Time series are cut to what a person can see at the record rate (twin.view.rerun_columns.visible_rows; every sample
+at FULL rate).
 """
 
 from __future__ import annotations
@@ -35,10 +41,14 @@ from estimators.nav.earth import mat_en
 from estimators.nav.rotations import mat_to_quat, quat_mul, quat_rotate
 from twin.config.scenario import Scenario
 from twin.face.layout import PAN_HEIGHT_M, PAN_WIDTH_M, SUPPORT_BASE_LENGTH_M
+from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
 from twin.view.rerun_columns import (
+    PATH_TOLERANCE_M,
     col,
     decimate,
     latest_rows,
+    line_rows,
+    marker_rows,
     mean_rate,
     send_bar_chart,
     series,
@@ -173,7 +183,23 @@ def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table) ->
     send_bar_chart(rec, "plots/ram_length", times, ram)
 
 
-def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate_hz: float) -> None:
+def path_strips(t: np.ndarray, p: np.ndarray, cycle: np.ndarray | None, rate_hz: float | None) -> list[np.ndarray]:
+    """A path (K, 3) as float32 strips, one per cycle (one without `cycle`), each without the samples it passes within
+    PATH_TOLERANCE_M of (the line through the others, in time: stops and reversals are kept); every sample at FULL
+    rate."""
+    if cycle is None:
+        cycle = np.zeros(t.size, np.int64)
+    order = np.argsort(cycle, kind="stable")
+    _, starts = np.unique(cycle[order], return_index=True)
+    strips = []
+    for rows in np.split(order, starts[1:]):
+        if rate_hz is not FULL:
+            rows = rows[line_rows(t[rows], p[rows], PATH_TOLERANCE_M)]
+        strips.append(p[rows].astype(np.float32))
+    return strips
+
+
+def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate_hz: float | None) -> None:
     sh = scn.shearer
     body_z = 0.5 * SHEARER_HEIGHT_M - sh.body_height_m  # underside on the running line
     rec.log("world/shearer/body", rr.Boxes3D(
@@ -191,34 +217,26 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate
     if shearer.num_rows == 0:
         return
 
-    t_all = col(shearer, "t")
-    keep = decimate(t_all, rate_hz)
-    sub = shearer.take(pa.array(keep))
-    t = t_all[keep]
-    p = vec(sub, "p_t")
-    q_nb = vec(sub, "q_nb", "wxyz")
+    t_all, p_all = col(shearer, "t"), vec(shearer, "p_t")
+    moved = shearer.take(pa.array(marker_rows(t_all, p_all, rate_hz)))
     # n (ENU at the shearer) to t (ENU at the site origin): C_n^t = (C_t^e)^T C_n^e.
     c_te = mat_en(np.radians(scn.site.lat_deg), np.radians(scn.site.lon_deg))
-    c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(col(sub, "lat"), col(sub, "lon"))
-    q_tb = quat_mul(mat_to_quat(c_nt), q_nb)
-    index = [time_column(t)]
-    rec.send_columns("world/shearer", indexes=index,
-                     columns=rr.Transform3D.columns(translation=p.astype(np.float32), quaternion=xyzw(q_tb)))
+    c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(col(moved, "lat"), col(moved, "lon"))
+    q_tb = quat_mul(mat_to_quat(c_nt), vec(moved, "q_nb", "wxyz"))
+    rec.send_columns("world/shearer", indexes=[time_column(col(moved, "t"))],
+                     columns=rr.Transform3D.columns(translation=vec(moved, "p_t").astype(np.float32),
+                                                    quaternion=xyzw(q_tb)))
+    rec.log("world/shearer_path", rr.LineStrips3D(path_strips(t_all, p_all, col(shearer, "cycle"), rate_hz),
+                                                  radii=0.03, colors=[240, 120, 40]), static=True)
 
-    cycle = col(sub, "cycle")
-    order = np.argsort(cycle, kind="stable")
-    _, counts = np.unique(cycle[order], return_counts=True)
-    strips = np.split(p[order].astype(np.float32), np.cumsum(counts)[:-1])
-    rec.log("world/shearer_path", rr.LineStrips3D(strips, radii=0.03, colors=[240, 120, 40]), static=True)
-
+    keep = decimate(t_all, rate_hz)
+    sub, t = shearer.take(pa.array(keep)), t_all[keep]
     speed = np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n"))
-    rec.log("plots/shearer_speed", rr.SeriesLines(names="horizontal speed [m/s]"), static=True)
-    rec.send_columns("plots/shearer_speed", indexes=index, columns=rr.Scalars.columns(scalars=speed))
-    rec.log("plots/cycle", rr.SeriesLines(names="cycle"), static=True)
-    rec.send_columns("plots/cycle", indexes=index, columns=rr.Scalars.columns(scalars=cycle.astype(float)))
+    series(rec, "plots/shearer_speed", t, speed[:, None], ["horizontal speed [m/s]"], rate_hz=rate_hz)
+    series(rec, "plots/cycle", t, col(sub, "cycle").astype(float)[:, None], ["cycle"], rate_hz=rate_hz, band=False)
 
 
-def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz: float) -> None:
+def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz: float | None) -> None:
     """Every sensor channel as time series (fast streams averaged to about rate_hz), fault windows as
     0/1 steps, the ram readings as a bar chart per support."""
     if "imu" in sensors:
@@ -226,32 +244,30 @@ def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz:
         t = col(imu, "t")
         for name, prefix, label in (("gyro", "dtheta", "rad/s"), ("accel", "dv", "m/s^2")):
             tt, rate = mean_rate(t, vec(imu, prefix, "xyz"), rate_hz)
-            series(rec, f"sensors/imu/{name}", tt, rate, [f"{a} [{label}]" for a in "xyz"])
+            series(rec, f"sensors/imu/{name}", tt, rate, [f"{a} [{label}]" for a in "xyz"], rate_hz=rate_hz)
     if "odometer" in sensors:
         odo = sensors["odometer"]
-        series(rec, "sensors/odometer/distance", col(odo, "t"), col(odo, "distance")[:, None], ["distance [m]"])
+        series(rec, "sensors/odometer/distance", col(odo, "t"), col(odo, "distance")[:, None], ["distance [m]"],
+               rate_hz=rate_hz)
     if "mag" in sensors:
         mag = sensors["mag"]
-        keep = decimate(col(mag, "t"), rate_hz)
-        series(rec, "sensors/mag", col(mag, "t")[keep], vec(mag, "b", "xyz")[keep] * 1e6,
-                [f"{a} [uT]" for a in "xyz"])
+        series(rec, "sensors/mag", col(mag, "t"), vec(mag, "b", "xyz") * 1e6, [f"{a} [uT]" for a in "xyz"],
+               rate_hz=rate_hz)
     if "support_imu" in sensors:
         units = sensors["support_imu"]
         for j in np.unique(col(units, "support")):
             rows = units.filter(pa.compute.equal(units.column("support"), int(j)))
-            keep = decimate(col(rows, "t"), rate_hz)
-            sub = rows.take(pa.array(keep))
-            series(rec, f"sensors/support_imu/{j}/accel", col(sub, "t"), vec(sub, "accel", "xyz"),
-                    [f"{a} [m/s^2]" for a in "xyz"])
-            series(rec, f"sensors/support_imu/{j}/gyro", col(sub, "t"), vec(sub, "gyro", "xyz"),
-                    [f"{a} [rad/s]" for a in "xyz"])
+            series(rec, f"sensors/support_imu/{j}/accel", col(rows, "t"), vec(rows, "accel", "xyz"),
+                   [f"{a} [m/s^2]" for a in "xyz"], rate_hz=rate_hz)
+            series(rec, f"sensors/support_imu/{j}/gyro", col(rows, "t"), vec(rows, "gyro", "xyz"),
+                   [f"{a} [rad/s]" for a in "xyz"], rate_hz=rate_hz)
     if "pushram" in sensors:
         ram = sensors["pushram"]
         t, support = col(ram, "t"), col(ram, "support")
         times, inverse = np.unique(t, return_inverse=True)
         grid = np.full((times.size, int(support.max()) + 1), np.nan)
         grid[inverse, support] = col(ram, "extension")
-        keep = decimate(times, min(rate_hz, 0.2))
+        keep = decimate(times, FULL if rate_hz is FULL else min(rate_hz, 0.2))
         send_bar_chart(rec, "sensors/pushram", times[keep], grid[keep])
     if "faults" in sensors and sensors["faults"].num_rows:
         faults = sensors["faults"]
@@ -290,28 +306,28 @@ def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
 
 
 def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
-                    floor_mesh: tuple[np.ndarray, np.ndarray], shearer_rate_hz: float = 10.0,
+                    floor_mesh: tuple[np.ndarray, np.ndarray], rate_hz: float | None = RECORD_RATE_HZ,
                     sensors: dict[str, pa.Table] | None = None) -> None:
     """Write the truth streams of a run as a Rerun recording (.rrd) with its blueprint, reproducibly
     (twin.view.rrd_stream: the recording id from the scenario and seed).
 
     `truth` maps "truth_shearer", "truth_pans", "truth_supports" (required) and "truth_cycles" (optional,
     not drawn) to tables with the columns of `estimators.io.logformat`. `floor_mesh` is (vertices (V, 3) in t,
-    triangle indices (T, 3)). The shearer stream is decimated to `shearer_rate_hz`.
+    triangle indices (T, 3)). `rate_hz` is the record rate (twin.view.rerun_columns: Hz, or FULL for every
+    sample) of the shearer and the time series.
     """
     missing = [k for k in ("truth_shearer", "truth_pans", "truth_supports") if k not in truth]
     if missing:
         raise KeyError(f"write_recording: missing truth streams {', '.join(missing)}")
-    if not shearer_rate_hz > 0:
-        raise ValueError(f"write_recording: shearer_rate_hz must be positive, got {shearer_rate_hz}")
+    rate_hz = check_record_rate(rate_hz)
     with recording_stream(path, recording_id(scn)) as rec:
         rec.send_recording_name(scn.name)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         _log_floor(rec, floor_mesh)
         _log_pans(rec, scn, truth["truth_pans"])
         _log_supports(rec, scn, truth["truth_supports"])
-        _log_shearer(rec, scn, truth["truth_shearer"], shearer_rate_hz)
-        _log_sensors(rec, sensors or {}, shearer_rate_hz)
+        _log_shearer(rec, scn, truth["truth_shearer"], rate_hz)
+        _log_sensors(rec, sensors or {}, rate_hz)
 
 
 def run_recording_id(run_dir: Path) -> str | None:

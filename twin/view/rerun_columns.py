@@ -1,17 +1,37 @@
 """Batched Rerun logging: whole histories sent column-wise with `send_columns` on the `sim_time` timeline.
 
-One call per entity carries its whole history (time columns, scalar series, bar-chart tensors), decimated to what
-a person can see; shared by the run's and the estimators' recordings.
+One call per entity carries its whole history (time columns, scalar series, bar-chart tensors), cut to what a person
+can see (`visible_rows`: at most the record rate, and without the samples the drawn line passes within a pixel of);
+shared by the run's and the estimators' recordings.
+
+The record rate (twin.view.record_rate) is a rate in Hz, or FULL (None): every sample, neither decimated nor thinned.
 """
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 import pyarrow as pa
 import rerun as rr
 
+from twin.view.record_rate import FULL
+
 TIMELINE = "sim_time"
 APPLICATION_ID = "longwall-twin"
+LINE_TOLERANCE = 2e-3
+"""Largest distance between a plotted line and a sample left out of it, as a fraction of the entity's span of values
+(a pixel of a plot 500 pixels high; the stacked plots of the layout are smaller)."""
+PATH_TOLERANCE_M = 0.005
+"""Largest distance between a drawn 3-D path and a sample left out of it [m]."""
+BAND_ROWS = 10
+"""Rows at the record rate per interval of which a noisy series keeps its band (first, lowest, highest row): 1 s at
+10 Hz."""
+BAND_TURNS = 3
+"""Turns (a value changing direction) in such an interval from which it is noise: a smooth curve turns once or
+twice."""
+MARKER_STEP_M = 0.05
+"""Distance a moving marker (the shearer, an estimate's point) travels between its logged positions [m]: it is drawn
+where it was last logged, at most this far behind."""
 
 
 def col(table: pa.Table, name: str) -> np.ndarray:
@@ -82,26 +102,168 @@ def send_bar_chart(rec: rr.RecordingStream, entity: str, times: np.ndarray, valu
     column = rr.ComponentColumn(rr.BarChart.descriptor_values(), TensorColumn(values))
     rec.send_columns(entity, indexes=[time_column(times)], columns=[column])
 
-def decimate(t: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Indices of the first sample in each 1/rate_hz interval (plus the last sample)."""
+def decimate(t: np.ndarray, rate_hz: float | None) -> np.ndarray:
+    """Indices of the first sample in each 1/rate_hz interval (plus the last sample); every index at FULL rate."""
     if t.size == 0:
         return np.zeros(0, np.int64)
+    if rate_hz is FULL:
+        return np.arange(t.size)
     bins = np.floor(np.asarray(t, float) * rate_hz + 1e-9)
     keep = np.flatnonzero(np.r_[True, np.diff(bins) > 0])
     if keep[-1] != t.size - 1:
         keep = np.r_[keep, t.size - 1]
     return keep
 
-def mean_rate(t: np.ndarray, values: np.ndarray, rate_hz: float) -> tuple[np.ndarray, np.ndarray]:
-    """Block means of increments per second at about rate_hz (sums over blocks / their duration)."""
+def marker_rows(t: np.ndarray, p: np.ndarray, rate_hz: float | None) -> np.ndarray:
+    """Rows of a moving marker's positions p (K, 3) to log: at most rate_hz (decimate), and of those the first after
+    each MARKER_STEP_M of travel along the path (plus the last); every row at FULL rate."""
+    keep = decimate(t, rate_hz)
+    if rate_hz is FULL or keep.size < 3:
+        return keep
+    travelled = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(np.asarray(p, float)[keep], axis=0), axis=1))]
+    return keep[decimate(travelled, 1.0 / MARKER_STEP_M)]
+
+
+def mean_rate(t: np.ndarray, values: np.ndarray, rate_hz: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Block means of increments per second at about rate_hz (sums over blocks / their duration; each sample at FULL
+    rate)."""
     if t.size < 2:
         return t, values
     dt = float(np.median(np.diff(t)))
-    step = max(1, int(round(1.0 / (rate_hz * dt))))
+    step = 1 if rate_hz is FULL else max(1, int(round(1.0 / (rate_hz * dt))))
     n = (t.size // step) * step
     blocks = values[:n].reshape(n // step, step, -1).sum(axis=1)
     return t[step - 1:n:step], blocks / (step * dt)
 
-def series(rec: rr.RecordingStream, entity: str, t: np.ndarray, values: np.ndarray, names: list[str]) -> None:
+@nb.njit(cache=True)
+def _line_rows(t, y, tol, must):
+    """Rows of (t, y) to draw a line through so that every row left out lies within tol[j] of it in each column j
+    (greedy: each segment from the last kept row is as long as the slopes allow, the swinging door of process
+    historians); the first and last rows and the rows marked `must` are kept; NaN values constrain nothing."""
+    n, m = y.shape
+    keep = np.zeros(n, np.bool_)
+    if n == 0:
+        return keep
+    keep[0] = keep[n - 1] = True
+    lo, hi = np.empty(m), np.empty(m)
+    a = 0
+    while a < n - 1:
+        lo[:] = -np.inf
+        hi[:] = np.inf
+        end, k = a + 1, a + 1
+        while k < n:
+            dt = t[k] - t[a]
+            if k > a + 1:  # the line from a to k must pass within tol of the rows between
+                if dt <= 0.0:
+                    break
+                ok = True
+                for j in range(m):
+                    if not (np.isnan(y[k, j]) or np.isnan(y[a, j])):
+                        s = (y[k, j] - y[a, j]) / dt
+                        if s < lo[j] or s > hi[j]:
+                            ok = False
+                            break
+                if not ok:
+                    break
+            end = k
+            if must[k] or dt <= 0.0:
+                break
+            for j in range(m):
+                if not (np.isnan(y[k, j]) or np.isnan(y[a, j])):
+                    lo[j] = max(lo[j], (y[k, j] - tol[j] - y[a, j]) / dt)
+                    hi[j] = min(hi[j], (y[k, j] + tol[j] - y[a, j]) / dt)
+            k += 1
+        keep[end] = True
+        a = end
+    return keep
+
+
+def line_rows(t: np.ndarray, values: np.ndarray, tolerance: float | np.ndarray,
+              must: np.ndarray | None = None) -> np.ndarray:
+    """Indices of the rows of `values` (K,) or (K, n) over times `t` that a line drawn through them keeps within
+    `tolerance` (per column, or one for all) of every row left out; rows where a value turns NaN or back, rows marked
+    in `must` (K,) bool, the first and the last are kept."""
+    t = np.asarray(t, float)
+    y = np.asarray(values, float).reshape(t.size, -1)
+    if t.size < 3:
+        return np.arange(t.size)
+    nan = np.isnan(y)
+    edge = np.zeros(t.size, bool) if must is None else np.array(must, bool)
+    turned = (nan[1:] != nan[:-1]).any(axis=1)
+    edge[1:] |= turned
+    edge[:-1] |= turned
+    tol = np.broadcast_to(np.asarray(tolerance, float), (y.shape[1],)).copy()
+    return np.flatnonzero(_line_rows(t, np.ascontiguousarray(y), tol, edge))
+
+
+def _intervals(t: np.ndarray, width_s: float) -> np.ndarray:
+    """The interval of width width_s seconds each of the (sorted) times falls in, numbered from 0."""
+    group = np.floor(np.asarray(t, float) / width_s + 1e-9)
+    return np.cumsum(np.r_[True, np.diff(group) > 0]) - 1
+
+
+def band_rows(t: np.ndarray, values: np.ndarray, width_s: float) -> np.ndarray:
+    """Indices of the rows that hold, in each interval of width_s seconds, the first row and each column's lowest and
+    highest value (the band a person sees of a series that swings faster than the eye follows), and the rows where a
+    value turns NaN or back."""
+    t = np.asarray(t, float)
+    y = np.asarray(values, float).reshape(t.size, -1)
+    if t.size < 3:
+        return np.arange(t.size)
+    ident = _intervals(t, width_s)
+    starts = np.flatnonzero(np.r_[True, np.diff(ident) > 0])
+    keep = np.zeros(t.size, bool)
+    keep[starts] = True
+    nan = np.isnan(y)
+    turned = (nan[1:] != nan[:-1]).any(axis=1)
+    keep[1:] |= turned
+    keep[:-1] |= turned
+    for extreme, blank in ((np.maximum, -np.inf), (np.minimum, np.inf)):
+        filled = np.where(nan, blank, y)
+        at = (filled == extreme.reduceat(filled, starts, axis=0)[ident]) & ~nan
+        first = np.zeros(t.size, bool)  # the first row at each column's extreme in each interval
+        for j in range(y.shape[1]):
+            rows = np.flatnonzero(at[:, j])
+            first[rows[np.r_[True, np.diff(ident[rows]) > 0]]] = True
+        keep |= first
+    return np.flatnonzero(keep)
+
+
+def visible_rows(t: np.ndarray, values: np.ndarray, rate_hz: float | None, band: bool = True) -> np.ndarray:
+    """Rows of a plotted series a person can tell apart (every row at FULL rate): at most rate_hz (decimate), and of
+    those the rows a line drawn through keeps within LINE_TOLERANCE of the entity's span of every row left out
+    (line_rows); with `band`, in each noisy interval of BAND_ROWS / rate_hz seconds (1 s at 10 Hz: the line keeps
+    more than half its rows and the values turn BAND_TURNS times or more), the interval's band instead when that is
+    fewer rows (band_rows: its extremes, all a person sees of noise). Without `band` (0/1 flags, steps) the line
+    keeps every edge."""
+    keep = decimate(t, rate_hz)
+    if rate_hz is FULL or keep.size < 3:
+        return keep
+    y = np.asarray(values, float).reshape(len(t), -1)[keep]
+    t = np.asarray(t, float)[keep]
+    finite = y[np.isfinite(y)]
+    span = float(finite.max() - finite.min()) if finite.size else 0.0
+    line = line_rows(t, y, LINE_TOLERANCE * span)
+    if not band:
+        return keep[line]
+    extremes = band_rows(t, y, BAND_ROWS / rate_hz)
+    ident = _intervals(t, BAND_ROWS / rate_hz)
+    n = ident[-1] + 1
+    # A turn: a row where a column changes direction. Noise turns at every other row; a smooth curve a few times.
+    slope = np.sign(np.diff(y, axis=0))
+    turns = np.r_[False, ((slope[1:] * slope[:-1]) < 0).any(axis=1), False]
+    on_line = np.bincount(ident[line], minlength=n)
+    noisy = ((2 * on_line > np.bincount(ident, minlength=n)) & (np.bincount(ident, turns, n) >= BAND_TURNS)
+             & (np.bincount(ident[extremes], minlength=n) < on_line))
+    rows = np.union1d(line[~noisy[ident[line]]], extremes[noisy[ident[extremes]]])
+    return keep[rows]
+
+
+def series(rec: rr.RecordingStream, entity: str, t: np.ndarray, values: np.ndarray, names: list[str], *,
+           rate_hz: float | None = FULL, band: bool = True) -> None:
+    """A time series of (K, n) values, its rows cut to `visible_rows` at `rate_hz` (every row by default); `band`
+    False for flags and steps, whose every edge is kept."""
+    keep = visible_rows(t, values, rate_hz, band)
     rec.log(entity, rr.SeriesLines(names=names), static=True)
-    rec.send_columns(entity, indexes=[time_column(t)], columns=rr.Scalars.columns(scalars=values))
+    rec.send_columns(entity, indexes=[time_column(np.asarray(t)[keep])],
+                     columns=rr.Scalars.columns(scalars=np.asarray(values)[keep]))

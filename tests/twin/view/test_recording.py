@@ -16,7 +16,7 @@ from estimators.io.logformat import (
 )
 from twin.config.scenario import Face, Scenario
 from twin.view.recording import write_recording
-from twin.view.rerun_columns import TIMELINE, decimate
+from twin.view.rerun_columns import MARKER_STEP_M, TIMELINE, decimate
 
 
 def synthetic_truth(n_pans: int = 4, n_supports: int = 4, n_updates: int = 3, shearer_s: float = 5.0,
@@ -117,10 +117,13 @@ def test_entities_and_times(recording):
     np.testing.assert_allclose(_sim_times(chunks, "/world/supports"), [0.0, 15.0, 25.0])
     np.testing.assert_allclose(_sim_times(chunks, "/plots/ram_length"), [0.0, 15.0, 25.0])
     shearer_t = _sim_times(chunks, "/world/shearer")
-    # 5 s at 200 Hz decimated to 10 Hz: 0.0, 0.1, ..., 4.9 and the last sample 4.995.
-    assert shearer_t.size == 51
-    np.testing.assert_allclose(shearer_t[:50], np.arange(50) / 10, atol=1e-9)
-    assert shearer_t.size == _sim_times(chunks, "/plots/shearer_speed").size
+    # 5 s at 200 Hz at 0.13 m/s: on the 10 Hz grid, a row as each MARKER_STEP_M (0.05 m) of travel is passed (the
+    # drawn shearer at most that and a frame behind), and the last sample 4.995.
+    np.testing.assert_allclose(shearer_t[:-1], np.round(shearer_t[:-1] * 10) / 10, atol=1e-9)
+    assert np.diff(shearer_t).max() * 0.13 <= MARKER_STEP_M + 0.013 + 1e-9
+    assert shearer_t.size <= 0.13 * 5 / MARKER_STEP_M + 2 and shearer_t[-1] == 4.995
+    # The constant speed is drawn by its first and last rows.
+    np.testing.assert_allclose(_sim_times(chunks, "/plots/shearer_speed"), [0.0, 4.995])
 
 
 def test_pan_boxes_forward_filled(recording):
