@@ -11,8 +11,8 @@ Entities (fixed names, checked by tests):
 * `world/pans`              Boxes3D, one per pan, at every pan-update time (colour: horizontal bend vs limit)
 * `world/supports`          Boxes3D, one per support, at every support-update time (colour: set / lowered)
 * `world/rams`              LineStrips3D, support point to support point + ram * advance direction
-* `world/shearer`           Transform3D (t <- body) at the record rate, after each MARKER_STEP_M of travel; static
-                            children `body`, `drums`
+* `world/shearer`           Transform3D (t <- body) at the record rate, as either end of the body moves MARKER_STEP_M;
+                            static children `body`, `drums`
 * `world/shearer_path`      static LineStrips3D of the path, one strip per cycle, within PATH_TOLERANCE_M of every
                             sample (stops and reversals kept)
 * `plots/shearer_speed`     Scalars, horizontal ground speed [m/s]
@@ -218,19 +218,22 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate
         return
 
     t_all, p_all = col(shearer, "t"), vec(shearer, "p_t")
-    moved = shearer.take(pa.array(marker_rows(t_all, p_all, rate_hz)))
+    keep = decimate(t_all, rate_hz)
+    sub, t = shearer.take(pa.array(keep)), t_all[keep]
+    p = vec(sub, "p_t")
     # n (ENU at the shearer) to t (ENU at the site origin): C_n^t = (C_t^e)^T C_n^e.
     c_te = mat_en(np.radians(scn.site.lat_deg), np.radians(scn.site.lon_deg))
-    c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(col(moved, "lat"), col(moved, "lon"))
-    q_tb = quat_mul(mat_to_quat(c_nt), vec(moved, "q_nb", "wxyz"))
-    rec.send_columns("world/shearer", indexes=[time_column(col(moved, "t"))],
-                     columns=rr.Transform3D.columns(translation=vec(moved, "p_t").astype(np.float32),
-                                                    quaternion=xyzw(q_tb)))
+    c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(col(sub, "lat"), col(sub, "lon"))
+    q_tb = quat_mul(mat_to_quat(c_nt), vec(sub, "q_nb", "wxyz"))
+    # Logged as either end of the drawn body moves MARKER_STEP_M (travel or turn).
+    half = quat_rotate(q_tb, np.array([0.0, 0.5 * sh.length_m, 0.0]))
+    moved = marker_rows(t, np.hstack([p - half, p + half]), rate_hz)
+    rec.send_columns("world/shearer", indexes=[time_column(t[moved])],
+                     columns=rr.Transform3D.columns(translation=p[moved].astype(np.float32),
+                                                    quaternion=xyzw(q_tb[moved])))
     rec.log("world/shearer_path", rr.LineStrips3D(path_strips(t_all, p_all, col(shearer, "cycle"), rate_hz),
                                                   radii=0.03, colors=[240, 120, 40]), static=True)
 
-    keep = decimate(t_all, rate_hz)
-    sub, t = shearer.take(pa.array(keep)), t_all[keep]
     speed = np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n"))
     series(rec, "plots/shearer_speed", t, speed[:, None], ["horizontal speed [m/s]"], rate_hz=rate_hz)
     series(rec, "plots/cycle", t, col(sub, "cycle").astype(float)[:, None], ["cycle"], rate_hz=rate_hz, band=False)

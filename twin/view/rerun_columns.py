@@ -115,12 +115,14 @@ def decimate(t: np.ndarray, rate_hz: float | None) -> np.ndarray:
     return keep
 
 def marker_rows(t: np.ndarray, p: np.ndarray, rate_hz: float | None) -> np.ndarray:
-    """Rows of a moving marker's positions p (K, 3) to log: at most rate_hz (decimate), and of those the first after
-    each MARKER_STEP_M of travel along the path (plus the last); every row at FULL rate."""
+    """Rows of a moving marker's positions p (K, 3) (or of several points of a body, (K, 3m)) to log: at most rate_hz
+    (decimate), and of those the first after each MARKER_STEP_M of travel (of the point that moves most) along the
+    path (plus the last); every row at FULL rate."""
     keep = decimate(t, rate_hz)
     if rate_hz is FULL or keep.size < 3:
         return keep
-    travelled = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(np.asarray(p, float)[keep], axis=0), axis=1))]
+    step = np.diff(np.asarray(p, float)[keep], axis=0).reshape(keep.size - 1, -1, 3)
+    travelled = np.r_[0.0, np.cumsum(np.linalg.norm(step, axis=2).max(axis=1))]  # the farthest-moving point
     return keep[decimate(travelled, 1.0 / MARKER_STEP_M)]
 
 

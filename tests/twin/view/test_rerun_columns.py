@@ -98,6 +98,16 @@ def test_marker_rows_follow_the_travel():
     np.testing.assert_array_equal(marker_rows(t, p, FULL), np.arange(t.size))
 
 
+def test_marker_rows_of_a_body_turning_in_place():
+    """A 10 m body turning at 1 deg/s without moving its centre: logged as its ends move MARKER_STEP_M."""
+    t = np.arange(1000) / 100.0
+    yaw = np.radians(t)
+    end = 5.0 * np.column_stack([np.sin(yaw), np.cos(yaw), np.zeros(t.size)])
+    rows = marker_rows(t, np.hstack([-end, end]), 10.0)
+    arc = 5.0 * np.radians(10.0)
+    assert arc / (MARKER_STEP_M + 0.01) <= rows.size <= arc / MARKER_STEP_M + 2
+
+
 def test_path_strips_keep_cycle_ends_stops_and_the_shape():
     t = np.arange(8000) / 100.0
     s = np.interp(t, [0, 20, 30, 50, 80], [0, 4, 4, 0, 6])  # along the face, a stop, back, and on in cycle 1
