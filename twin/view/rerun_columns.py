@@ -226,7 +226,8 @@ def band_rows(t: np.ndarray, values: np.ndarray, width_s: float) -> np.ndarray:
         first = np.zeros(t.size, bool)  # the first row at each column's extreme in each interval
         for j in range(y.shape[1]):
             rows = np.flatnonzero(at[:, j])
-            first[rows[np.r_[True, np.diff(ident[rows]) > 0]]] = True
+            if rows.size:  # none where the column is NaN throughout
+                first[rows[np.r_[True, np.diff(ident[rows]) > 0]]] = True
         keep |= first
     return np.flatnonzero(keep)
 

@@ -47,6 +47,15 @@ def test_line_rows_keep_where_a_value_turns_nan_and_back():
     assert {39, 40, 49, 50} <= set(line_rows(t, y, 1e-3))
 
 
+def test_visible_rows_of_a_column_without_values():
+    """A column NaN throughout (e.g. a yaw innovation of a filter that never used the magnetometer) beside another."""
+    t = np.arange(600) / 10.0
+    y = np.column_stack([np.full(t.size, np.nan), np.random.default_rng(2).normal(size=t.size)])
+    rows = visible_rows(t, y, 10.0)
+    assert rows[0] == 0 and rows[-1] == t.size - 1
+    np.testing.assert_array_equal(visible_rows(t, y[:, :1], 10.0), [0, t.size - 1])
+
+
 def test_visible_rows_every_row_at_full_rate_at_most_the_rate_otherwise():
     t = np.arange(20000) / 200.0  # 100 s at 200 Hz
     y = np.random.default_rng(0).normal(size=(t.size, 2))
