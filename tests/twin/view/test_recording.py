@@ -126,6 +126,18 @@ def test_entities_and_times(recording):
     np.testing.assert_allclose(_sim_times(chunks, "/plots/shearer_speed"), [0.0, 4.995])
 
 
+@pytest.mark.parametrize("rate_hz, shearer_rows", [(None, 1000), (2.0, 11)])
+def test_record_rate_of_the_run_recording(tmp_path, rate_hz, shearer_rows):
+    """At FULL rate (None) every truth sample of the shearer (5 s at 200 Hz) and of its speed; at 2 Hz one row each
+    0.5 s and the last (the shearer moves 0.065 m in 0.5 s, more than MARKER_STEP_M)."""
+    path = tmp_path / "run.rrd"
+    scn = Scenario.model_construct(name="test", face=Face(azimuth_deg=30.0))
+    write_recording(path, scn, synthetic_truth(), flat_floor(), rate_hz=rate_hz)
+    chunks = RrdReader(path).stream().to_chunks()
+    assert _sim_times(chunks, "/world/shearer").size == shearer_rows
+    assert _sim_times(chunks, "/plots/shearer_speed").size == (1000 if rate_hz is None else 2)  # a flat line
+
+
 def test_pan_boxes_forward_filled(recording):
     """Every pan-update time carries all 4 pans even though only 2 changed; bends drop the last pan."""
     chunks = RrdReader(recording).stream().to_chunks()
