@@ -11,6 +11,7 @@ The command line (twin.cli) parses its flags into these calls and prints what th
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from dataclasses import dataclass
@@ -80,6 +81,11 @@ class Run:
     def estimate(self, method: str) -> pa.Table:
         """Estimator `method`'s solution (estimates/METHOD.parquet): t, position, velocity, attitude, sigma, flags."""
         return read_estimate(self.dir, method, ESTIMATE)
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity, as a container or `taskset` limits it)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def default_scenario() -> Path:
@@ -229,10 +235,13 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
         tables = {name: make_table(STREAMS[name], cols) for name, cols in result.tables.items()}
         for name, table in tables.items():
             write_stream(staging, STREAMS[name], table)
+        summary = twin_summary(scn, result.tables)
         if sensors:
             ctx = trial_context(scn, tables, staging)
-            runner.submit(ctx, staging, mc_trials)  # runs beside trial 0 unless sequential
+            if mc_trials:
+                runner.submit(ctx, staging, mc_trials)  # runs beside trial 0 unless sequential
             tables.update(write_sensors(ctx, 0, staging))
+            del ctx
             progress("sensors", 1.0)
         (staging / "scenario.toml").write_text(scenario_to_toml(scn))
         progress("write", 1.0)
@@ -240,11 +249,17 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
                         result.floor_grid.mesh_t(result.frame), record_rate_hz,
                         sensors={k: v for k, v in tables.items() if not k.startswith("truth_")})
         progress("recording", 1.0)
-        summary = twin_summary(scn, result.tables)
+        # The estimators read the log from the run directory: the run's tables go before they start, so that
+        # their peak memory is not added to the twin's.
+        del tables, result
+        pa.default_memory_pool().release_unused()
         wall_s = time.perf_counter() - start
         write_timing(staging, wall_s=wall_s, real_time_factor=summary["simulated_s"] / wall_s)
         (staging / "metrics.json").write_text(json.dumps({"twin": summary, "estimators": {}}, indent=2) + "\n")
-        estimated = run_estimators(staging, scn, record_rate_hz=record_rate_hz) if sensors else {}
+        # The estimators use every core unless Monte Carlo trials run beside trial 0 on local processes.
+        beside = bool(mc_trials) and workers > 1 and ray_address is None
+        estimated = run_estimators(staging, scn, record_rate_hz=record_rate_hz,
+                                   workers=1 if beside else usable_cores()) if sensors else {}
         write_metrics(staging, estimated)
         note_recordings(staging, {RUN_RRD: record_rate_hz, ESTIMATES_RRD: record_rate_hz})
         progress("estimators", 1.0)
@@ -288,7 +303,7 @@ def estimate(run_dir: str | Path, quiet: bool = True, record_rate_hz: float | No
     with run_lock(run_dir), staged_update(run_dir, fresh=(ESTIMATES_DIR, ESTIMATES_RRD),
                                           copied=("metrics.json", TIMING)) as staging:
         # Written beside a copy: an interrupted one leaves run_dir as it was.
-        estimated = run_estimators(staging, scn, record_rate_hz=record_rate_hz)
+        estimated = run_estimators(staging, scn, record_rate_hz=record_rate_hz, workers=usable_cores())
         write_metrics(staging, estimated)
         note_recordings(staging, {ESTIMATES_RRD: record_rate_hz})
     if not quiet:

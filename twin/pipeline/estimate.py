@@ -123,12 +123,14 @@ def _calibration(sol: Solution, states_truth: dict[str, float] | None) -> dict:
             "odo_mount_deg": {a: state(CAL_MOUNT.start + i, f"odo_mount_{a}", True) for i, a in enumerate("xyz")}}
 
 
-def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True,
+def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers: int = 1,
                    record_rate_hz: float | None = RECORD_RATE_HZ) -> dict:
     """Run the scenario's shearer estimators on run_dir; writes estimates/, estimates.rrd (with `recording`, at
     `record_rate_hz`: Hz, or None for every row; twin.view.record_rate) and returns the metrics. A log the
     estimators cannot use raises PositioningError (one line). With instrumented supports the metrics also hold their
     canopy attitude under SUPPORT_ATTITUDE (twin.pipeline.support_estimate).
+    The shearer's methods run on `workers` processes (estimators.shearer.methods.estimate), forked before the
+    supports' parallel kernels start their threads.
 
     Each method's entry holds "truth" (whether truth_shearer was there to score against), its notes, what it says
     of itself (estimators.io.metrics.self_assessment, under "self") and, for the filters, the final odometer
@@ -138,16 +140,15 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True,
     # The canopy attitude of the instrumented supports (issue 8), under the key SUPPORT_ATTITUDE.
     from twin.pipeline.support_estimate import SUPPORT_ATTITUDE, support_attitude
     from twin.view.estimate_recording import write_estimate_recording
+    methods = tuple(scn.estimators.shearer.methods)
+    sols = estimate(load_log(run_dir), positioning_config(scn), methods, workers) if methods else {}
     supports = support_attitude(run_dir, scn)
     out = {} if supports is None else {SUPPORT_ATTITUDE: supports.metrics}
-    if recording and supports is not None and not scn.estimators.shearer.methods:
+    if recording and supports is not None and not methods:
         write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, None, {}, {}, supports=supports,
                                  rate_hz=record_rate_hz)
-    methods = tuple(scn.estimators.shearer.methods)
     if not methods:
         return out
-    log = load_log(run_dir)
-    sols = estimate(log, positioning_config(scn), methods)
     truth, survey = _optional(run_dir, "truth_shearer"), read_stream(run_dir, STREAMS["survey"])
     cycles = _optional(run_dir, "truth_cycles") if truth is not None else None
     states_truth = true_states(scn) if truth is not None else None
