@@ -190,6 +190,8 @@ def note_recordings(run_dir: Path, rates: dict[str, float | None]) -> None:
 
 def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, trials: int, sensors: bool,
               workers: int, ray_address: str | None, record_rate_hz: float | None) -> Run:
+    from numba.core import event as numba_event
+
     from twin.face.haulage import Timeline
     from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
     from twin.pipeline.montecarlo import (
@@ -220,17 +222,39 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     stage_s = {k: 0.0 for k in stages}  # wall time of each stage: the time up to each report goes to its stage
     last = [start]
 
+    running = ["face"]  # the stage under way, which the bar names
+    compiling = [False]  # numba compiled a kernel in this stage: a first run after installing
+
+    def show() -> None:
+        bar.set_description(f"longwall run {scn.name} ({running[0]}"
+                            + (": compiling numba kernels, first run only)" if compiling[0] else ")"))
+        bar.refresh()
+
     def progress(stage: str, frac: float) -> None:
         now = time.perf_counter()
         stage_s[stage] += now - last[0]
         last[0] = now
         done[stage] = frac
         bar.n = round(100 * sum(stages[k] * v for k, v in done.items()) / total)
-        bar.set_description(f"longwall run {scn.name} ({stage})")
-        bar.refresh()
+        after = [k for k in list(stages)[list(stages).index(stage) + 1:] if stages[k] and done[k] < 1.0]
+        running[0] = stage if frac < 1.0 or not after else after[0]
+        compiling[0] = False
+        show()
+
+    class CompileNotice(numba_event.Listener):
+        """Names the compilation on the bar while a numba kernel compiles (nothing in a warm run)."""
+
+        def on_start(self, event) -> None:
+            if not compiling[0]:
+                compiling[0] = True
+                show()
+
+        def on_end(self, event) -> None:
+            pass
 
     monte_carlo = None
-    with atomic_run_dir(out, force) as staging, trial_runner(workers, ray_address) as runner:
+    with (atomic_run_dir(out, force) as staging, trial_runner(workers, ray_address) as runner,
+          numba_event.install_listener("numba:compile", CompileNotice())):
         result = simulate(scn, progress)
         tables = {name: make_table(STREAMS[name], cols) for name, cols in result.tables.items()}
         for name, table in tables.items():

@@ -67,3 +67,34 @@ def test_bad_arguments_are_one_line_errors(short_path, tmp_path):
     with pytest.raises(ScenarioError, match="trials: must be >= 1"):
         twin.run(short_path, tmp_path / "x", trials=0)
     assert not (tmp_path / "x").exists()
+
+
+def test_the_progress_bar_names_the_stage_under_way_and_a_compilation(short_path, tmp_path, monkeypatch):
+    """The bar names the stage that is running (not the one just done), and says so while numba compiles (a first
+    run after installing), here a kernel compiled inside the face stage."""
+    import numba as nb
+
+    import twin.pipeline.api as api
+    import twin.pipeline.simulate as simulate_module
+
+    seen = []
+
+    class Bar(api.tqdm):
+        def set_description(self, desc=None, refresh=True):
+            seen.append(desc)
+            super().set_description(desc, refresh)
+
+    real_simulate = simulate_module.simulate
+
+    def simulate_after_a_compile(scn, progress=None):
+        nb.njit(lambda x: x + 1)(1)  # not cached: compiled now
+        return real_simulate(scn, progress)
+
+    monkeypatch.setattr(api, "tqdm", Bar)
+    monkeypatch.setattr(simulate_module, "simulate", simulate_after_a_compile)
+    twin.run(short_path, tmp_path / "run", quiet=False)
+    stages = [d.split("(")[1].split(")")[0] for d in seen if "(" in d]
+    assert stages[0] == "face: compiling numba kernels, first run only", seen
+    order = ["face", "shearer", "sensors", "write", "recording", "estimators"]
+    named = [s for s in dict.fromkeys(s.split(":")[0] for s in stages) if s in order]
+    assert named == order, seen
