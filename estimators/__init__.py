@@ -15,6 +15,10 @@ from collections.abc import Sequence
 from os import PathLike
 from pathlib import Path
 
+from estimators import kernel_cache
+
+kernel_cache.install()  # before any kernel is defined: one cache stamp over all the project's kernels
+
 
 def estimate(log, method: str | Sequence[str], config):
     """Run shearer positioning method(s) (estimators.shearer.methods.METHODS) on a log.

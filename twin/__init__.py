@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from importlib import import_module
 
+import estimators  # noqa: F401  (its kernel cache stamp covers twin's kernels too: estimators.kernel_cache)
+
 _API = {"run": "twin.pipeline.api", "estimate": "twin.pipeline.api", "Run": "twin.pipeline.api",
         "default_scenario": "twin.pipeline.api",
         "load_scenario": "twin.config.scenario", "Scenario": "twin.config.scenario"}
