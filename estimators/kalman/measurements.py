@@ -9,6 +9,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from estimators.arrays import put
 from estimators.kalman.error_state import (
     CAL_MOUNT,
     CAL_SCALE,
@@ -59,9 +60,9 @@ def odometer_velocity(nav, cal, disp, w_sum, lever, t_span, d_odo, nominal, r_ve
     v_od = d_odo / t_span / (1 + cal[CAL_SCALE])
     v_b_nom = np.array([0.0, nominal[NOM_SPEED], 0.0])
     h = np.zeros((3, n))
-    h[:, DV] = c_mb @ c_bn
-    h[:, PHI] = -c_mb @ c_bn @ skew3(c_nb @ v_b_nom)
-    h[:, ODO_MOUNT] = -c_mb @ skew3(v_b_nom)
+    put(h[:, DV], c_mb @ c_bn)
+    put(h[:, PHI], -c_mb @ c_bn @ skew3(c_nb @ v_b_nom))
+    put(h[:, ODO_MOUNT], -c_mb @ skew3(v_b_nom))
     h[1, ODO_SCALE] = -(c_mb @ v_b_nom)[1]
     z = c_mb @ v_b - np.array([0.0, v_od, 0.0])
     nominal[NOM_SPEED] += (nominal[NOM_SPEED_LAST] - nominal[NOM_SPEED]) * min(1.0, t_span / tau_fwd)
@@ -94,7 +95,7 @@ def zero_rate(nav, w_sum, t_span, r_zaru, n):
     c_bn = quat_mat(nav[QUAT]).T
     w_ie, _w_en = nav_rates(nav[LAT], nav[HGT], nav[VEL])
     h = np.zeros((3, n))
-    h[:, PHI] = c_bn @ skew3(w_ie)
+    put(h[:, PHI], c_bn @ skew3(w_ie))
     for i in range(3):
         h[i, GYRO_BIAS.start + i] = 1.0
     return w_sum / t_span - c_bn @ w_ie, h, np.eye(3) * r_zaru ** 2
@@ -112,7 +113,7 @@ def position_fix(nav, lever, fix_llh, fix_r, n):
                   (nav[LAT] - fix_llh[0]) * (r_m + hgt) - off[1],
                   nav[HGT] - fix_llh[2] - off[2]])
     h = np.zeros((3, n))
-    h[:, PHI] = -skew3(off)
+    put(h[:, PHI], -skew3(off))
     r = fix_r.copy()
     for i in range(3):
         h[i, DP.start + i] = 1.0

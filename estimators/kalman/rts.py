@@ -17,18 +17,21 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from estimators.arrays import put
+from estimators.kalman.lapack import solve_matrix
+
 
 @nb.njit(cache=True)
 def rts_backward(x_post, p_post, x_pred, p_pred, phi, x_s, p_s):
     """Smooth epochs 0..N-1 in place into (x_s, p_s); row k+1 of x_pred, p_pred, phi is the step k -> k+1."""
     n = x_post.shape[0]
-    x_s[n - 1] = x_post[n - 1]
-    p_s[n - 1] = p_post[n - 1]
+    put(x_s[n - 1], x_post[n - 1])
+    put(p_s[n - 1], p_post[n - 1])
     for k in range(n - 2, -1, -1):
         # A_k = P_k Phi^T P_pred^-1, via a solve with the symmetric P_pred: A^T = P_pred^-1 Phi P_k.
-        a = np.linalg.solve(p_pred[k + 1], phi[k + 1] @ p_post[k]).T
-        x_s[k] = x_post[k] + a @ (x_s[k + 1] - x_pred[k + 1])
-        p_s[k] = p_post[k] + a @ (p_s[k + 1] - p_pred[k + 1]) @ a.T
+        a = solve_matrix(p_pred[k + 1], phi[k + 1] @ p_post[k]).T
+        put(x_s[k], x_post[k] + a @ (x_s[k + 1] - x_pred[k + 1]))
+        put(p_s[k], p_post[k] + a @ (p_s[k + 1] - p_pred[k + 1]) @ a.T)
 
 
 def rts_smooth(x_post: np.ndarray, p_post: np.ndarray, x_pred: np.ndarray, p_pred: np.ndarray,

@@ -14,17 +14,20 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from estimators.arrays import put
+from estimators.kalman.lapack import inv, solve_vector
+
 
 @nb.njit(cache=True)
 def joseph_update(x, p, z, h, r):
     """Kalman update of (x, P) with (z, H, R) in Joseph form, in place; returns the normalized innovation squared."""
     y = z - h @ x
     s = h @ p @ h.T + r
-    s_inv = np.linalg.inv(s)
+    s_inv = inv(s)
     k = p @ h.T @ s_inv
     x += k @ y
     ikh = np.eye(x.size) - k @ h
-    p[:, :] = ikh @ p @ ikh.T + k @ r @ k.T
+    put(p, ikh @ p @ ikh.T + k @ r @ k.T)
     return y @ s_inv @ y
 
 
@@ -32,7 +35,7 @@ def joseph_update(x, p, z, h, r):
 def nis(x, p, z, h, r):
     """Normalized innovation squared of (z, H, R) at (x, P), without updating."""
     y = z - h @ x
-    return y @ np.linalg.solve(h @ p @ h.T + r, y)
+    return y @ solve_vector(h @ p @ h.T + r, y)
 
 
 @nb.njit(cache=True)

@@ -31,6 +31,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from estimators.arrays import add, put
 from estimators.io.logformat import (
     FLAG_COVARIANCE_REPAIRED,
     FLAG_POSITION,
@@ -108,7 +109,7 @@ def system_matrix(nav, f_n):
     f = np.zeros((N_STATES, N_STATES))
     navigation_block(f, nav, f_n, False)
     bias_blocks(f, c_nb)
-    f[DV, ACCEL_NONORTH] = c_nb @ nonorth_matrix(c_nb.T @ f_n)
+    put(f[DV, ACCEL_NONORTH], c_nb @ nonorth_matrix(c_nb.T @ f_n))
     return f
 
 
@@ -125,11 +126,11 @@ def discretize(f, q_psd, dt):
 def apply_correction(nav, cal, x):
     """Feed an error estimate back: corrected navigation state and calibration (in place)."""
     feed_back_navigation(nav, x)
-    cal[CAL_GYRO] += x[GYRO_BIAS]
-    cal[CAL_ACCEL] += x[ACCEL_BIAS]
-    cal[CAL_NONORTH] += x[ACCEL_NONORTH]
+    add(cal[CAL_GYRO], x[GYRO_BIAS])
+    add(cal[CAL_ACCEL], x[ACCEL_BIAS])
+    add(cal[CAL_NONORTH], x[ACCEL_NONORTH])
     # C_b^m <- C_b^m (I - [dalpha x]), i.e. C_m^b <- (I + [dalpha x]) C_m^b, kept as a rotation vector.
-    cal[CAL_MOUNT] = mat_rotvec(rotvec_mat(x[ODO_MOUNT]) @ rotvec_mat(cal[CAL_MOUNT]))
+    put(cal[CAL_MOUNT], mat_rotvec(rotvec_mat(x[ODO_MOUNT]) @ rotvec_mat(cal[CAL_MOUNT])))
     cal[CAL_SCALE] = (1 + cal[CAL_SCALE]) * (1 + x[ODO_SCALE]) - 1
 
 
@@ -148,8 +149,10 @@ def mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, u0, steps):
         dt = t_mech[u + 1] - t_mech[u]
         ph = phi_b[u] - cal[CAL_GYRO] * dt
         dv = dv_b[u] - nonorth_matrix(dv_b[u]) @ cal[CAL_NONORTH] - cal[CAL_ACCEL] * dt
-        nav[LAT], nav[LON], nav[HGT], nav[VEL], nav[QUAT], dv_n, v_bar = strapdown_step(
+        nav[LAT], nav[LON], nav[HGT], vel, quat, dv_n, v_bar = strapdown_step(
             nav[LAT], nav[LON], nav[HGT], nav[VEL], nav[QUAT], ph, dv, dt, nav[LAT], nav[HGT], nav[VEL], False)
+        put(nav[VEL], vel)
+        put(nav[QUAT], quat)
         f_sum += dv_n
         disp += v_bar * dt
         w_sum += ph
@@ -167,12 +170,12 @@ def transition(nav, nominal, f_sum, t_span, q_psd, tau_force):
     delay of 2 tau_force, so a speed change (a reversal) still reaches F within seconds, with its area kept."""
     f_now = f_sum / t_span
     if np.all(nominal[NOM_FORCE_1] == 0.0):
-        nominal[NOM_FORCE_1] = f_now
-        nominal[NOM_FORCE_2] = f_now
+        put(nominal[NOM_FORCE_1], f_now)
+        put(nominal[NOM_FORCE_2], f_now)
     else:
         gain = min(1.0, t_span / tau_force)
-        nominal[NOM_FORCE_1] += (f_now - nominal[NOM_FORCE_1]) * gain
-        nominal[NOM_FORCE_2] += (nominal[NOM_FORCE_1] - nominal[NOM_FORCE_2]) * gain
+        add(nominal[NOM_FORCE_1], (f_now - nominal[NOM_FORCE_1]) * gain)
+        add(nominal[NOM_FORCE_2], (nominal[NOM_FORCE_1] - nominal[NOM_FORCE_2]) * gain)
     return discretize(system_matrix(nav, nominal[NOM_FORCE_2].copy()), q_psd, t_span)
 
 
@@ -204,10 +207,10 @@ def odometer_aiding(x, p, mode, nav, cal, disp, w_sum, lever, t_span, d_odo, nom
 def keep_covariance(x, p, p_fallback):
     """Symmetrize P; if a variance is not positive and finite, restore p_fallback and drop the update x.
     Returns True when P had to be repaired."""
-    p[:, :] = 0.5 * (p + p.T)
+    put(p, 0.5 * (p + p.T))
     for i in range(x.size):
         if not (p[i, i] > 0.0) or not np.isfinite(p[i, i]):
-            p[:, :] = p_fallback
+            put(p, p_fallback)
             x[:] = 0.0
             return True
     return False
@@ -235,14 +238,14 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
     for j in range(j0 + 1, j1 + 1):
         t_span, f_sum, disp, w_sum = mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, (j - 1) * steps, steps)
         phi, qd = transition(nav, nominal, f_sum, t_span, q_psd, params[P_TAU_FORCE])
-        p[:, :] = phi @ p @ phi.T + qd
-        phi_store[j] = phi
-        p_pred[j] = p
+        put(p, phi @ p @ phi.T + qd)
+        put(phi_store[j], phi)
+        put(p_pred[j], p)
         x[:] = 0.0
         flag, innov = odometer_aiding(x, p, odo_mode[j], nav, cal, disp, w_sum, lever, t_span,
                                       odo_dist[j] - odo_dist[j - 1], nominal, r_vel, params)
         if flag & FLAG_VELOCITY:
-            vel_innov[j] = innov
+            put(vel_innov[j], innov)
         while k_fix < fix_epoch.size and fix_epoch[k_fix] == j:
             z, h, r = position_fix(nav, lever, fix_llh[k_fix], fix_r[k_fix], N_STATES)
             nis_out[k_fix], applied = gated_update(x, p, z, h, r, fix_gate[k_fix])
@@ -251,8 +254,8 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
         if keep_covariance(x, p, p_pred[j]):
             flag |= FLAG_COVARIANCE_REPAIRED
         apply_correction(nav, cal, x)
-        x_post[j] = x
-        p_post[j] = p
-        out_nav[j] = nav
-        out_cal[j] = cal
+        put(x_post[j], x)
+        put(p_post[j], p)
+        put(out_nav[j], nav)
+        put(out_cal[j], cal)
         flags[j] = flag

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from estimators.arrays import add, put, sub
 from estimators.kalman.error_state import (
     ACCEL_BIAS,
     DP,
@@ -54,10 +55,10 @@ def navigation_block(f, nav, f_n, earth_partials):
     v = nav[VEL]
     w_ie, w_en = nav_rates(lat, h, v)
     r_m, r_n = radii_nb(lat)
-    f[DV, DV] = -skew3(2 * w_ie + w_en)
-    f[DV, PHI] = skew3(f_n)
+    put(f[DV, DV], -skew3(2 * w_ie + w_en))
+    put(f[DV, PHI], skew3(f_n))
     f[DV.start + _U, DP.start + _U] = 2 * gravity_nb(lat, h) / np.sqrt((r_m + h) * (r_n + h))
-    f[PHI, PHI] = -skew3(w_ie + w_en)
+    put(f[PHI, PHI], -skew3(w_ie + w_en))
     for i in range(3):
         f[DP.start + i, DV.start + i] = 1.0
     if not earth_partials:
@@ -70,12 +71,12 @@ def navigation_block(f, nav, f_n, earth_partials):
     dwie_dpn = np.array([0.0, -earth.OMEGA_IE * sl, earth.OMEGA_IE * cl]) / rm
     dwen_dpn = np.array([0.0, 0.0, ve / (rn * cl ** 2)]) / rm
     dwen_dpu = np.array([vn / rm ** 2, -ve / rn ** 2, -ve * tl / rn ** 2])
-    f[PHI, DV] = dwen_dv
-    f[PHI, DP.start + _N] = dwie_dpn + dwen_dpn
-    f[PHI, DP.start + _U] = dwen_dpu
-    f[DV, DV] += skew3(v) @ dwen_dv
-    f[DV, DP.start + _N] = -cross3(2 * dwie_dpn + dwen_dpn, v)
-    f[DV, DP.start + _U] -= cross3(dwen_dpu, v)
+    put(f[PHI, DV], dwen_dv)
+    put(f[PHI, DP.start + _N], dwie_dpn + dwen_dpn)
+    put(f[PHI, DP.start + _U], dwen_dpu)
+    add(f[DV, DV], skew3(v) @ dwen_dv)
+    put(f[DV, DP.start + _N], -cross3(2 * dwie_dpn + dwen_dpn, v))
+    sub(f[DV, DP.start + _U], cross3(dwen_dpu, v))
     f[DP.start + _E, DP.start + _E] = vu / rn - vn * tl / rm
     f[DP.start + _E, DP.start + _N] = ve * tl / rm
     f[DP.start + _E, DP.start + _U] = -ve / rn
@@ -86,8 +87,8 @@ def navigation_block(f, nav, f_n, earth_partials):
 @nb.njit(cache=True)
 def bias_blocks(f, c_nb):
     """Write how the gyro bias eps and accelerometer bias nabla (body axes) drive phi and dv into f (in place)."""
-    f[DV, ACCEL_BIAS] = c_nb
-    f[PHI, GYRO_BIAS] = -c_nb
+    put(f[DV, ACCEL_BIAS], c_nb)
+    put(f[PHI, GYRO_BIAS], -c_nb)
 
 
 @nb.njit(cache=True)
@@ -98,9 +99,9 @@ def feed_back_navigation(nav, x):
     nav[LAT] -= x[DP.start + _N] / (r_m + h)
     nav[LON] -= x[DP.start + _E] / ((r_n + h) * np.cos(lat))
     nav[HGT] -= x[DP.start + _U]
-    nav[VEL] -= x[DV]
+    sub(nav[VEL], x[DV])
     q = qmul(qexp(x[PHI]), nav[QUAT])
-    nav[QUAT] = q / np.sqrt(np.sum(q * q))
+    put(nav[QUAT], q / np.sqrt(np.sum(q * q)))
 
 
 def system_matrix(nav: np.ndarray, f_n: np.ndarray, earth_partials: bool = True) -> np.ndarray:
