@@ -26,9 +26,9 @@ PATH_TOLERANCE_M = 0.005
 BAND_ROWS = 10
 """Rows at the record rate per interval of which a noisy series keeps its band (first, lowest, highest row): 1 s at
 10 Hz."""
-BAND_TURNS = 3
-"""Turns (a value changing direction) in such an interval from which it is noise: a smooth curve turns once or
-twice."""
+BAND_TURNS = 1
+"""Turns (a value changing direction) in such an interval from which it is busy (noise, a vibration faster than the
+interval): drawn by its band, the interval's extremes, as a min/max plot does."""
 MARKER_STEP_M = 0.05
 """Distance a moving marker (the shearer, an estimate's point) travels between its logged positions [m]: it is drawn
 where it was last logged, at most this far behind."""
@@ -235,10 +235,10 @@ def band_rows(t: np.ndarray, values: np.ndarray, width_s: float) -> np.ndarray:
 def visible_rows(t: np.ndarray, values: np.ndarray, rate_hz: float | None, band: bool = True) -> np.ndarray:
     """Rows of a plotted series a person can tell apart (every row at FULL rate): at most rate_hz (decimate), and of
     those the rows a line drawn through keeps within LINE_TOLERANCE of the entity's span of every row left out
-    (line_rows); with `band`, in each noisy interval of BAND_ROWS / rate_hz seconds (1 s at 10 Hz: the line keeps
-    more than half its rows and the values turn BAND_TURNS times or more), the interval's band instead when that is
-    fewer rows (band_rows: its extremes, all a person sees of noise). Without `band` (0/1 flags, steps) the line
-    keeps every edge."""
+    (line_rows); with `band`, in each busy interval of BAND_ROWS / rate_hz seconds (1 s at 10 Hz: the line keeps
+    more than half its rows and the values turn BAND_TURNS times or more: noise, vibration), the interval's band
+    instead when that is fewer rows (band_rows: its first row and extremes, what a min/max plot draws of it). Without
+    `band` (0/1 flags, steps) the line keeps every edge."""
     keep = decimate(t, rate_hz)
     if rate_hz is FULL or keep.size < 3:
         return keep
@@ -252,7 +252,7 @@ def visible_rows(t: np.ndarray, values: np.ndarray, rate_hz: float | None, band:
     extremes = band_rows(t, y, BAND_ROWS / rate_hz)
     ident = _intervals(t, BAND_ROWS / rate_hz)
     n = ident[-1] + 1
-    # A turn: a row where a column changes direction. Noise turns at every other row; a smooth curve a few times.
+    # A turn: a row where a column changes direction (noise: at every other row).
     slope = np.sign(np.diff(y, axis=0))
     turns = np.r_[False, ((slope[1:] * slope[:-1]) < 0).any(axis=1), False]
     on_line = np.bincount(ident[line], minlength=n)
