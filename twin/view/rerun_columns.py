@@ -9,11 +9,11 @@ The record rate (twin.view.record_rate) is a rate in Hz, or FULL (None): every s
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 import pyarrow as pa
 import rerun as rr
 
+from twin.view.line_kernel import line_kernel
 from twin.view.record_rate import FULL
 
 TIMELINE = "sim_time"
@@ -137,49 +137,6 @@ def mean_rate(t: np.ndarray, values: np.ndarray, rate_hz: float | None) -> tuple
     blocks = values[:n].reshape(n // step, step, -1).sum(axis=1)
     return t[step - 1:n:step], blocks / (step * dt)
 
-@nb.njit(cache=True)
-def _line_rows(t, y, tol, must):
-    """Rows of (t, y) to draw a line through so that every row left out lies within tol[j] of it in each column j
-    (greedy: each segment from the last kept row is as long as the slopes allow, the swinging door of process
-    historians); the first and last rows and the rows marked `must` are kept; NaN values constrain nothing."""
-    n, m = y.shape
-    keep = np.zeros(n, np.bool_)
-    if n == 0:
-        return keep
-    keep[0] = keep[n - 1] = True
-    lo, hi = np.empty(m), np.empty(m)
-    a = 0
-    while a < n - 1:
-        lo[:] = -np.inf
-        hi[:] = np.inf
-        end, k = a + 1, a + 1
-        while k < n:
-            dt = t[k] - t[a]
-            if k > a + 1:  # the line from a to k must pass within tol of the rows between
-                if dt <= 0.0:
-                    break
-                ok = True
-                for j in range(m):
-                    if not (np.isnan(y[k, j]) or np.isnan(y[a, j])):
-                        s = (y[k, j] - y[a, j]) / dt
-                        if s < lo[j] or s > hi[j]:
-                            ok = False
-                            break
-                if not ok:
-                    break
-            end = k
-            if must[k] or dt <= 0.0:
-                break
-            for j in range(m):
-                if not (np.isnan(y[k, j]) or np.isnan(y[a, j])):
-                    lo[j] = max(lo[j], (y[k, j] - tol[j] - y[a, j]) / dt)
-                    hi[j] = min(hi[j], (y[k, j] + tol[j] - y[a, j]) / dt)
-            k += 1
-        keep[end] = True
-        a = end
-    return keep
-
-
 def line_rows(t: np.ndarray, values: np.ndarray, tolerance: float | np.ndarray,
               must: np.ndarray | None = None) -> np.ndarray:
     """Indices of the rows of `values` (K,) or (K, n) over times `t` that a line drawn through them keeps within
@@ -195,7 +152,7 @@ def line_rows(t: np.ndarray, values: np.ndarray, tolerance: float | np.ndarray,
     edge[1:] |= turned
     edge[:-1] |= turned
     tol = np.broadcast_to(np.asarray(tolerance, float), (y.shape[1],)).copy()
-    return np.flatnonzero(_line_rows(t, np.ascontiguousarray(y), tol, edge))
+    return np.flatnonzero(line_kernel(t, np.ascontiguousarray(y), tol, edge))
 
 
 def _intervals(t: np.ndarray, width_s: float) -> np.ndarray:
