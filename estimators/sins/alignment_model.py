@@ -56,6 +56,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from estimators.arrays import put
 from estimators.kalman import error_state as es
 from estimators.nav.rotation_kernels import euler_mat, mat_euler, rotvec_mat
 
@@ -105,7 +106,7 @@ def propagate_rows(xs, c1, r_ie, w_u, gamma, T):
     """propagate for each row of xs (the UKF's sigma points)."""
     out = np.empty_like(xs)
     for i in range(xs.shape[0]):
-        out[i] = propagate(xs[i], c1, r_ie, w_u, gamma, T)
+        put(out[i], propagate(xs[i], c1, r_ie, w_u, gamma, T))
     return out
 
 
@@ -115,10 +116,10 @@ def transition(c1, w, gamma, T, q_psd):
     a = np.zeros((N_STATES, N_STATES))
     a[_DVE, _DVN], a[_DVN, _DVE] = 2 * w[2], -2 * w[2]
     a[_DVE, _PN], a[_DVN, _PE] = -gamma, gamma  # [f^n x] rows E, N
-    a[DV, ACCEL_BIAS] = c1[:2, :2]
+    put(a[DV, ACCEL_BIAS], c1[:2, :2])
     wx = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    a[PHI, PHI] = -wx
-    a[PHI, GYRO_BIAS] = -c1
+    put(a[PHI, PHI], -wx)
+    put(a[PHI, GYRO_BIAS], -c1)
     at = a * T
     at2 = at @ at
     eye = np.eye(N_STATES)
@@ -156,7 +157,7 @@ def measurement(c0, c1, v, dth, w, T, r_vel, r_rate, zero_rate):
         c_mid = 0.5 * (c0 + c1)
         z[2] = c_mid[2, 0] * dth[0] + c_mid[2, 1] * dth[1] + c_mid[2, 2] * dth[2] - w[2] * T
         hm[2, _PE] = -w[1] * T
-        hm[2, GYRO_BIAS] = c_mid[2] * T
+        put(hm[2, GYRO_BIAS], c_mid[2] * T)
         r[2, 2] = r_rate
     return z, hm, r
 
@@ -177,8 +178,8 @@ def reset(c, v, x, p):
         b = mat_euler(euler_mat(lo[0], lo[1], lo[2]) @ e_hat.T)
         for i in range(3):
             g[i, j] = (a[i] - b[i]) / (2 * step)
-    p[PHI, :] = g @ np.ascontiguousarray(p[PHI, :])
-    p[:, PHI] = np.ascontiguousarray(p[:, PHI]) @ g.T
+    put(p[PHI, :], g @ np.ascontiguousarray(p[PHI, :]))
+    put(p[:, PHI], np.ascontiguousarray(p[:, PHI]) @ g.T)
     c1 = e_hat @ c
     v1 = np.array([v[0] - x[_DVE], v[1] - x[_DVN]])
     x[DV] = 0.0

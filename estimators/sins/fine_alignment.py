@@ -48,6 +48,7 @@ import numba as nb
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, unscented_transform
 
+from estimators.arrays import put
 from estimators.kalman.update import joseph_update
 from estimators.nav import earth
 from estimators.nav.rotations import (
@@ -183,10 +184,10 @@ def _correct(k, c0, c, v, x, p, dth, w, T, r_vel, r_rate, zero_rate, c_out, s_ou
     z, hm, r = measurement(c0, c, v, dth, w, T, r_vel, r_rate, zero_rate)
     nis_out[k] = joseph_update(x, p, z, hm, r)
     c, v = reset(c, v, x, p)
-    c_out[k] = c
+    put(c_out[k], c)
     for i in range(N_STATES):
         s_out[k, i] = math.sqrt(p[i, i])
-    b_out[k] = x[BIASES]
+    put(b_out[k], x[BIASES])
     return c, v
 
 
