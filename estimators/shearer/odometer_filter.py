@@ -100,20 +100,20 @@ def nonorth_matrix(v):
     return n
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def system_matrix(nav, f_n):
     """F (N_STATES x N_STATES) of the error dynamics at the navigation state `nav` with specific force f_n: the
     navigation and bias blocks of estimators.sins.error_model (without the Earth-rate partials), and the
     non-orthogonality's."""
     c_nb = quat_mat(nav[QUAT])
     f = np.zeros((N_STATES, N_STATES))
-    navigation_block(f, nav, f_n, False)
+    navigation_block(f, nav, f_n)
     bias_blocks(f, c_nb)
     put(f[DV, ACCEL_NONORTH], c_nb @ nonorth_matrix(c_nb.T @ f_n))
     return f
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def discretize(f, q_psd, dt):
     """Phi = I + F T + (F T)^2 / 2 and Q_d = (Phi Q_c Phi^T + Q_c) T / 2 (001 eq. 17)."""
     ft = f * dt
@@ -122,7 +122,7 @@ def discretize(f, q_psd, dt):
     return phi, 0.5 * (phi @ qc @ phi.T + qc) * dt
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def apply_correction(nav, cal, x):
     """Feed an error estimate back: corrected navigation state and calibration (in place)."""
     feed_back_navigation(nav, x)
@@ -134,7 +134,7 @@ def apply_correction(nav, cal, x):
     cal[CAL_SCALE] = (1 + cal[CAL_SCALE]) * (1 + x[ODO_SCALE]) - 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, u0, steps):
     """Mechanize steps u0 .. u0+steps-1 with the calibration's corrections (nav in place; estimators.sins.strapdown's
     step with the Earth and transport rates at each interval's start).
@@ -159,7 +159,7 @@ def mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, u0, steps):
     return t_span, f_sum, disp, w_sum
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def transition(nav, nominal, f_sum, t_span, q_psd, tau_force):
     """(Phi, Q_d) over the epoch, F evaluated at the nominal specific force (updated here).
 
@@ -179,7 +179,7 @@ def transition(nav, nominal, f_sum, t_span, q_psd, tau_force):
     return discretize(system_matrix(nav, nominal[NOM_FORCE_2].copy()), q_psd, t_span)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def odometer_aiding(x, p, mode, nav, cal, disp, w_sum, lever, t_span, d_odo, nominal, r_vel, params):
     """The epoch's odometer-channel updates of (x, P) (estimators.kalman.measurements, Joseph form) by mode
     (run_filter's odo_mode, MODE_*): the odometer velocity while moving, zero velocity and zero rate at a stand,
@@ -203,7 +203,7 @@ def odometer_aiding(x, p, mode, nav, cal, disp, w_sum, lever, t_span, d_odo, nom
     return FLAG_SKIPPED, innov
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def keep_covariance(x, p, p_fallback):
     """Symmetrize P; if a variance is not positive and finite, restore p_fallback and drop the update x.
     Returns True when P had to be repaired."""

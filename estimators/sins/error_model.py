@@ -48,9 +48,10 @@ _E, _N, _U = 0, 1, 2
 
 
 @nb.njit(cache=True)
-def navigation_block(f, nav, f_n, earth_partials):
+def navigation_block(f, nav, f_n):
     """Write F's navigation block (rows and columns DV, PHI, DP) at the navigation state `nav`
-    (estimators.kalman.error_state's LAT .. QUAT) with specific force f_n (ENU) into f (in place)."""
+    (estimators.kalman.error_state's LAT .. QUAT) with specific force f_n (ENU) into f (in place), without the
+    Earth- and transport-rate partials (earth_partial_blocks adds them)."""
     lat, h = nav[LAT], nav[HGT]
     v = nav[VEL]
     w_ie, w_en = nav_rates(lat, h, v)
@@ -61,8 +62,16 @@ def navigation_block(f, nav, f_n, earth_partials):
     put(f[PHI, PHI], -skew3(w_ie + w_en))
     for i in range(3):
         f[DP.start + i, DV.start + i] = 1.0
-    if not earth_partials:
-        return
+
+
+@nb.njit(cache=True)
+def earth_partial_blocks(f, nav):
+    """Add the Earth- and transport-rate partials and the position-rate terms (module docstring) to F's navigation
+    block written by navigation_block (in place). A kernel of its own, so that the filters, which leave them out,
+    do not compile them."""
+    lat, h = nav[LAT], nav[HGT]
+    v = nav[VEL]
+    r_m, r_n = radii_nb(lat)
     rm, rn = r_m + h, r_n + h
     sl, cl, tl = np.sin(lat), np.cos(lat), np.tan(lat)
     ve, vn, vu = v[_E], v[_N], v[_U]
@@ -107,8 +116,11 @@ def feed_back_navigation(nav, x):
 def system_matrix(nav: np.ndarray, f_n: np.ndarray, earth_partials: bool = True) -> np.ndarray:
     """F (N_NAV_ERRORS + the two bias blocks, i.e. ACCEL_BIAS.stop square) at one navigation state."""
     f = np.zeros((ACCEL_BIAS.stop, ACCEL_BIAS.stop))
-    navigation_block(f, np.asarray(nav, float), np.asarray(f_n, float), earth_partials)
-    bias_blocks(f, quat_mat(np.asarray(nav, float)[QUAT]))
+    nav = np.asarray(nav, float)
+    navigation_block(f, nav, np.asarray(f_n, float))
+    if earth_partials:
+        earth_partial_blocks(f, nav)
+    bias_blocks(f, quat_mat(nav[QUAT]))
     return f
 
 
