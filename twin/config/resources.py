@@ -32,6 +32,7 @@ from twin.config.scenario import (
     travel_length_m,
 )
 from twin.config.turntable import Turntable
+from twin.face.layout import MESH_MAX_CELLS
 
 GIB = 1 << 30
 
@@ -58,7 +59,7 @@ filters; with MEMORY_PER_TABLE_BYTE the line through default.toml (1.19 GB peak,
 MEMORY_PER_TABLE_BYTE = 1.8
 """Peak memory per byte of the run's tables (their copies, the recording's buffers, the filters' arrays)."""
 FLOOR_BYTES_PER_CELL = 120.0
-"""Memory per cell of the floor's height field (its heights, the mesh's vertices and triangles, MuJoCo's list)."""
+"""Memory per cell of the recording's floor mesh (its heights, vertices and triangles)."""
 FLOOR_CELL_M = 0.25
 """Cell size of the floor's height field (twin.face.model.HFIELD_RESOLUTION_M) [m]."""
 FLOOR_MARGIN_M = 12.0
@@ -140,8 +141,10 @@ def face_resources(scn: Scenario, trials: int = 1, sensors: bool = True, workers
     table = {k: n * ROW_COSTS[k].memory for k, n in rows.items()}
     trial_bytes = sum(v for k, v in table.items() if k in SENSOR_STREAMS)
     f = scn.face
-    cells = ((f.panel_length_m + FLOOR_MARGIN_M) / FLOOR_CELL_M) * (
-        (f.pan_count * f.pan_length_m + FLOOR_MARGIN_M) / FLOOR_CELL_M)
+    # The window models' floor is a band under the window (twin.face.model.FloorBand); the recording's floor mesh
+    # covers the run's face, at most MESH_MAX_CELLS cells.
+    cells = min(MESH_MAX_CELLS, ((min(f.panel_length_m, scn.cycles * f.web_depth_m) + FLOOR_MARGIN_M) / FLOOR_CELL_M)
+                * ((f.pan_count * f.pan_length_m + FLOOR_MARGIN_M) / FLOOR_CELL_M))
     memory = (BASE_MEMORY + MEMORY_PER_TABLE_BYTE * (sum(table.values()) + (workers - 1) * trial_bytes)
               + FLOOR_BYTES_PER_CELL * cells)
     disk_once = {k: n * ROW_COSTS[k].disk for k, n in rows.items()}

@@ -29,6 +29,8 @@ PAN_HEIGHT_M = 0.35
 """Height of the running line above the floor (pan feet to rail top)."""
 INITIAL_BEND_FRACTION = 0.25
 """Share of the horizontal bend limit the random initial face may use (the snake has the rest)."""
+MESH_MAX_CELLS = 250_000
+"""Most cells of the floor mesh a recording draws (coarser than the height field on a long run's face)."""
 SUPPORT_BASE_LENGTH_M = 3.0
 """Length of a support base from its ram connection (front) to its rear; x extent in F."""
 

@@ -3,8 +3,9 @@
 The face is slow, local and event-driven: a push touches the pans of the snake and the supports behind it,
 nothing else. `FaceSimulator` compiles one window model (a run of pans with their supports and two mocap
 anchors standing in for the neighbours) and moves it along the face: for each push event it loads the
-window's part of the global `FaceState`, drives the rams to their new targets (quasi-static: the rams move
-over a fixed number of steps, then the supports set and the window settles) and writes the result back.
+window's part of the global `FaceState`, places its floor (a height field of fixed size under the window only:
+model.FloorBand), drives the rams to their new targets (quasi-static: the rams move over a fixed number of steps,
+then the supports set and the window settles) and writes the result back.
 """
 
 from __future__ import annotations
@@ -20,9 +21,10 @@ from twin.face.model import (
     SUPPORT_FRICTION_LOWERED_N,
     SUPPORT_FRICTION_SET_N,
     FaceIndex,
-    FloorGrid,
+    FloorBand,
     build_face_spec,
     index_face_model,
+    place_floor,
 )
 
 QS_RAM_SPEED_M_S = 1.2
@@ -61,6 +63,7 @@ class _Window:
     """One compiled window model of `count` pans, its index and data, moved along the face."""
 
     count: int
+    band: FloorBand
     model: mujoco.MjModel
     data: mujoco.MjData
     index: FaceIndex
@@ -70,12 +73,13 @@ class _Window:
     sup_body: np.ndarray
 
     @classmethod
-    def compile(cls, scn: Scenario, grid: FloorGrid, count: int) -> "_Window":
-        model = build_face_spec(scn, grid, 0, count, anchors=True).compile()
+    def compile(cls, scn: Scenario, floor: Floor, count: int) -> "_Window":
+        band = FloorBand.for_window(scn, floor, count)
+        model = build_face_spec(scn, band, 0, count, anchors=True).compile()
         index = index_face_model(model, scn, 0, count)
         pan_body = np.array([model.body(f"pan{i}_pan").id for i in index.pans], int)
         sup_body = np.array([model.body(f"sup{j}_support").id for j in index.supports], int)
-        return cls(count, model, mujoco.MjData(model), index, pan_body, model.body_mass[pan_body].copy(),
+        return cls(count, band, model, mujoco.MjData(model), index, pan_body, model.body_mass[pan_body].copy(),
                    model.body_inertia[pan_body].copy(), sup_body)
 
 
@@ -86,11 +90,10 @@ class FaceSimulator:
         self.scn = scn
         self.floor = floor
         self.frame = FaceFrame(np.radians(scn.face.azimuth_deg))
-        self.grid = FloorGrid.from_scenario(scn, floor)
         self.stations = support_stations(scn)
         k, n = scn.supports.pans_per_support, scn.face.pan_count
         counts = sorted({min(n, int(np.ceil(c / k)) * k) for c in window_sizes})
-        self.windows = [_Window.compile(scn, self.grid, c) for c in counts]
+        self.windows = [_Window.compile(scn, floor, c) for c in counts]
         model = self.windows[0].model
         self.ram_site_local = np.array(model.site("pan0_ram").pos)
         self.sup_site_local = np.array(model.site(f"sup{self.windows[0].index.supports[0]}_ram").pos)
@@ -138,6 +141,8 @@ class FaceSimulator:
         pans = np.arange(first, first + win.count)
         sups = np.flatnonzero((self.stations >= first) & (self.stations < first + win.count))
         mujoco.mj_resetData(m, d)
+        place_floor(m, d, *win.band.place(self.floor, float(state.pans[pans, 0].min()), first * length),
+                    self.frame.mat_tf)
         d.qpos[ix.pan_qpos] = state.pans[pans]
         scale = np.where((pans == 0) | (pans == n - 1), DRIVE_FRAME_MASS_SCALE, 1.0)
         m.body_mass[win.pan_body] = win.pan_mass * scale

@@ -268,4 +268,4 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
         "t_end": np.array([p.t_end for p in timeline.cycles]), "s_sump": np.array([p.s_sump for p in timeline.cycles])}
     tables = {lf.TRUTH_SHEARER.name: shearer, lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab,
               lf.TRUTH_CYCLES.name: cycles}
-    return SimResult(tables, sim.grid, frame, timeline.duration, events)
+    return SimResult(tables, FloorGrid.from_scenario(scn, floor), frame, timeline.duration, events)

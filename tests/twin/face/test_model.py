@@ -8,6 +8,7 @@ import numpy as np
 from tests.conftest import capped
 from twin.face.layout import PAN_HEIGHT_M, PAN_WIDTH_M, Floor
 from twin.face.model import (
+    FloorBand,
     FloorGrid,
     build_face_spec,
     build_ride_spec,
@@ -29,11 +30,11 @@ def test_pan_piece_matches_layout_constants():
 def test_full_face_model_has_the_flat_layout():
     scn = capped("default")
     rng = np.random.default_rng(0)
-    grid = FloorGrid.from_scenario(scn, Floor.from_scenario(scn, rng))
     n = scn.face.pan_count
-    model = build_face_spec(scn, grid, 0, n, anchors=False).compile()
+    band = FloorBand.for_window(scn, Floor.from_scenario(scn, rng), n)
+    model = build_face_spec(scn, band, 0, n, anchors=False).compile()
     index = index_face_model(model, scn, 0, n)
-    assert model.nbody == 1 + 2 * n + n  # world, pans, supports and their canopies
+    assert model.nbody == 2 + 2 * n + n  # world, the floor, pans, supports and their canopies
     assert all(model.body_parentid[model.body(f"pan{i}_pan").id] == 0 for i in range(n))  # no chain
     assert model.neq == n - 1  # a connect per joint
     assert model.ntendon == 2 * (n - 1) + n  # two bend limits per joint, a ram per support
@@ -48,3 +49,49 @@ def test_ride_model_suspension_from_the_scenario():
     assert np.isclose(model.opt.timestep, 1 / scn.rates.ride_hz)
     shoes = [model.site(f"shoe_{s}").pos for s in ("rear", "front")]
     assert np.isclose(np.linalg.norm(shoes[1] - shoes[0]), scn.shearer.shoe_spacing_m)
+
+
+def test_a_window_models_floor_does_not_grow_with_the_panel():
+    """The height field is a band under the window (FloorBand), the same size on a 12 m and a 2 km panel; the
+    recording's floor mesh covers the run's face at most MESH_MAX_CELLS cells."""
+    from twin.face.layout import MESH_MAX_CELLS
+
+    short = capped("seed004")
+    long = short.model_validate(short.model_dump() | {"cycles": 2000, "face": short.face.model_dump() | {
+        "panel_length_m": 2000.0}})
+    floor = Floor.from_scenario(short, np.random.default_rng(0))
+    assert FloorBand.for_window(short, floor, 40) == FloorBand.for_window(long, floor, 40)
+    grid = FloorGrid.from_scenario(long, floor)
+    assert grid.z.size <= MESH_MAX_CELLS * 1.01 and grid.x[-1] >= 2000.0
+
+
+def test_the_floor_band_follows_the_window_and_the_advance():
+    """Placed under a window of advanced pans in the middle of the face, the height field holds the floor's heights
+    on the lattice and covers the window's pans and supports."""
+    from twin.face.layout import initial_pans
+    from twin.face.simulator import SKID_OFFSET_X_M, FaceSimulator
+    from twin.pipeline.simulate import window_sizes
+
+    scn = capped("default")
+    floor = Floor.from_scenario(scn, np.random.default_rng(3))
+    sim = FaceSimulator(scn, floor, window_sizes(scn))
+    state = sim.initial_supports(initial_pans(scn, floor, np.random.default_rng(4)))
+    state.pans[:, 0] += 7.3  # the face seven webs on
+    state.sup_x += 7.3
+    win = sim.windows[0]
+    first = 10
+    pans, sups = sim._load(win, state, first)
+    m = win.model
+    hf = m.hfield("floor")
+    nrow, ncol = int(m.hfield_nrow[hf.id]), int(m.hfield_ncol[hf.id])
+    heights = m.hfield_data[m.hfield_adr[hf.id]:m.hfield_adr[hf.id] + nrow * ncol].reshape(nrow, ncol)
+    centre_f = sim.frame.mat_tf.T @ win.data.mocap_pos[m.body_mocapid[m.body("floor").id]]
+    half_x, half_y, elevation = m.hfield_size[hf.id, :3]
+    x = centre_f[0] - half_x + np.arange(ncol) * 2 * half_x / (ncol - 1)
+    y = centre_f[1] - half_y + np.arange(nrow) * 2 * half_y / (nrow - 1)
+    np.testing.assert_allclose(centre_f[2] + heights * elevation, floor.height(x[None, :], y[:, None]), atol=1e-5)
+    assert heights.min() >= 0.0 and heights.max() <= 1.0
+    assert x[0] < state.sup_x[sups].min() + SKID_OFFSET_X_M - 1.0 and x[-1] > state.pans[pans, 0].max() + 2.0
+    assert y[0] < first * scn.face.pan_length_m and y[-1] > (first + win.count) * scn.face.pan_length_m
+    lattice = (x - win.band.origin_f[0]) / 0.25
+    np.testing.assert_allclose(lattice, np.round(lattice), atol=1e-9)  # on the one lattice
