@@ -113,6 +113,9 @@ class Resources:
     wall_s: float
     reduce: str
     """The keys that make it big, for the refusal."""
+    parts_s: dict[str, float] | None = None
+    """A face run's wall time [s] of the twin (simulation, sensors, writing) and of one trial's estimators on one
+    core: what the progress bar weighs its stages by."""
 
 
 def simulated_s(scn: Scenario) -> float:
@@ -153,7 +156,8 @@ def face_resources(scn: Scenario, trials: int = 1, sensors: bool = True, workers
     estimating = ESTIMATOR_S_PER_SAMPLE * rows.get("imu", 0.0) * len(scn.estimators.shearer.methods)
     wall = TWIN_S_PER_STEP * steps + estimating * trials / workers
     return Resources(rows, memory, disk, t, wall, "cycles, the haulage stops and speeds, the rates (rates.*, "
-                     "sensors.*.rate_hz), face.pan_count, face.panel_length_m, the estimators, --trials")
+                     "sensors.*.rate_hz), face.pan_count, face.panel_length_m, the estimators, --trials",
+                     {"twin": TWIN_S_PER_STEP * steps, "estimators": estimating})
 
 
 def paper_resources(exp: Experiment | Turntable) -> Resources:

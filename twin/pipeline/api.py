@@ -213,8 +213,13 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     check_target(out, force)
     start = time.perf_counter()
     mc_trials = range(1, trials if sensors else 1)  # trial 0 is the run itself
-    stages = {"face": 0.45, "shearer": 0.2, "sensors": 0.1, "write": 0.05, "recording": 0.05, "estimators": 0.15,
-              "trials": 0.25 * len(mc_trials)}
+    # The bar weighs each stage by its expected share of the run (twin.config.resources).
+    # The estimators use every core unless Monte Carlo trials run beside trial 0 on local processes.
+    est_workers = 1 if mc_trials and workers > 1 and ray_address is None else usable_cores()
+    parts = estimate_resources(scn, trials, sensors, workers).parts_s
+    twin_s, est_s = parts["twin"], parts["estimators"] / est_workers
+    stages = {"face": 0.55 * twin_s, "shearer": 0.1 * twin_s, "sensors": 0.25 * twin_s, "write": 0.02 * twin_s,
+              "recording": 0.08 * twin_s, "estimators": est_s, "trials": est_s * len(mc_trials) / workers}
     total = sum(stages.values())
     bar = tqdm(total=100, desc=f"longwall run {scn.name}", disable=quiet, leave=False,
                bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining}")
@@ -280,10 +285,8 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
         wall_s = time.perf_counter() - start
         write_timing(staging, wall_s=wall_s, real_time_factor=summary["simulated_s"] / wall_s)
         (staging / "metrics.json").write_text(json.dumps({"twin": summary, "estimators": {}}, indent=2) + "\n")
-        # The estimators use every core unless Monte Carlo trials run beside trial 0 on local processes.
-        beside = bool(mc_trials) and workers > 1 and ray_address is None
         estimated = run_estimators(staging, scn, record_rate_hz=record_rate_hz,
-                                   workers=1 if beside else usable_cores()) if sensors else {}
+                                   workers=est_workers) if sensors else {}
         write_metrics(staging, estimated)
         note_recordings(staging, {RUN_RRD: record_rate_hz, ESTIMATES_RRD: record_rate_hz})
         progress("estimators", 1.0)
