@@ -12,6 +12,7 @@ message.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 from numba.core import types
 from numba.extending import overload
@@ -35,49 +36,28 @@ def sub(dst, src):
 _SHAPE_ERROR = "array block assignment: shapes differ"
 
 
+_COMBINE = {"put": nb.njit(inline="always")(lambda d, s: s), "add": nb.njit(inline="always")(lambda d, s: d + s),
+            "sub": nb.njit(inline="always")(lambda d, s: d - s)}
+"""What each operation makes of the destination's element d and the source's element s."""
+
+
 def _loops(ndim, op):
     """The elementwise implementation of op ('put', 'add', 'sub') for dst of ndim 1 or 2."""
+    combine = _COMBINE[op]
     if ndim == 1:
-        if op == "put":
-            def impl(dst, src):
-                if dst.shape != src.shape:
-                    raise ValueError(_SHAPE_ERROR)
-                for i in range(dst.shape[0]):
-                    dst[i] = src[i]
-        elif op == "add":
-            def impl(dst, src):
-                if dst.shape != src.shape:
-                    raise ValueError(_SHAPE_ERROR)
-                for i in range(dst.shape[0]):
-                    dst[i] += src[i]
-        else:
-            def impl(dst, src):
-                if dst.shape != src.shape:
-                    raise ValueError(_SHAPE_ERROR)
-                for i in range(dst.shape[0]):
-                    dst[i] -= src[i]
+        def impl(dst, src):
+            if dst.shape != src.shape:
+                raise ValueError(_SHAPE_ERROR)
+            for i in range(dst.shape[0]):
+                dst[i] = combine(dst[i], src[i])
         return impl
-    if op == "put":
-        def impl(dst, src):
-            if dst.shape != src.shape:
-                raise ValueError(_SHAPE_ERROR)
-            for i in range(dst.shape[0]):
-                for j in range(dst.shape[1]):
-                    dst[i, j] = src[i, j]
-    elif op == "add":
-        def impl(dst, src):
-            if dst.shape != src.shape:
-                raise ValueError(_SHAPE_ERROR)
-            for i in range(dst.shape[0]):
-                for j in range(dst.shape[1]):
-                    dst[i, j] += src[i, j]
-    else:
-        def impl(dst, src):
-            if dst.shape != src.shape:
-                raise ValueError(_SHAPE_ERROR)
-            for i in range(dst.shape[0]):
-                for j in range(dst.shape[1]):
-                    dst[i, j] -= src[i, j]
+
+    def impl(dst, src):
+        if dst.shape != src.shape:
+            raise ValueError(_SHAPE_ERROR)
+        for i in range(dst.shape[0]):
+            for j in range(dst.shape[1]):
+                dst[i, j] = combine(dst[i, j], src[i, j])
     return impl
 
 
