@@ -47,8 +47,9 @@ from estimators.nav.rotations import quat_conj, quat_rotate
 from twin.config.scenario import Scenario
 from twin.config.sensors import Fault
 from twin.face.haulage import STOPPED
-from twin.sensors.clock import sample_times
+from twin.sensors.chunks import TruthChunk, halo_rows, split_truth
 from twin.sensors.faults import faults_of, window_mask
+from twin.sensors.odometer import clock_in_chunk
 
 
 class FieldElements(NamedTuple):
@@ -137,43 +138,72 @@ def motor_factor(scn: Scenario, shearer: dict, t: np.ndarray) -> np.ndarray:
     return np.where(moving, np.linalg.norm(v_n, axis=-1) / v_cut, 0.0)
 
 
-def interference_field(t: np.ndarray, faults: Iterable[Fault], rng: np.random.Generator,
-                       target: int | None = None) -> np.ndarray:
-    """Sum of the `mag_interference` fault fields (K, 3) [T] for the faults with this target.
-
-    Each fault (in schedule order) draws one direction uniformly on the sphere from `rng`, whether or not
-    its window meets t, so the draws do not depend on the run length.
-    """
-    out = np.zeros((t.size, 3))
+def interference_directions(faults: Iterable[Fault], rng: np.random.Generator,
+                            target: int | None = None) -> list[tuple[Fault, np.ndarray]]:
+    """The `mag_interference` faults with this target, each (in schedule order) with its field direction u_f (3,)
+    in b, drawn uniformly on the sphere from `rng` whether or not its window meets the run."""
+    out = []
     for fault in faults_of(faults, "mag_interference"):
-        if fault.target != target:
-            continue
-        u = rng.normal(size=3)
-        u /= np.linalg.norm(u)
+        if fault.target == target:
+            u = rng.normal(size=3)
+            out.append((fault, u / np.linalg.norm(u)))
+    return out
+
+
+def interference_field(t: np.ndarray, directions: list[tuple[Fault, np.ndarray]]) -> np.ndarray:
+    """Sum (K, 3) [T] in b of the fault fields B_f u_f whose windows hold the times t (`interference_directions`)."""
+    out = np.zeros((t.size, 3))
+    for fault, u in directions:
         out[window_mask(t, fault)] += fault.value * u
     return out
 
 
+def soft_iron_rows(b: np.ndarray, soft_iron: np.ndarray) -> np.ndarray:
+    """S b for each row b of (K, 3), i.e. b @ S^T, rounded alike in every row whatever K: NumPy hands a lone row to
+    a vector kernel that rounds differently from the matrix kernel, so a lone row is multiplied beside a copy."""
+    if len(b) == 1:
+        return (np.concatenate([b, b]) @ soft_iron.T)[:1]
+    return b @ soft_iron.T
+
+
+class Magnetometer:
+    """The MAG stream (estimators.io.logformat.MAG) of the shearer magnetometer, one TruthChunk at a time
+    (twin.sensors.chunks); `faults` defaults to the scenario's schedule.
+
+    Random draws: the white noise from `rng` in sample order (each chunk draws its samples' (n, 3) next, the
+    values one draw over the run gives); one direction per untargeted `mag_interference` fault from the child
+    generator rng.spawn(1)[0], drawn at construction. Spawning does not advance `rng`, so the faults leave the
+    noise as it is and a fault changes the stream only inside its window; `rng` must carry its SeedSequence (as
+    default_rng(seed) does). (Before the stream was drawn in chunks the directions came from `rng` after the
+    noise: the noise is the same as then, the directions are not.)"""
+
+    def __init__(self, scn: Scenario, rng: np.random.Generator, faults: Iterable[Fault] | None = None):
+        self.scn = scn
+        self.cfg = scn.sensors.mag
+        self.field_n = site_field_n(scn)
+        self.rng = rng
+        self.interference = interference_directions(scn.faults if faults is None else faults, rng.spawn(1)[0])
+
+    def step(self, chunk: TruthChunk) -> dict[str, np.ndarray]:
+        """The readings the chunk owns, b_x, b_y, b_z [T] in b; the truth columns t, q_nb_*, v_n_*, phase are read."""
+        cfg = self.cfg
+        shearer, _ = chunk.padded()
+        t = clock_in_chunk(chunk, cfg.rate_hz)
+        q_nb = shearer_attitude_at(shearer, t)
+        b_b = soft_iron_rows(quat_rotate(quat_conj(q_nb), self.field_n), np.asarray(cfg.soft_iron, float))
+        b_b += np.asarray(cfg.hard_iron_t, float)
+        if any(cfg.motor_disturbance_t):
+            b_b += motor_factor(self.scn, shearer, t)[:, None] * np.asarray(cfg.motor_disturbance_t, float)
+        if cfg.noise_t > 0:
+            b_b += self.rng.normal(0.0, cfg.noise_t, b_b.shape)
+        b_b += interference_field(t, self.interference)
+        return {"t": t, "b_x": b_b[:, 0], "b_y": b_b[:, 1], "b_z": b_b[:, 2]}
+
+
 def mag_stream(scn: Scenario, shearer: dict, rng: np.random.Generator,
                faults: Iterable[Fault] | None = None) -> dict[str, np.ndarray]:
-    """The MAG stream (estimators.io.logformat.MAG) of the shearer magnetometer from the shearer truth.
-
-    `shearer` holds the truth_shearer columns; `faults` defaults to the scenario's schedule. Random draws, in
-    this order: the noise, then one direction per untargeted `mag_interference` fault; so adding a fault
-    changes the stream only inside the fault's window.
-    """
-    cfg = scn.sensors.mag
-    faults = list(scn.faults if faults is None else faults)
-    t = sample_times(float(shearer["t"][0]), float(shearer["t"][-1]), cfg.rate_hz)
-    q_nb = shearer_attitude_at(shearer, t)
-    b_b = quat_rotate(quat_conj(q_nb), site_field_n(scn)) @ np.asarray(cfg.soft_iron, float).T
-    b_b += np.asarray(cfg.hard_iron_t, float)
-    if any(cfg.motor_disturbance_t):
-        b_b += motor_factor(scn, shearer, t)[:, None] * np.asarray(cfg.motor_disturbance_t, float)
-    if cfg.noise_t > 0:
-        b_b += rng.normal(0.0, cfg.noise_t, b_b.shape)
-    b_b += interference_field(t, faults, rng)
-    return {"t": t, "b_x": b_b[:, 0], "b_y": b_b[:, 1], "b_z": b_b[:, 2]}
+    """The MAG stream of a whole run: the Magnetometer over the truth_shearer columns in one chunk."""
+    return Magnetometer(scn, rng, faults).step(next(split_truth(shearer, [], halo_rows(scn))))
 
 
 tilt_compensated_heading = tilt_compensated_yaw

@@ -57,6 +57,7 @@ import numpy as np
 from estimators.nav.rotations import euler_to_mat
 from twin.config.scenario import Scenario
 from twin.config.sensors import Fault
+from twin.sensors.chunks import TruthChunk, halo_rows, split_truth
 from twin.sensors.clock import sample_times
 from twin.sensors.faults import faults_of, window_overlap
 
@@ -85,34 +86,62 @@ def speed_along_axis(shearer: dict[str, np.ndarray], axis_b: np.ndarray) -> np.n
     return row_e * v[0] + row_n * v[1] + row_u * v[2]
 
 
+def clock_in_chunk(chunk: TruthChunk, rate_hz: float) -> np.ndarray:
+    """The sample times [s] of a sensor clock at rate_hz (twin.sensors.clock.sample_times between the run's first
+    and last truth times) that the chunk's readings hold: those it owns, and on the last chunk every clock time up
+    to the run's last truth time as sample_times takes it (within its rounding tolerance)."""
+    t = sample_times(float(chunk.rows["t"][0]), chunk.t_end, rate_hz)
+    keep = chunk.owns(t)
+    if chunk.last:
+        keep |= t > chunk.t_end
+    return t[keep]
+
+
+class Odometer:
+    """The ODOMETER stream (t, distance, pulses, direction) at scn.sensors.odometer.rate_hz, one TruthChunk at a
+    time (twin.sensors.chunks). `faults` is the scenario's fault schedule (only odometer_slip acts here).
+
+    Carries the sprocket's pulse phase u (drawn once, at construction: the model's only draw from `rng`) and
+    the encoder travel [m] at the next chunk's first truth row (the trapezoid sum of v_y^m from the run's start,
+    slip applied)."""
+
+    def __init__(self, scn: Scenario, rng: np.random.Generator, faults: list[Fault]):
+        cfg = scn.sensors.odometer
+        self.rate_hz = cfg.rate_hz
+        self.metres_per_pulse = cfg.metres_per_pulse
+        self.pulse_m = cfg.metres_per_pulse * (1.0 + cfg.scale_error)  # true metres per pulse
+        self.axis_b = odometer_axis_b(cfg.mounting_deg)
+        self.slips = faults_of(faults, "odometer_slip")
+        self.phase = rng.random()
+        self.travel = 0.0
+
+    def step(self, chunk: TruthChunk) -> dict[str, np.ndarray]:
+        """The readings the chunk owns; the truth columns t, v_n_*, q_nb_* are read."""
+        cols, own = chunk.padded()
+        rows = slice(own.start, own.stop + (not chunk.last))  # its rows and the next chunk's first
+        t = np.asarray(cols["t"][rows], dtype=float)
+        v_axis = speed_along_axis({k: v[rows] for k, v in cols.items()}, self.axis_b)
+
+        # Encoder travel: trapezoidal increments of v_y^m, reduced inside slip windows, cumulated from the carry.
+        step = 0.5 * (v_axis[1:] + v_axis[:-1]) * np.diff(t)
+        for fault in self.slips:
+            step *= 1.0 - fault.value * window_overlap(t[:-1], t[1:], fault)
+        travel = np.cumsum(np.concatenate(([self.travel], step)))
+        self.travel = float(travel[-1])
+
+        t_out = clock_in_chunk(chunk, self.rate_hz)
+        pulses = np.floor(np.interp(t_out, t, travel) / self.pulse_m + self.phase).astype(np.int64)
+        speed = np.interp(t_out, t, v_axis)
+        direction = np.where(np.abs(speed) < STANDSTILL_M_S, 0, np.sign(speed)).astype(np.int8)
+        return {"t": t_out, "distance": pulses * self.metres_per_pulse, "pulses": pulses, "direction": direction}
+
+
 def odometer_stream(scn: Scenario, shearer: dict[str, np.ndarray], rng: np.random.Generator,
                     faults: list[Fault]) -> dict[str, np.ndarray]:
-    """The ODOMETER stream (t, distance, pulses, direction) at scn.sensors.odometer.rate_hz.
-
-    `shearer` holds the truth_shearer columns (t, v_n_*, q_nb_* are used); `faults` the scenario's fault
-    schedule (only odometer_slip acts here).
-    """
-    cfg = scn.sensors.odometer
-    t = np.asarray(shearer["t"], dtype=float)
-    if t.size == 0:
-        empty = np.zeros(0)
-        return {"t": empty, "distance": empty.copy(), "pulses": np.zeros(0, np.int64),
+    """The ODOMETER stream of a whole run: the Odometer over the truth_shearer columns in one chunk."""
+    odometer = Odometer(scn, rng, faults)
+    chunk = next(split_truth(shearer, [], halo_rows(scn)), None)
+    if chunk is None:  # no truth: no readings
+        return {"t": np.zeros(0), "distance": np.zeros(0), "pulses": np.zeros(0, np.int64),
                 "direction": np.zeros(0, np.int8)}
-    v_axis = speed_along_axis(shearer, odometer_axis_b(cfg.mounting_deg))
-
-    # Encoder travel: trapezoidal increments of v_y^m, reduced inside slip windows, cumulated from 0.
-    dt = np.diff(t)
-    step = 0.5 * (v_axis[1:] + v_axis[:-1]) * dt
-    for fault in faults_of(faults, "odometer_slip"):
-        step *= 1.0 - fault.value * window_overlap(t[:-1], t[1:], fault)
-    travel = np.concatenate(([0.0], np.cumsum(step)))
-
-    t_out = sample_times(t[0], t[-1], cfg.rate_hz)
-    travel_out = np.interp(t_out, t, travel)
-    pulse_m = cfg.metres_per_pulse * (1.0 + cfg.scale_error)
-    phase = rng.random()
-    pulses = np.floor(travel_out / pulse_m + phase).astype(np.int64)
-
-    speed = np.interp(t_out, t, v_axis)
-    direction = np.where(np.abs(speed) < STANDSTILL_M_S, 0, np.sign(speed)).astype(np.int8)
-    return {"t": t_out, "distance": pulses * cfg.metres_per_pulse, "pulses": pulses, "direction": direction}
+    return odometer.step(chunk)

@@ -9,10 +9,14 @@ import pytest
 
 from estimators.io.logformat import FAULTS, ODOMETER, PUSHRAM, check_table, make_table
 from estimators.nav.rotations import euler_to_quat, quat_rotate
+from tests.conftest import simulated
+from tests.twin.sensors.test_survey_chunks import joined, random_starts, same
 from twin.config.scenario import ScenarioError, parse_scenario
+from twin.config.sensors import Fault
 from twin.face.layout import support_stations
+from twin.sensors.chunks import halo_rows, split_truth
 from twin.sensors.faults import check_faults_in_run, faults_table, window_mask
-from twin.sensors.odometer import odometer_stream
+from twin.sensors.odometer import Odometer, odometer_stream
 from twin.sensors.pushram import pushram_stream, rail_deviation_m
 
 MPP = 0.002
@@ -117,6 +121,28 @@ def test_odometer_slip_only_inside_window():
     lost = 0.25 * 0.12 * 100.0 / MPP  # pulses missed in the window, not recovered afterwards
     assert set(np.unique(diff[t >= 200.0])) <= {math.floor(lost), math.ceil(lost)}
     assert np.array_equal(clean["direction"], slipped["direction"])
+
+
+@pytest.mark.parametrize("rate", [50.0, 30.0])
+@pytest.mark.parametrize("seed", range(3))
+def test_odometer_over_random_partitions_is_the_whole_run(rate, seed):
+    """The default run (both directions of travel) with two overlapping slip windows; at 30 Hz the readings fall
+    between truth rows (interpolated from the halo)."""
+    base, result = simulated("default")
+    data = base.model_dump()
+    data["sensors"]["odometer"]["rate_hz"] = rate
+    scn = parse_scenario(data, "default")
+    truth = result.tables["truth_shearer"]
+    halo = halo_rows(scn)
+    slips = [Fault(kind="odometer_slip", t_start_s=300.0013, t_end_s=700.0, value=0.3),
+             Fault(kind="odometer_slip", t_start_s=650.0, t_end_s=1400.007, value=0.5)]
+    whole = odometer_stream(scn, truth, np.random.default_rng(1), slips)
+    edges = np.searchsorted(truth["t"], [t for f in slips for t in (f.t_start_s, f.t_end_s)])
+    chunks = list(split_truth(truth, random_starts(np.random.default_rng(seed), truth["t"].size, halo, edges), halo))
+    odometer = Odometer(scn, np.random.default_rng(1), slips)
+    assert same(joined([odometer.step(c) for c in chunks]), whole)
+    # The comparison catches a stepper that does not carry its travel on (an Odometer per chunk).
+    assert not same(joined([Odometer(scn, np.random.default_rng(1), slips).step(c) for c in chunks]), whole)
 
 
 # ----------------------------------------------------------------------------------------------- push rams
