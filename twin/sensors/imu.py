@@ -17,6 +17,11 @@ is analytic (sums of sines with random phases and a smooth amplitude envelope pe
 interval is integrated with 4-point Gauss-Legendre quadrature, exact for the cubic body part and to ~1e-12
 relative for vibration up to 40 Hz at 200 Hz, so an uncompensated mechanization shows exactly the coning and
 sculling the vibration creates, and a compensated one removes it.
+
+A streaming run hands over its truth in chunks (twin.sensors.chunks); `IdealImu` gives each chunk's IMU samples,
+bit for bit those of the whole run in one chunk: a truth interval's increment reads the truth up to ENVELOPE_S
+and a sample to either side (the envelope, its slope, the derivatives of w and f), inside the chunk's halo
+(HALO_S), and the truth intervals of an IMU sample that straddles two chunks are carried to the next.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ from estimators.nav.rotations import euler_to_mat, quat_conj, quat_rotate
 from twin.config.scenario import Scenario
 from twin.config.sensors import VibrationState
 from twin.face.haulage import STOPPED
+from twin.sensors.chunks import TruthChunk
 
 G0 = 9.80665
 GL_NODES = np.array([-0.8611363115940526, -0.3399810435848563, 0.3399810435848563, 0.8611363115940526])
@@ -38,6 +44,12 @@ GL_WEIGHTS = np.array([0.3478548451374538, 0.6521451548625461, 0.652145154862546
 
 # Machine states of the vibration model.
 IDLE, COAL, ROCK = range(3)
+
+VIBRATION_STREAM = 1000
+"""Key of the run's vibration generator, np.random.default_rng([scn.seed, VIBRATION_STREAM]): the vibration's
+phases belong to the machine's motion, drawn once per run, not per Monte Carlo trial."""
+ENVELOPE_S = 0.5
+"""Length [s] of each of the two boxcars that smooth the machine state into the vibration envelope."""
 
 
 @dataclass(frozen=True)
@@ -77,14 +89,43 @@ def machine_state(scn: Scenario, phase: np.ndarray, s: np.ndarray) -> np.ndarray
     return state
 
 
-def state_envelope(state: np.ndarray, t: np.ndarray, n_states: int = 3) -> np.ndarray:
-    """Weights (K, n_states) of each machine state's tones: one-hot per sample, smoothed over about a second
-    (a boxcar twice, so the envelope's slope is continuous and its curvature bounded)."""
-    amp = np.zeros((t.size, n_states))
-    amp[np.arange(t.size), state] = 1.0
-    width = max(1, int(0.5 / np.median(np.diff(t))))
-    kernel = np.convolve(np.ones(width), np.ones(width)) / width ** 2
-    return np.column_stack([np.convolve(amp[:, j], kernel, mode="same") for j in range(n_states)])
+def state_envelope(state: np.ndarray, rate_hz: float, n_states: int = 3) -> np.ndarray:
+    """Weights (K, n_states) of each machine state's tones for the states (K,) of samples at rate_hz: one-hot per
+    sample, smoothed by a boxcar of ENVELOPE_S twice (a triangle reaching width - 1 samples to each side, so the
+    envelope's slope is continuous and its curvature bounded).
+
+    The convolution is done in integers and divided once at the end, so a sample's weight does not depend on how
+    far the array extends beyond the triangle's reach (a chunk of the run gives the whole run's values)."""
+    width = max(1, int(ENVELOPE_S * rate_hz))  # 100 samples at 200 Hz
+    box = np.ones(width, dtype=np.int64)
+    kernel = np.convolve(box, box)  # 1, 2, .., width, .., 2, 1
+    onehot = (np.asarray(state)[:, None] == np.arange(n_states)).astype(np.int64)
+    centred = slice(width - 1, width - 1 + onehot.shape[0])  # np.convolve's mode="same", for any array length
+    return np.column_stack([np.convolve(onehot[:, j], kernel)[centred] for j in range(n_states)]) / width ** 2
+
+
+def time_derivative(y: np.ndarray, t: np.ndarray, edge_order: int = 1) -> np.ndarray:
+    """dy/dt (K, ...) of samples y (K, ...) at times t (K,) [s]: np.gradient's second-order formulas for uneven
+    steps in the interior and of order edge_order (1 or 2) at the ends, used whatever the steps. (np.gradient
+    switches to its even-step formula when every step of the array is equal, so its values would depend, in the
+    last bit, on how far the array extends.)"""
+    if y.shape[0] < edge_order + 1:
+        raise ValueError(f"a derivative of order-{edge_order} edges needs {edge_order + 1} samples, got {y.shape[0]}")
+    dx = np.diff(t).reshape((-1,) + (1,) * (y.ndim - 1))
+    d1, d2 = dx[:-1], dx[1:]
+    out = np.empty_like(y, dtype=float)
+    out[1:-1] = -d2 / (d1 * (d1 + d2)) * y[:-2] + (d2 - d1) / (d1 * d2) * y[1:-1] + d1 / (d2 * (d1 + d2)) * y[2:]
+    if edge_order == 1:
+        out[0] = (y[1] - y[0]) / dx[0]
+        out[-1] = (y[-1] - y[-2]) / dx[-1]
+    else:
+        d1, d2 = dx[0], dx[1]
+        out[0] = (-(2. * d1 + d2) / (d1 * (d1 + d2)) * y[0] + (d1 + d2) / (d1 * d2) * y[1]
+                  - d1 / (d2 * (d1 + d2)) * y[2])
+        d1, d2 = dx[-2], dx[-1]
+        out[-1] = (d2 / (d1 * (d1 + d2)) * y[-3] - (d2 + d1) / (d1 * d2) * y[-2]
+                   + (2. * d2 + d1) / (d2 * (d1 + d2)) * y[-1])
+    return out
 
 
 @nb.njit(cache=True, inline="always")
@@ -226,14 +267,15 @@ def _increments_kernel(t, w, dw, f, df, amp_state, amp_rate, freq, ang_amp, lin_
 
 def sensor_increments(t: np.ndarray, w_ib_b: np.ndarray, f_b: np.ndarray, amp_state: np.ndarray,
                       tones: VibrationTones, lever_arm_b: np.ndarray, mat_bs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Increments (K, 3) of a sensor at lever_arm_b with axes C_s^b = mat_bs Exp(phi(t)) on a body with
-    samples of w_ib^b and f^b at times t; amp_state (K, n_states) weighs the tones of each state (its time
-    derivative is taken from the samples)."""
+    """Increments (K, 3) [rad], [m/s] over (t[k-1], t[k]] (row 0 zero) of a sensor at lever_arm_b [m] with axes
+    C_s^b = mat_bs Exp(phi(t)) on a body with samples of w_ib^b [rad/s] and f^b [m/s^2] at times t [s] (K >= 3);
+    amp_state (K, n_states) weighs the tones of each state. The time derivatives of w, f and amp_state are taken
+    from the samples (`time_derivative`): row k's increment reads rows k - 2 .. k + 1."""
     dtheta, dv = np.zeros_like(w_ib_b), np.zeros_like(f_b)
     amp_state = np.ascontiguousarray(amp_state, float)
-    amp_rate = np.gradient(amp_state, t, axis=0) if t.size > 1 else np.zeros_like(amp_state)
-    dw = np.gradient(w_ib_b, t, axis=0, edge_order=2)
-    df = np.gradient(f_b, t, axis=0, edge_order=2)
+    amp_rate = time_derivative(amp_state, t)
+    dw = time_derivative(w_ib_b, t, edge_order=2)
+    df = time_derivative(f_b, t, edge_order=2)
     _increments_kernel(t, w_ib_b, dw, f_b, df, amp_state, amp_rate, tones.freq_hz, tones.ang_amp, tones.lin_amp,
                        tones.phase_ang, tones.phase_lin, np.asarray(lever_arm_b, float), mat_bs, GL_NODES,
                        GL_WEIGHTS, dtheta, dv)
@@ -260,23 +302,66 @@ def mounting_matrix(misalignment_deg) -> np.ndarray:
     return euler_to_mat(m[0], m[1], m[2])
 
 
-def ideal_increments(scn: Scenario, shearer: dict[str, np.ndarray], rng: np.random.Generator,
-                     vibration: bool | None = None) -> dict[str, np.ndarray]:
-    """Error-free IMU increments at the truth rate (IMU stream columns; the first row is zero).
+def _tones(scn: Scenario, rng: np.random.Generator) -> VibrationTones:
+    vib = scn.sensors.vibration
+    return vibration_tones([vib.idle, vib.cutting_coal, vib.cutting_rock], rng)
 
-    `vibration` overrides the scenario's sensors.vibration.enabled (False for the round-trip checks).
-    """
+
+def _truth_increments(scn: Scenario, shearer: dict[str, np.ndarray], tones: VibrationTones, vibration: bool
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Error-free increments dtheta [rad] and dv [m/s] (K, 3) in the sensor frame over the truth intervals
+    (t[k-1], t[k]] of the truth_shearer columns `shearer` (row 0 zero)."""
     cfg = scn.sensors
     t = shearer["t"]
     w = np.column_stack([shearer[f"w_ib_b_{a}"] for a in "xyz"])
     f = np.column_stack([shearer[f"f_b_{a}"] for a in "xyz"])
-    vib = cfg.vibration
-    on = vib.enabled if vibration is None else vibration
-    tones = vibration_tones([vib.idle, vib.cutting_coal, vib.cutting_rock], rng)
-    amp_state = state_envelope(machine_state(scn, shearer["phase"], shearer["s"]), t) if on else np.zeros((t.size, 3))
+    amp_state = (state_envelope(machine_state(scn, shearer["phase"], shearer["s"]), scn.rates.truth_hz) if vibration
+                 else np.zeros((t.size, 3)))
     lever = np.asarray(cfg.imu.lever_arm_m, float)
     # f = a - g: the sensor's specific force loses what its own gravity adds over the reference point's.
     f = f - gravity_at_lever_arm_b(shearer, lever)
-    dtheta, dv = sensor_increments(t, w, f, amp_state, tones, lever, mounting_matrix(cfg.imu.misalignment_deg))
-    return {"t": t, **{f"dtheta_{a}": dtheta[:, i] for i, a in enumerate("xyz")},
+    return sensor_increments(t, w, f, amp_state, tones, lever, mounting_matrix(cfg.imu.misalignment_deg))
+
+
+def ideal_increments(scn: Scenario, shearer: dict[str, np.ndarray], rng: np.random.Generator,
+                     vibration: bool | None = None) -> dict[str, np.ndarray]:
+    """Error-free IMU increments at the truth rate (IMU stream columns: t [s], dtheta_* [rad], dv_* [m/s]; the
+    first row is zero), the vibration's tones drawn from rng.
+
+    `vibration` overrides the scenario's sensors.vibration.enabled (False for the round-trip checks).
+    """
+    on = scn.sensors.vibration.enabled if vibration is None else vibration
+    dtheta, dv = _truth_increments(scn, shearer, _tones(scn, rng), on)
+    return {"t": shearer["t"], **{f"dtheta_{a}": dtheta[:, i] for i, a in enumerate("xyz")},
             **{f"dv_{a}": dv[:, i] for i, a in enumerate("xyz")}}
+
+
+class IdealImu:
+    """The error-free shearer IMU of a run handed over in TruthChunks (twin.sensors.chunks).
+
+    The vibration's tones are drawn once, from np.random.default_rng([scn.seed, VIBRATION_STREAM]); `vibration`
+    overrides the scenario's sensors.vibration.enabled. An IMU sample at scn.sensors.imu.rate_hz sums `group`
+    consecutive truth intervals (1 .. group, group + 1 .. 2 group, ...; the run's row 0 is its start) and is
+    stamped with the last one's time; the truth intervals of a sample not yet complete are held for the next
+    chunk, and those of an incomplete one at the run's end are dropped.
+    """
+
+    def __init__(self, scn: Scenario, vibration: bool | None = None):
+        self.scn = scn
+        self.vibration = scn.sensors.vibration.enabled if vibration is None else vibration
+        self.tones = _tones(scn, np.random.default_rng([scn.seed, VIBRATION_STREAM]))
+        self.group = round(scn.rates.truth_hz / scn.sensors.imu.rate_hz)
+        self._held = (np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)))  # t, dtheta, dv of the incomplete sample
+
+    def step(self, chunk: TruthChunk) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The IMU samples the chunk owns: t (N,) [s], dtheta (N, 3) [rad] and dv (N, 3) [m/s] in the sensor
+        frame, each over (t - 1 / rate_hz, t]."""
+        cols, own = chunk.padded()
+        dtheta, dv = _truth_increments(self.scn, cols, self.tones, self.vibration)
+        rows = slice(own.start + 1 if chunk.first else own.start, own.stop)
+        t, dtheta, dv = (np.concatenate([held, new[rows]]) for held, new in zip(self._held, (cols["t"], dtheta, dv)))
+        g = self.group
+        n = t.size // g
+        self._held = (t[n * g:], dtheta[n * g:], dv[n * g:])
+        dtheta, dv = (x[:n * g].reshape(n, g, 3).sum(axis=1) if g > 1 else x for x in (dtheta, dv))
+        return t[g - 1:n * g:g], dtheta, dv

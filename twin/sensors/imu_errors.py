@@ -21,6 +21,10 @@ output is a whole number of steps and the running sum stays within half a step o
 Randomness: the generator passed in seeds five independent child streams (constants, gyro drift, gyro noise,
 accelerometer drift, accelerometer noise), so the same seed gives the same output and, across grades, the same
 underlying unit draws (common random numbers): par4 and par5 differ only by the scale of one noise record.
+
+A run may be fed in blocks (`ImuErrorModel.step`, as a streaming run hands over its truth): beta, the quantizer
+residual, the clip counts and the generators carry on from block to block, so any split of a run gives, bit for
+bit, the output of one block (`apply_imu_errors`).
 """
 
 from __future__ import annotations
@@ -61,26 +65,26 @@ class ImuErrorInfo:
 
 
 @nb.njit(cache=True, nogil=True)
-def _sensor_kernel(ideal, m, bias_dt, dt, gm_sigma, phi, gm_gen, noise_std, noise_gen, lim, q, out, drift, keep):
-    """One sensor's error model over all samples (see the module docstring); returns the clip count per axis.
+def _sensor_kernel(ideal, m, bias_dt, dt, gm_sigma, phi, gm_gen, noise_std, noise_gen, lim, q, out, drift, keep, first,
+                   beta, resid, clipped):
+    """One sensor's error model over a block of samples (see the module docstring), writing out (N, 3).
 
-    The unit normals are drawn here, sample by sample and axis by axis, from gm_gen (only if gm_sigma > 0)
-    and noise_gen (only if noise_std > 0); drift receives beta when keep is True. Runs without the GIL, so
-    the two sensors can run on two threads.
+    Carried from block to block, read and updated in place: beta (3,) the Gauss-Markov bias [rad/s or m/s^2],
+    resid (3,) the quantizer's residual [rad or m/s], clipped (3,) the saturated samples per axis; first says
+    whether the block's sample 0 is the run's first (beta_0 is drawn there). The unit normals are drawn here,
+    sample by sample and axis by axis, from gm_gen (only if gm_sigma > 0) and noise_gen (only if noise_std > 0);
+    drift (N, 3) receives beta when keep is True. Runs without the GIL, so the two sensors can run on two threads.
     """
     n = ideal.shape[0]
     has_gm = gm_sigma > 0.0
     has_noise = noise_std > 0.0
     drive = gm_sigma * np.sqrt(1.0 - phi * phi)
-    beta = np.zeros(3)
-    resid = np.zeros(3)
-    clipped = np.zeros(3, dtype=np.int64)
     for k in range(n):
         x0, x1, x2 = ideal[k, 0], ideal[k, 1], ideal[k, 2]
         for i in range(3):
             x = m[i, 0] * x0 + m[i, 1] * x1 + m[i, 2] * x2 + bias_dt[i]
             if has_gm:
-                if k == 0:
+                if first and k == 0:
                     beta[i] = gm_sigma * gm_gen.standard_normal()
                 else:
                     beta[i] = phi * beta[i] + drive * gm_gen.standard_normal()
@@ -102,7 +106,6 @@ def _sensor_kernel(ideal, m, bias_dt, dt, gm_sigma, phi, gm_gen, noise_std, nois
                 out[k, i] = y
             else:
                 out[k, i] = x
-    return clipped
 
 
 def _check_increments(name: str, a) -> np.ndarray:
@@ -122,58 +125,95 @@ def _sensor_matrix(scale: float, nonorth: float, z: np.ndarray) -> np.ndarray:
     return m
 
 
-def _run_sensor(ideal, m, bias, dt, sigma, tau, density, rate_range, quant, gm_gen, noise_gen, keep):
-    n = ideal.shape[0]
-    phi = float(np.exp(-dt / tau)) if sigma > 0.0 else 0.0
-    out = np.empty((n, 3))
-    drift = np.zeros((n, 3)) if keep else np.empty((0, 3))
-    lim = rate_range * dt  # inf stays inf
-    clipped = _sensor_kernel(ideal, m, bias * dt, dt, float(sigma), phi, gm_gen, density * np.sqrt(dt), noise_gen,
-                             lim, float(quant), out, drift, keep)
-    return out, clipped, (drift if keep else None)
+class _Sensor:
+    """One sensor (gyroscope or accelerometer) of a run: its drawn constants, its two generators and the state
+    carried between blocks (beta, the quantizer residual, the clip counts, the drift records if kept)."""
+
+    def __init__(self, m, bias, dt, sigma, tau, density, rate_range, quant, gm_gen, noise_gen, keep):
+        self.m, self.bias = m, bias
+        phi = float(np.exp(-dt / tau)) if sigma > 0.0 else 0.0
+        self._consts = (m, bias * dt, dt, float(sigma), phi, gm_gen, density * np.sqrt(dt), noise_gen,
+                        rate_range * dt, float(quant))  # rate_range * dt: inf stays inf
+        self.beta, self.resid = np.zeros(3), np.zeros(3)
+        self.clipped = np.zeros(3, dtype=np.int64)
+        self.drift: list[np.ndarray] | None = [] if keep else None
+
+    def run(self, ideal: np.ndarray, first: bool) -> np.ndarray:
+        keep = self.drift is not None
+        out = np.empty((ideal.shape[0], 3))
+        drift = np.zeros((ideal.shape[0], 3)) if keep else np.empty((0, 3))
+        _sensor_kernel(ideal, *self._consts, out, drift, keep, first, self.beta, self.resid, self.clipped)
+        if keep:
+            self.drift.append(drift)
+        return out
+
+    def drift_record(self) -> np.ndarray | None:
+        if self.drift is None:
+            return None
+        return np.concatenate(self.drift) if self.drift else np.zeros((0, 3))
+
+
+class ImuErrorModel:
+    """A sensor's errors over a run fed in consecutive blocks of ideal increments (`step`); stepping the run in
+    blocks gives, bit for bit, what one step over the whole run gives.
+
+    dt: the sample interval [s]; g: the error budget; rng: the run's generator (advanced here by one draw of four
+    seeds, from which the constants are drawn and the per-sample generators made). keep_drift=True also records
+    the Gauss-Markov bias per sample (in `info`). `samples` counts the samples stepped so far.
+    """
+
+    def __init__(self, dt: float, g: ImuGrade, rng: np.random.Generator, *, keep_drift: bool = False):
+        dt = float(dt)
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive finite number, got {dt!r}")
+        if not isinstance(g, ImuGrade):
+            raise TypeError(f"g must be an ImuGrade, got {type(g).__name__}")
+        if not isinstance(rng, np.random.Generator):
+            raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
+        seq = np.random.SeedSequence(rng.integers(0, 2 ** 63, size=4))
+        gens = [np.random.Generator(np.random.PCG64(child)) for child in seq.spawn(_N_STREAMS)]
+        z = gens[_CONST].standard_normal(18)
+        self.gyro = _Sensor(_sensor_matrix(g.gyro_scale, g.gyro_nonorth, z[3:9]), g.gyro_bias * z[0:3], dt,
+                            g.gyro_bias_instability, g.gyro_bias_tau, g.gyro_arw, g.gyro_range, g.gyro_quant,
+                            gens[_GYRO_DRIFT], gens[_GYRO_NOISE], keep_drift)
+        self.accel = _Sensor(_sensor_matrix(g.accel_scale, g.accel_nonorth, z[12:18]), g.accel_bias * z[9:12], dt,
+                             g.accel_bias_instability, g.accel_bias_tau, g.accel_vrw, g.accel_range, g.accel_quant,
+                             gens[_ACCEL_DRIFT], gens[_ACCEL_NOISE], keep_drift)
+        self.samples = 0
+
+    def step(self, dtheta, dv) -> tuple[np.ndarray, np.ndarray]:
+        """The reported increments (new arrays) for the next block of ideal increments dtheta [rad] and dv [m/s],
+        both (N, 3), the samples following those of the previous steps."""
+        dtheta = _check_increments("dtheta", dtheta)
+        dv = _check_increments("dv", dv)
+        if dtheta.shape != dv.shape:
+            raise ValueError(f"dtheta and dv must have the same shape, got {dtheta.shape} and {dv.shape}")
+        first = self.samples == 0
+        if dtheta.shape[0] >= _THREAD_MIN_SAMPLES:
+            # The kernel releases the GIL and each sensor owns its streams: same result as the serial path.
+            with ThreadPoolExecutor(max_workers=2) as pool:
+                gyro_job = pool.submit(self.gyro.run, dtheta, first)
+                out_dv = self.accel.run(dv, first)
+                out_th = gyro_job.result()
+        else:
+            out_th = self.gyro.run(dtheta, first)
+            out_dv = self.accel.run(dv, first)
+        self.samples += dtheta.shape[0]
+        return out_th, out_dv
+
+    @property
+    def info(self) -> ImuErrorInfo:
+        """The constants drawn, the clip counts and (with keep_drift) the drift records of the samples so far."""
+        return ImuErrorInfo(self.gyro.bias, self.accel.bias, self.gyro.m, self.accel.m, self.gyro.clipped.copy(),
+                            self.accel.clipped.copy(), self.gyro.drift_record(), self.accel.drift_record())
 
 
 def apply_imu_errors(dtheta, dv, dt: float, g: ImuGrade, rng: np.random.Generator, *, keep_drift: bool = False
                      ) -> tuple[np.ndarray, np.ndarray, ImuErrorInfo]:
-    """The increments the sensor reports for ideal increments `dtheta` [rad] and `dv` [m/s], both (N, 3).
-
-    dt: the sample interval [s]; g: the error budget; rng: the run's generator (advanced by one draw of four
-    seeds). keep_drift=True also returns the Gauss-Markov bias records in the info. Returns new arrays
-    (dtheta, dv) and the drawn constants.
+    """The increments the sensor reports for ideal increments `dtheta` [rad] and `dv` [m/s], both (N, 3): an
+    ImuErrorModel(dt, g, rng, keep_drift=keep_drift) stepped once. Returns new arrays (dtheta, dv) and the drawn
+    constants.
     """
-    dtheta = _check_increments("dtheta", dtheta)
-    dv = _check_increments("dv", dv)
-    if dtheta.shape != dv.shape:
-        raise ValueError(f"dtheta and dv must have the same shape, got {dtheta.shape} and {dv.shape}")
-    dt = float(dt)
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive finite number, got {dt!r}")
-    if not isinstance(g, ImuGrade):
-        raise TypeError(f"g must be an ImuGrade, got {type(g).__name__}")
-    if not isinstance(rng, np.random.Generator):
-        raise TypeError(f"rng must be a numpy.random.Generator, got {type(rng).__name__}")
-
-    seq = np.random.SeedSequence(rng.integers(0, 2 ** 63, size=4))
-    gens = [np.random.Generator(np.random.PCG64(child)) for child in seq.spawn(_N_STREAMS)]
-
-    z = gens[_CONST].standard_normal(18)
-    gyro_bias = g.gyro_bias * z[0:3]
-    gyro_m = _sensor_matrix(g.gyro_scale, g.gyro_nonorth, z[3:9])
-    accel_bias = g.accel_bias * z[9:12]
-    accel_m = _sensor_matrix(g.accel_scale, g.accel_nonorth, z[12:18])
-
-    gyro_args = (dtheta, gyro_m, gyro_bias, dt, g.gyro_bias_instability, g.gyro_bias_tau, g.gyro_arw,
-                 g.gyro_range, g.gyro_quant, gens[_GYRO_DRIFT], gens[_GYRO_NOISE], keep_drift)
-    accel_args = (dv, accel_m, accel_bias, dt, g.accel_bias_instability, g.accel_bias_tau, g.accel_vrw,
-                  g.accel_range, g.accel_quant, gens[_ACCEL_DRIFT], gens[_ACCEL_NOISE], keep_drift)
-    if dtheta.shape[0] >= _THREAD_MIN_SAMPLES:
-        # The kernel releases the GIL and each sensor owns its streams: same result as the serial path.
-        with ThreadPoolExecutor(max_workers=2) as pool:
-            gyro_job = pool.submit(_run_sensor, *gyro_args)
-            out_dv, clip_a, drift_a = _run_sensor(*accel_args)
-            out_th, clip_g, drift_g = gyro_job.result()
-    else:
-        out_th, clip_g, drift_g = _run_sensor(*gyro_args)
-        out_dv, clip_a, drift_a = _run_sensor(*accel_args)
-    info = ImuErrorInfo(gyro_bias, accel_bias, gyro_m, accel_m, clip_g, clip_a, drift_g, drift_a)
-    return out_th, out_dv, info
+    model = ImuErrorModel(dt, g, rng, keep_drift=keep_drift)
+    out_th, out_dv = model.step(dtheta, dv)
+    return out_th, out_dv, model.info

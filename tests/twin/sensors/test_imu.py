@@ -17,14 +17,22 @@ from estimators.nav.rotations import (
 )
 from estimators.sins.strapdown import mechanize
 from tests.conftest import simulated
+from twin.config.scenario import parse_scenario
 from twin.papers.motions import coning, coning_increments_closed_form, sculling
+from twin.sensors import imu
+from twin.sensors.chunks import halo_rows, split_truth
 from twin.sensors.imu import (
     COAL,
+    ENVELOPE_S,
     IDLE,
+    VIBRATION_STREAM,
+    IdealImu,
     ideal_increments,
+    machine_state,
     mounting_matrix,
     sensor_increments,
     state_envelope,
+    time_derivative,
     vibration_tones,
 )
 
@@ -123,9 +131,124 @@ def test_switching_vibration_on_and_off_leaves_no_velocity_behind():
     t = np.arange(0, 30, dt)
     state = np.where((t > 5) & (t < 20), COAL, IDLE)
     zeros = np.zeros((t.size, 3))
-    _, dv = sensor_increments(t, zeros, zeros, state_envelope(state, t), tones, np.zeros(3), np.eye(3))
+    _, dv = sensor_increments(t, zeros, zeros, state_envelope(state, 1 / dt), tones, np.zeros(3), np.eye(3))
     v = np.cumsum(dv, axis=0)  # relative to the (vibrating) start: a constant offset, the same before and after
     before, cutting, after = (v[(t > a) & (t < b)].mean(axis=0) for a, b in ((1, 5), (8, 18), (23, 29)))
     # A drum tone's velocity amplitude is ~4e-3 m/s; a switch that ignored the envelope's slope shifts the mean.
     assert np.abs(cutting - before).max() < 2e-4
     assert np.abs(after - before).max() < 2e-4
+
+
+# ---------------------------------------------------------------------------------------------------------
+# The IMU of a streaming run (issue 24): chunk by chunk as one chunk
+
+
+def _vibrating_start(imu_hz: float) -> tuple:
+    """The default run's first 30 s (idle, then cutting coal from 10 s: the envelope rises inside it) with the
+    shearer IMU at imu_hz, vibration on."""
+    scn, res = simulated("default")
+    data = scn.model_dump()
+    data["sensors"]["imu"]["rate_hz"] = imu_hz
+    scn = parse_scenario(data, "default")
+    truth = {k: v[:6000] for k, v in res.tables["truth_shearer"].items()}
+    state = machine_state(scn, truth["phase"], truth["s"])
+    assert scn.sensors.vibration.enabled and scn.rates.truth_hz == 200.0 and IDLE in state and COAL in state
+    return scn, truth
+
+
+def _stream(scn, truth, starts, halo) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """IdealImu over the truth cut at the rows `starts`, each chunk's samples checked to be its own."""
+    ideal = IdealImu(scn)
+    out = []
+    for chunk in split_truth(truth, starts, halo):
+        out.append(ideal.step(chunk))
+        assert chunk.owns(out[-1][0]).all()
+    return tuple(np.concatenate([o[i] for o in out]) for i in range(3))
+
+
+def _partitions(n: int, group: int, halo: int, rng: np.random.Generator):
+    """Random chunk starts: some long chunks, runs of chunks shorter than the halo (down to one row), the run's
+    start row alone, and cuts inside an IMU sample's group of truth intervals."""
+    yield [1, 2, 3, 2000]
+    for _ in range(4):
+        cuts = rng.choice(np.arange(1, n), 6, replace=False)
+        short = cuts[:3, None] + np.cumsum(rng.integers(1, halo // 3, (3, 4)), axis=1)
+        yield np.concatenate([cuts, short.ravel(), [group * 7 + 2, group * 300 + group - 1]])
+
+
+@pytest.mark.parametrize("imu_hz", [200.0, 40.0])
+def test_ideal_imu_over_any_partition_equals_one_chunk(imu_hz):
+    scn, truth = _vibrating_start(imu_hz)
+    halo = halo_rows(scn)
+    t, dtheta, dv = _stream(scn, truth, [], halo)
+    group = int(scn.rates.truth_hz / imu_hz)
+    assert t.size == (truth["t"].size - 1) // group and t[0] == truth["t"][group]
+    for starts in _partitions(truth["t"].size, group, halo, np.random.default_rng(24)):
+        for whole, parts in zip((t, dtheta, dv), _stream(scn, truth, starts, halo)):
+            np.testing.assert_array_equal(parts, whole)
+
+
+def _float_envelope(state, t, n_states=3):
+    """state_envelope before issue 24: a float kernel, its width from the samples' median step."""
+    amp = np.zeros((t.size, n_states))
+    amp[np.arange(t.size), state] = 1.0
+    width = max(1, int(0.5 / np.median(np.diff(t))))
+    kernel = np.convolve(np.ones(width), np.ones(width)) / width ** 2
+    return np.column_stack([np.convolve(amp[:, j], kernel, mode="same") for j in range(n_states)])
+
+
+def _imu_truth_before_issue_24(scn, truth):
+    """twin.sensors.streams.imu_truth before issue 24 (its start row dropped): the whole run's increments at the
+    truth rate, summed to the IMU rate."""
+    inc = ideal_increments(scn, truth, np.random.default_rng([scn.seed, VIBRATION_STREAM]))
+    step = round(scn.rates.truth_hz / scn.sensors.imu.rate_hz)
+    dtheta = np.column_stack([inc[f"dtheta_{a}"] for a in "xyz"])
+    dv = np.column_stack([inc[f"dv_{a}"] for a in "xyz"])
+    if step > 1:
+        n = (dtheta.shape[0] - 1) // step
+        dtheta = np.concatenate([dtheta[:1], dtheta[1:1 + n * step].reshape(n, step, 3).sum(axis=1)])
+        dv = np.concatenate([dv[:1], dv[1:1 + n * step].reshape(n, step, 3).sum(axis=1)])
+    t = inc["t"][::step][: dtheta.shape[0]]
+    return t[1:], dtheta[1:], dv[1:]
+
+
+@pytest.mark.parametrize("imu_hz", [200.0, 40.0])
+def test_ideal_imu_in_one_chunk_is_the_former_imu_truth(imu_hz, monkeypatch):
+    """The same numbers as before the run streamed, but for the envelope's integer convolution: with the former
+    float envelope bit for bit; with the new one the envelope (100 samples wide at 200 Hz, as the median step gave)
+    moves by its last bit, its slope (a difference over 5 ms) by ~1e-14 /s, and the increments by < 1e-12 of their
+    largest."""
+    scn, truth = _vibrating_start(imu_hz)
+    t = truth["t"]
+    state = machine_state(scn, truth["phase"], truth["s"])
+    old_env, new_env = _float_envelope(state, t), state_envelope(state, scn.rates.truth_hz)
+    assert np.abs(new_env - old_env).max() <= 1e-15
+    assert int(ENVELOPE_S * scn.rates.truth_hz) == 100 == int(0.5 / np.median(np.diff(t)))
+    # np.gradient's formulas for uneven steps, which it uses on the truth times.
+    w = np.column_stack([truth[f"w_ib_b_{a}"] for a in "xyz"])
+    for order in (1, 2):
+        np.testing.assert_array_equal(time_derivative(w, t, order), np.gradient(w, t, axis=0, edge_order=order))
+
+    now = _stream(scn, truth, [], halo_rows(scn))
+    with monkeypatch.context() as m:
+        m.setattr(imu, "state_envelope", lambda s, rate_hz: _float_envelope(s, t))
+        before = _imu_truth_before_issue_24(scn, truth)
+        for a, b in zip(_stream(scn, truth, [], halo_rows(scn)), before):
+            np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(now[0], before[0])
+    for a, b in zip(now[1:], before[1:]):
+        assert np.abs(a - b).max() <= 1e-12 * np.abs(b).max()
+
+
+def test_partition_needs_the_halo():
+    """A chunk reads width + 1 truth rows before it (the envelope's triangle reaches width - 1 rows, its slope
+    and the interval one more each) and width after: with that halo a partition gives the one chunk's numbers,
+    with one row less, or a halo of 1, it does not. halo_rows (HALO_S = 1 s) has twice the reach."""
+    scn, truth = _vibrating_start(200.0)
+    width = int(ENVELOPE_S * scn.rates.truth_hz)
+    assert halo_rows(scn) >= 2 * (width + 1)
+    whole = _stream(scn, truth, [], halo_rows(scn))
+    starts = [700, 1500, 1990, 2010, 2100, 2300, 4000]
+    for halo, same in ((width + 1, True), (width, False), (1, False)):
+        parts = _stream(scn, truth, starts, halo)
+        assert all(np.array_equal(a, b) for a, b in zip(parts, whole)) == same, halo

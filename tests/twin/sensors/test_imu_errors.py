@@ -22,7 +22,7 @@ from twin.config.imu_grades import (
     grade,
 )
 from twin.sensors import imu_errors
-from twin.sensors.imu_errors import apply_imu_errors
+from twin.sensors.imu_errors import ImuErrorModel, apply_imu_errors
 
 FS = 200.0
 DT = 1.0 / FS
@@ -257,6 +257,30 @@ def test_same_seed_same_output_different_seed_different(monkeypatch):
     np.testing.assert_array_equal(s[1], a[1])
 
 
+def test_stepping_in_blocks_equals_one_step():
+    """ImuErrorModel fed a run in blocks (empty ones, single samples, long ones on two threads) gives, bit for bit,
+    apply_imu_errors over the run: Gauss-Markov bias, quantizer residual, clip counts and generators carry on, and
+    beta_0 is drawn at the run's first sample only."""
+    g = ImuGrade(gyro_bias=1e-3, gyro_bias_instability=2e-4, gyro_bias_tau=3.0, gyro_arw=1e-4, gyro_scale=1e-3,
+                 gyro_nonorth=1e-3, gyro_quant=1e-6, gyro_range=0.5, accel_bias=1e-2, accel_bias_instability=1e-3,
+                 accel_bias_tau=5.0, accel_vrw=1e-3, accel_scale=1e-3, accel_nonorth=1e-3, accel_quant=1e-5,
+                 accel_range=12.0)
+    rng = np.random.default_rng(24)
+    n = 2 * imu_errors._THREAD_MIN_SAMPLES + 5000
+    w, f = rng.normal(0, 0.4, (n, 3)) * DT, rng.normal(0, 8, (n, 3)) * DT
+    dtheta, dv, info = _apply(g, w, f, seed=6, keep_drift=True)
+    assert info.gyro_clipped.min() > 0 and info.accel_clipped.min() > 0  # saturation active
+    for cuts in ([0, 0, 1, 2, 3, 10, imu_errors._THREAD_MIN_SAMPLES + 10, n - 1],
+                 np.sort(rng.integers(0, n, 12)), np.sort(rng.integers(0, 20, 12))):
+        model = ImuErrorModel(DT, g, np.random.default_rng(6), keep_drift=True)
+        out = [model.step(a, b) for a, b in zip(np.split(w, cuts), np.split(f, cuts))]
+        np.testing.assert_array_equal(np.concatenate([o[0] for o in out]), dtheta)
+        np.testing.assert_array_equal(np.concatenate([o[1] for o in out]), dv)
+        for field in ("gyro_bias", "accel_matrix", "gyro_clipped", "accel_clipped", "gyro_drift", "accel_drift"):
+            np.testing.assert_array_equal(getattr(model.info, field), getattr(info, field))
+        assert model.samples == n
+
+
 def test_common_random_numbers_across_grades():
     """Par 4 and Par 5 of 001 differ only in the gyro random walk (1 and 2 deg/sqrt(h)): same seed, same draws."""
     zero = np.zeros((5000, 3))
@@ -300,6 +324,8 @@ def test_invalid_inputs_are_rejected():
         apply_imu_errors(z, z, DT, "mti-g-700", rng)
     with pytest.raises(TypeError):
         apply_imu_errors(z, z, DT, g, 1)
+    with pytest.raises(ValueError, match="same shape"):
+        ImuErrorModel(DT, g, rng).step(z, np.zeros((9, 3)))
     with pytest.raises(ValueError):
         ImuGrade(gyro_arw=-1.0)
     with pytest.raises(ValueError):
