@@ -371,12 +371,61 @@ def make_table(stream: Stream, data: dict[str, np.ndarray]) -> pa.Table:
     return pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata={b"stream": stream.name.encode()}))
 
 
+ROW_GROUP_ROWS = 1 << 20
+"""Rows per Parquet row group of a stream file (the last holds the rest): a file's bytes do not depend on the
+blocks it was written in."""
+
+
 def write_stream(run_dir: Path, stream: Stream, data: dict[str, np.ndarray] | pa.Table) -> Path:
-    table = data if isinstance(data, pa.Table) else make_table(stream, data)
-    path = Path(run_dir) / stream.filename
-    with stream_writer(path, table.schema) as writer:
-        writer.write_table(table)
-    return path
+    with StreamAppender(run_dir, stream) as appender:
+        appender.append(data)
+    return appender.path
+
+
+class StreamAppender:
+    """Writes a stream file block by block (a streaming run), in row groups of ROW_GROUP_ROWS: the same rows give the
+    same bytes however they were split into blocks. Holds at most a row group's worth of rows; the file exists
+    once the appender is closed (with the schema and no rows if nothing was appended)."""
+
+    def __init__(self, run_dir: Path, stream: Stream):
+        self.stream, self.path = stream, Path(run_dir) / stream.filename
+        self._writer: pq.ParquetWriter | None = None
+        self._held: list[pa.Table] = []
+        self._rows = 0
+        self._schema: pa.Schema | None = None
+
+    def append(self, data: dict[str, np.ndarray] | pa.Table) -> None:
+        table = data if isinstance(data, pa.Table) else make_table(self.stream, data)
+        self._schema = self._schema or table.schema
+        if table.num_rows:
+            self._held.append(table)
+            self._rows += table.num_rows
+        while self._rows >= ROW_GROUP_ROWS:
+            self._flush(ROW_GROUP_ROWS)
+
+    def close(self) -> None:
+        if self._schema is None:
+            self._schema = make_table(self.stream, {c.name: np.zeros(0) for c in self.stream.columns}).schema
+        self._flush(self._rows)
+        if self._writer is None:
+            self._writer = stream_writer(self.path, self._schema)
+        self._writer.close()
+
+    def _flush(self, rows: int) -> None:
+        if not rows:
+            return
+        held = pa.concat_tables(self._held)
+        if self._writer is None:
+            self._writer = stream_writer(self.path, self._schema)
+        self._writer.write_table(held.slice(0, rows), row_group_size=rows)
+        rest = held.slice(rows)
+        self._held, self._rows = ([rest] if rest.num_rows else []), rest.num_rows
+
+    def __enter__(self) -> StreamAppender:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def stream_writer(path: Path, schema: pa.Schema) -> pq.ParquetWriter:

@@ -26,10 +26,8 @@ from estimators.io.logformat import (
     ESTIMATES_DIR,
     STREAMS,
     LogError,
-    make_table,
     read_estimate,
     read_stream,
-    write_stream,
 )
 from twin.config.experiments import Experiment
 from twin.config.resources import check_resources, estimate_resources
@@ -194,16 +192,11 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
 
     from twin.face.haulage import Timeline
     from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
-    from twin.pipeline.montecarlo import (
-        TrialResult,
-        trial_context,
-        trial_runner,
-        write_sensors,
-    )
+    from twin.pipeline.montecarlo import TrialResult, trial_runner
     from twin.pipeline.montecarlo_table import format_monte_carlo, write_monte_carlo
-    from twin.pipeline.simulate import simulate
+    from twin.pipeline.twin_stream import stream_twin
     from twin.sensors.faults import check_faults_in_run
-    from twin.view.recording import ESTIMATES_RRD, RUN_RRD, write_recording
+    from twin.view.recording import ESTIMATES_RRD, RUN_RRD, SHEARER_COLUMNS, write_recording
     from twin.view.summary import format_summary, twin_summary
 
     try:
@@ -260,20 +253,15 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     monte_carlo = None
     with (atomic_run_dir(out, force) as staging, trial_runner(workers, ray_address) as runner,
           numba_event.install_listener("numba:compile", CompileNotice())):
-        result = simulate(scn, progress)
-        tables = {name: make_table(STREAMS[name], cols) for name, cols in result.tables.items()}
-        for name, table in tables.items():
-            write_stream(staging, STREAMS[name], table)
-        summary = twin_summary(scn, result.tables)
-        if sensors:
-            ctx = trial_context(scn, tables, staging)
-            if mc_trials:
-                runner.submit(ctx, staging, mc_trials)  # runs beside trial 0 unless sequential
-            tables.update(write_sensors(ctx, 0, staging))
-            del ctx
-            progress("sensors", 1.0)
+        # The truth and trial 0's sensors go to the run directory as the twin makes them (twin.pipeline.twin_stream).
+        result, shearer_stats = stream_twin(scn, staging, sensors, progress)
+        summary = twin_summary(scn, result.tables, shearer_stats)
+        if mc_trials:
+            runner.submit(scn, staging, mc_trials)  # runs beside trial 0 unless sequential
         (staging / "scenario.toml").write_text(scenario_to_toml(scn))
         progress("write", 1.0)
+        tables = {name: read_stream(staging, STREAMS[name], SHEARER_COLUMNS if name == "truth_shearer" else None)
+                  for name in STREAMS if (staging / STREAMS[name].filename).is_file()}
         write_recording(staging / RUN_RRD, scn, {k: v for k, v in tables.items() if k.startswith("truth_")},
                         result.floor_grid.mesh_t(result.frame), record_rate_hz,
                         sensors={k: v for k, v in tables.items() if not k.startswith("truth_")})

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Self
 import numpy as np
 import pyarrow as pa
 
-from estimators.io.logformat import STREAMS, make_table, read_stream, write_stream
+from estimators.io.logformat import STREAMS, read_stream, write_stream
 from twin.config.scenario import Scenario
 from twin.pipeline.estimate import run_estimators
 
@@ -85,16 +85,13 @@ def load_trial_context(run_dir: Path, scn: Scenario) -> TrialContext:
     return trial_context(scn, {name: read_stream(run_dir, STREAMS[name]) for name in SENSOR_TRUTH}, Path(run_dir))
 
 
-def write_sensors(ctx: TrialContext, trial: int, target: Path) -> dict[str, pa.Table]:
-    """Draw trial `trial`'s sensor streams and write them to `target`; returns the tables."""
+def write_sensors(ctx: TrialContext, trial: int, target: Path) -> None:
+    """Draw trial `trial`'s sensor streams and write them to `target`."""
     from twin.sensors.streams import sensor_streams
 
     target.mkdir(parents=True, exist_ok=True)
-    tables = {name: make_table(STREAMS[name], cols)
-              for name, cols in sensor_streams(ctx.scn, ctx.truth, ctx.ideal, trial).items()}
-    for name, table in tables.items():
-        write_stream(target, STREAMS[name], table)
-    return tables
+    for name, cols in sensor_streams(ctx.scn, ctx.truth, ctx.ideal, trial).items():
+        write_stream(target, STREAMS[name], cols)
 
 
 def _link(source: Path, target: Path) -> None:
@@ -131,7 +128,8 @@ class TrialRunner:
 
     description = ""
 
-    def submit(self, ctx: TrialContext, run_dir: Path, trials: range) -> None:
+    def submit(self, scn: Scenario, run_dir: Path, trials: range) -> None:
+        """Start trials `trials` of the run in `run_dir`, whose truth is on disk there."""
         raise NotImplementedError
 
     def gather(self, progress: Progress) -> list[TrialResult]:
@@ -153,15 +151,16 @@ class SequentialTrials(TrialRunner):
     description = "sequential"
 
     def __init__(self) -> None:
-        self._jobs: tuple[TrialContext, Path, range] | None = None
+        self._jobs: tuple[Scenario, Path, range] | None = None
 
-    def submit(self, ctx: TrialContext, run_dir: Path, trials: range) -> None:
-        self._jobs = (ctx, Path(run_dir), trials)
+    def submit(self, scn: Scenario, run_dir: Path, trials: range) -> None:
+        self._jobs = (scn, Path(run_dir), trials)
 
     def gather(self, progress: Progress) -> list[TrialResult]:
         if self._jobs is None:
             return []
-        ctx, run_dir, trials = self._jobs
+        scn, run_dir, trials = self._jobs
+        ctx = load_trial_context(run_dir, scn)  # loaded once trial 0 is done with its memory
         results = []
         for trial in trials:
             results.append(run_trial(ctx, trial, trial_dir(run_dir, trial)))
@@ -197,11 +196,11 @@ class ProcessTrials(TrialRunner):
         self._pool: ProcessPoolExecutor | None = None
         self._futures: dict = {}
 
-    def submit(self, ctx: TrialContext, run_dir: Path, trials: range) -> None:
+    def submit(self, scn: Scenario, run_dir: Path, trials: range) -> None:
         if not trials:
             return
         self._pool = ProcessPoolExecutor(min(self.workers, len(trials)), mp_context=get_context("spawn"),
-                                         initializer=_load_worker_context, initargs=(Path(run_dir), ctx.scn))
+                                         initializer=_load_worker_context, initargs=(Path(run_dir), scn))
         self._futures = {self._pool.submit(_worker_trial, trial, trial_dir(run_dir, trial)): trial
                          for trial in trials}
 
@@ -273,12 +272,12 @@ class RayTrials(TrialRunner):
         self._refs: dict = {}
         self._run_dir: Path | None = None
 
-    def submit(self, ctx: TrialContext, run_dir: Path, trials: range) -> None:
+    def submit(self, scn: Scenario, run_dir: Path, trials: range) -> None:
         if not trials:
             return
         ray = self._ray
         self._run_dir = Path(run_dir)
-        ctx_ref = ray.put(replace(ctx, truth_dir=None))
+        ctx_ref = ray.put(replace(load_trial_context(self._run_dir, scn), truth_dir=None))
         truth_ref = ray.put({name: (self._run_dir / name).read_bytes() for name in SCORING_TRUTH})
         task = ray.remote(_ray_trial)
         self._refs = {task.remote(ctx_ref, truth_ref, trial): trial for trial in trials}

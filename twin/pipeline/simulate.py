@@ -9,7 +9,7 @@ pan line at the truth rate in one batched rollout, and the truth splines are fit
 from __future__ import annotations
 
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -48,10 +48,15 @@ SUPPORT_DEADBAND_M = 5e-3
 
 Progress = Callable[[str, float], None]
 """Callback (stage, fraction done in 0..1)."""
+ShearerSink = Callable[[dict[str, np.ndarray]], None]
+"""Takes the truth_shearer columns of the next stretch of the run, in time order (a streaming run's consumer)."""
 
 
 @dataclass
 class SimResult:
+    """The truth tables (logformat stream name -> columns; truth_shearer only from `simulate`, a streaming run's
+    sink takes it), the floor, the face frame, the simulated time and the number of push-advance events."""
+
     tables: dict[str, dict[str, np.ndarray]]
     floor_grid: FloorGrid
     frame: FaceFrame
@@ -97,6 +102,13 @@ class _FaceRecorder:
         if pans.size:
             self.versions.append(PanVersion(t if t_begin is None else t_begin, t, state.pans.copy()))
 
+    def forget_before(self, t: float) -> None:
+        """Drop the pan-line versions no ride from time t on needs (the one in force at t and its predecessor,
+        which a ride blends from while an event moves the pans, stay)."""
+        begins = np.array([v.t_begin for v in self.versions])
+        keep = max(0, int(np.searchsorted(begins, t, side="right")) - 2)
+        del self.versions[:keep]
+
     def tables(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         return _concat(self.pan_rows), _concat(self.sup_rows)
 
@@ -131,14 +143,25 @@ def shearer_chunks(scn: Scenario, timeline: Timeline) -> np.ndarray:
     return np.array([0.0, *inner, timeline.duration])
 
 
+def _truth_times(scn: Scenario, t0: float, t1: float, last: bool) -> np.ndarray:
+    """The truth clock over a ride chunk [t0, t1) ([t0, t1] for the last), within the ride's samples."""
+    t_ride_end = sample_times(t0, t1, scn.rates.ride_hz)[-1]
+    t = sample_times(t0, t1, scn.rates.truth_hz)
+    return t[(t <= t_ride_end) & ((t < t1) | last)]
+
+
+def last_truth_time(scn: Scenario, timeline: Timeline) -> float:
+    """The time of the run's last truth_shearer row, known before the run."""
+    bounds = shearer_chunks(scn, timeline)
+    return float(_truth_times(scn, bounds[-2], bounds[-1], True)[-1])
+
+
 def shearer_chunk(scn: Scenario, timeline: Timeline, versions: list[PanVersion], t0: float, t1: float,
                   last: bool) -> dict[str, np.ndarray]:
     """Ride and truth columns for times in [t0, t1) ([t0, t1] for the last chunk)."""
-    ride_hz, truth_hz = scn.rates.ride_hz, scn.rates.truth_hz
-    t_ride = sample_times(t0, t1, ride_hz)
+    t_ride = sample_times(t0, t1, scn.rates.ride_hz)
     pos, quat = simulate_ride(scn, *ride_targets_t(versions, t_ride, timeline.sample(t_ride)["s"], scn))
-    t = sample_times(t0, t1, truth_hz)
-    t = t[(t <= t_ride[-1]) & ((t < t1) | last)]
+    t = _truth_times(scn, t0, t1, last)
     haul = timeline.sample(t)
     site, frame = scn.site, FaceFrame(np.radians(scn.face.azimuth_deg))
     truth = shearer_truth(t_ride, pos, quat, t, mat_to_quat(frame.mat_tf), np.radians(site.lat_deg),
@@ -152,8 +175,26 @@ def shearer_chunk(scn: Scenario, timeline: Timeline, versions: list[PanVersion],
         "cycle": haul["cycle"], "phase": haul["phase"]}
 
 
+def cycles_table(timeline: Timeline) -> dict[str, np.ndarray]:
+    """The truth_cycles columns: the haulage timeline's cycles, known before the face is simulated."""
+    plans = timeline.cycles
+    return {"cycle": np.array([p.cycle for p in plans]), "direction": np.array([p.direction for p in plans]),
+            "t": np.array([p.t_start for p in plans], float),
+            **{key: np.array([getattr(p, key) for p in plans], float)
+               for key in ("t_cut_end", "t_sump_end", "t_push_end", "t_end", "s_sump")}}
+
+
 def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
-    """Run the twin for a scenario: the face events, the shearer ride and the truth."""
+    """Run the twin for a scenario: the face events, the shearer ride and the truth, all tables in memory."""
+    pieces: list[dict[str, np.ndarray]] = []
+    result = simulate_stream(scn, pieces.append, progress)
+    result.tables[lf.TRUTH_SHEARER.name] = {key: np.concatenate([p[key] for p in pieces]) for key in pieces[0]}
+    return result
+
+
+def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress | None = None) -> SimResult:
+    """Run the twin for a scenario, handing the shearer truth to `shearer_sink` a ride chunk (a cycle) at a time as
+    it is made; the result holds the other truth tables. At most two chunks of the shearer's truth exist at once."""
     report = progress or (lambda stage, frac: None)
     rng = np.random.default_rng(scn.seed)
     frame = FaceFrame(np.radians(scn.face.azimuth_deg))
@@ -230,7 +271,16 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
     # The shearer's ride and truth run chunk by chunk on the other core while the face simulates on:
     # a chunk needs only the pan line up to its end, and each starts with the shearer at rest.
     bounds = shearer_chunks(scn, timeline)
-    pending = []
+    pending: list[Future] = []
+    handed = [0]
+
+    def hand_over(keep: int) -> None:
+        """Hand the finished chunks, oldest first, to the sink until at most `keep` are pending."""
+        while len(pending) > keep:
+            shearer_sink(pending.pop(0).result())
+            handed[0] += 1
+            report("shearer", handed[0] / (len(bounds) - 1))
+
     half = scn.shearer.length_m / 2
     with ThreadPoolExecutor(max_workers=1) as pool:
         for plan in timeline.cycles:
@@ -254,18 +304,10 @@ def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
             for c in ready:
                 pending.append(pool.submit(shearer_chunk, scn, timeline, list(recorder.versions), bounds[c],
                                            bounds[c + 1], c == len(bounds) - 2))
-        chunks = []
-        for k, fut in enumerate(pending):
-            chunks.append(fut.result())
-            report("shearer", (k + 1) / len(pending))
-    shearer = {key: np.concatenate([c[key] for c in chunks]) for key in chunks[0]}
+                recorder.forget_before(bounds[c + 1])
+            # The face runs at most one chunk ahead of the ride: memory stays that of two chunks.
+            hand_over(keep=1)
+        hand_over(keep=0)
     pans_tab, sups_tab = recorder.tables()
-    cycles = {
-        "cycle": np.array([p.cycle for p in timeline.cycles]), "direction": np.array([p.direction for p in timeline.cycles]),
-        "t": np.array([p.t_start for p in timeline.cycles]), "t_cut_end": np.array([p.t_cut_end for p in timeline.cycles]),
-        "t_sump_end": np.array([p.t_sump_end for p in timeline.cycles]),
-        "t_push_end": np.array([p.t_push_end for p in timeline.cycles]),
-        "t_end": np.array([p.t_end for p in timeline.cycles]), "s_sump": np.array([p.s_sump for p in timeline.cycles])}
-    tables = {lf.TRUTH_SHEARER.name: shearer, lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab,
-              lf.TRUTH_CYCLES.name: cycles}
+    tables = {lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab, lf.TRUTH_CYCLES.name: cycles_table(timeline)}
     return SimResult(tables, FloorGrid.from_scenario(scn, floor), frame, timeline.duration, events)

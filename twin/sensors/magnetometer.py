@@ -49,7 +49,6 @@ from twin.config.sensors import Fault
 from twin.face.haulage import STOPPED
 from twin.sensors.chunks import TruthChunk, halo_rows, split_truth
 from twin.sensors.faults import faults_of, window_mask
-from twin.sensors.odometer import clock_in_chunk
 
 
 class FieldElements(NamedTuple):
@@ -188,7 +187,7 @@ class Magnetometer:
         """The readings the chunk owns, b_x, b_y, b_z [T] in b; the truth columns t, q_nb_*, v_n_*, phase are read."""
         cfg = self.cfg
         shearer, _ = chunk.padded()
-        t = clock_in_chunk(chunk, cfg.rate_hz)
+        t = chunk.clock(cfg.rate_hz)
         q_nb = shearer_attitude_at(shearer, t)
         b_b = soft_iron_rows(quat_rotate(quat_conj(q_nb), self.field_n), np.asarray(cfg.soft_iron, float))
         b_b += np.asarray(cfg.hard_iron_t, float)

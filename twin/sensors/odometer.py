@@ -58,7 +58,6 @@ from estimators.nav.rotations import euler_to_mat
 from twin.config.scenario import Scenario
 from twin.config.sensors import Fault
 from twin.sensors.chunks import TruthChunk, halo_rows, split_truth
-from twin.sensors.clock import sample_times
 from twin.sensors.faults import faults_of, window_overlap
 
 STANDSTILL_M_S = 0.005
@@ -84,17 +83,6 @@ def speed_along_axis(shearer: dict[str, np.ndarray], axis_b: np.ndarray) -> np.n
     row_n = 2 * (xy + wz) * ax + (1 - 2 * (xx + zz)) * ay + 2 * (yz - wx) * az
     row_u = 2 * (xz - wy) * ax + 2 * (yz + wx) * ay + (1 - 2 * (xx + yy)) * az
     return row_e * v[0] + row_n * v[1] + row_u * v[2]
-
-
-def clock_in_chunk(chunk: TruthChunk, rate_hz: float) -> np.ndarray:
-    """The sample times [s] of a sensor clock at rate_hz (twin.sensors.clock.sample_times between the run's first
-    and last truth times) that the chunk's readings hold: those it owns, and on the last chunk every clock time up
-    to the run's last truth time as sample_times takes it (within its rounding tolerance)."""
-    t = sample_times(float(chunk.rows["t"][0]), chunk.t_end, rate_hz)
-    keep = chunk.owns(t)
-    if chunk.last:
-        keep |= t > chunk.t_end
-    return t[keep]
 
 
 class Odometer:
@@ -129,7 +117,7 @@ class Odometer:
         travel = np.cumsum(np.concatenate(([self.travel], step)))
         self.travel = float(travel[-1])
 
-        t_out = clock_in_chunk(chunk, self.rate_hz)
+        t_out = chunk.clock(self.rate_hz)
         pulses = np.floor(np.interp(t_out, t, travel) / self.pulse_m + self.phase).astype(np.int64)
         speed = np.interp(t_out, t, v_axis)
         direction = np.where(np.abs(speed) < STANDSTILL_M_S, 0, np.sign(speed)).astype(np.int8)

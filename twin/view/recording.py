@@ -199,6 +199,11 @@ def path_strips(t: np.ndarray, p: np.ndarray, cycle: np.ndarray | None, rate_hz:
     return strips
 
 
+SHEARER_COLUMNS = ("t", "lat", "lon", "p_t_e", "p_t_n", "p_t_u", "q_nb_w", "q_nb_x", "q_nb_y", "q_nb_z", "v_n_e", "v_n_n",
+                   "cycle")
+"""The truth_shearer columns the recording draws (a run reads only these back from its Parquet)."""
+
+
 def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate_hz: float | None) -> None:
     sh = scn.shearer
     body_z = 0.5 * SHEARER_HEIGHT_M - sh.body_height_m  # underside on the running line

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from twin.config.scenario import Scenario
@@ -15,12 +17,26 @@ def latest_per_id(t: np.ndarray, ident: np.ndarray, n: int, t_max: float) -> np.
     return out
 
 
-def twin_summary(scn: Scenario, tables: dict[str, dict[str, np.ndarray]]) -> dict:
-    pans, sups = tables["truth_pans"], tables["truth_supports"]
-    shearer, cycles = tables["truth_shearer"], tables["truth_cycles"]
+@dataclass
+class ShearerStats:
+    """What the summary says of the shearer's truth, gathered chunk by chunk as a run streams (`update`)."""
+
+    samples: int = 0
+    t_last: float = 0.0
+    max_speed_m_s: float = 0.0
+
+    def update(self, rows: dict[str, np.ndarray]) -> None:
+        self.samples += rows["t"].size
+        self.t_last = float(rows["t"][-1])
+        self.max_speed_m_s = max(self.max_speed_m_s, float(np.hypot(rows["v_n_e"], rows["v_n_n"]).max()))
+
+
+def twin_summary(scn: Scenario, tables: dict[str, dict[str, np.ndarray]], shearer: ShearerStats) -> dict:
+    """The run's summary (metrics.json "twin") from the face's truth tables and the shearer's statistics."""
+    pans, sups, cycles = tables["truth_pans"], tables["truth_supports"], tables["truth_cycles"]
     n_pan = scn.face.pan_count
     n_sup = int(sups["support"].max()) + 1
-    duration = float(shearer["t"][-1])
+    duration = shearer.t_last
     per_cycle = []
     for k, t_end in enumerate(cycles["t_end"]):
         pan_adv = pans["advance"][latest_per_id(pans["t"], pans["pan"], n_pan, t_end)]
@@ -30,13 +46,12 @@ def twin_summary(scn: Scenario, tables: dict[str, dict[str, np.ndarray]]) -> dic
             "cycle": k, "t_start_s": float(cycles["t"][k]), "t_end_s": float(t_end),
             "pan_advance_error_max_mm": float(np.abs(pan_adv - want).max() * 1e3),
             "support_advance_error_max_mm": float(np.abs(sup_adv - want).max() * 1e3)})
-    speed = np.hypot(shearer["v_n_e"], shearer["v_n_n"])
     return {
         "scenario": scn.name, "seed": scn.seed, "simulated_s": duration,
-        "shearer_samples": int(shearer["t"].size), "pan_updates": int(pans["t"].size),
+        "shearer_samples": shearer.samples, "pan_updates": int(pans["t"].size),
         "max_bend_horizontal_deg": float(np.degrees(np.nanmax(np.abs(pans["bend_h"])))),
         "max_bend_vertical_deg": float(np.degrees(np.nanmax(np.abs(pans["bend_v"])))),
-        "max_speed_m_min": float(speed.max() * 60), "cycles": per_cycle}
+        "max_speed_m_min": shearer.max_speed_m_s * 60, "cycles": per_cycle}
 
 
 def format_summary(summary: dict, wall_s: float) -> str:

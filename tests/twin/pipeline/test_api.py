@@ -75,7 +75,7 @@ def test_the_progress_bar_names_the_stage_under_way_and_a_compilation(short_path
     import numba as nb
 
     import twin.pipeline.api as api
-    import twin.pipeline.simulate as simulate_module
+    import twin.pipeline.twin_stream as twin_stream
 
     seen = []
 
@@ -84,14 +84,14 @@ def test_the_progress_bar_names_the_stage_under_way_and_a_compilation(short_path
             seen.append(desc)
             super().set_description(desc, refresh)
 
-    real_simulate = simulate_module.simulate
+    real_simulate = twin_stream.simulate_stream
 
-    def simulate_after_a_compile(scn, progress=None):
+    def simulate_after_a_compile(scn, sink, progress=None):
         nb.njit(lambda x: x + 1)(1)  # not cached: compiled now
-        return real_simulate(scn, progress)
+        return real_simulate(scn, sink, progress)
 
     monkeypatch.setattr(api, "tqdm", Bar)
-    monkeypatch.setattr(simulate_module, "simulate", simulate_after_a_compile)
+    monkeypatch.setattr(twin_stream, "simulate_stream", simulate_after_a_compile)
     twin.run(short_path, tmp_path / "run", quiet=False)
     stages = [d.split("(")[1].split(")")[0] for d in seen if "(" in d]
     assert stages[0] == "face: compiling numba kernels, first run only", seen

@@ -1,0 +1,57 @@
+"""The twin stage as it streams: the files do not depend on the chunking and hold what the whole run in memory gives."""
+
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+import estimators.io.logformat as lf
+from tests.conftest import simulated
+from twin.pipeline.twin_stream import SHEARER_STREAMS, stream_twin
+from twin.sensors.streams import imu_truth, sensor_streams
+
+
+@pytest.fixture(scope="module")
+def streamed(tmp_path_factory):
+    """The capped default scenario streamed twice: by ride chunk (a cycle), and in chunks of 7,919 truth rows
+    (boundaries anywhere: inside an IMU sample's group, a survey's cut, a stop) with row groups of 100,000 rows, so
+    that both files span several row groups."""
+    scn, _ = simulated("default")
+    dirs = []
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(lf, "ROW_GROUP_ROWS", 100_000)
+        for chunk_rows in (None, 7_919):
+            out = tmp_path_factory.mktemp("stream")
+            stream_twin(scn, out, chunk_rows=chunk_rows)
+            dirs.append(out)
+    return scn, dirs
+
+
+def test_two_chunk_sizes_give_the_same_bytes(streamed):
+    _, (by_cycle, by_rows) = streamed
+    names = sorted(p.name for p in by_cycle.glob("*.parquet"))
+    assert names == sorted(p.name for p in by_rows.glob("*.parquet"))
+    assert {f"{n}.parquet" for n in ("truth_shearer", *SHEARER_STREAMS)} <= set(names)
+    assert pq.ParquetFile(by_cycle / "imu.parquet").metadata.num_row_groups > 1
+    for name in names:
+        digest = [hashlib.sha256((d / name).read_bytes()).hexdigest() for d in (by_cycle, by_rows)]
+        assert digest[0] == digest[1], name
+
+
+def test_streamed_run_holds_what_the_whole_run_in_memory_gives(streamed):
+    scn, (by_cycle, _) = streamed
+    _, result = simulated("default")
+    truth = result.tables
+    whole = {**truth, **sensor_streams(scn, truth, imu_truth(scn, truth["truth_shearer"]), 0)}
+    for name, cols in whole.items():
+        table = pq.read_table(by_cycle / lf.STREAMS[name].filename)
+        assert table.num_rows == len(next(iter(cols.values()))), name
+        for key, values in cols.items():
+            got = table.column(key).to_numpy()
+            if np.asarray(values).dtype.kind in "fiu":
+                np.testing.assert_array_equal(got, np.asarray(values), err_msg=f"{name}.{key}")
+            else:
+                assert list(got) == list(values), f"{name}.{key}"
