@@ -102,6 +102,10 @@ def enu_offset_to_geodetic(d_enu: np.ndarray, lat, lon, h) -> tuple[np.ndarray, 
     return (lat + d_enu[..., 1] / (r_m + h), lon + d_enu[..., 0] / ((r_n + h) * np.cos(lat)), h + d_enu[..., 2])
 
 
+SCORED_TRUTH = ("t", "lat", "lon", "h", "q_nb_w", "q_nb_x", "q_nb_y", "q_nb_z", "cycle")
+"""The truth_shearer columns scoring reads (errors at the truth point, per cycle): a run loads only these."""
+
+
 def position_errors(estimate, truth_shearer) -> tuple[np.ndarray, np.ndarray]:
     """(t (K,), err_enu (K, 3)): estimated minus true body point in metres East/North/Up at the truth point,
     the truth linearly interpolated at the estimate times."""

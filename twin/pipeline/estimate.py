@@ -106,9 +106,10 @@ NO_CYCLES = {key: np.empty(0) for key in ("cycle", "t", "t_cut_end", "t_end")}
 """truth_cycles with no cycle: errors scored over the whole run only (estimators.io.metrics.cycle_metrics)."""
 
 
-def _optional(run_dir: Path, name: str):
-    """Stream `name` of run_dir, None when its file is absent."""
-    return read_stream(run_dir, STREAMS[name]) if (Path(run_dir) / STREAMS[name].filename).is_file() else None
+def _optional(run_dir: Path, name: str, columns: tuple[str, ...] | None = None):
+    """Stream `name` of run_dir (only `columns` when given), None when its file is absent."""
+    path = Path(run_dir) / STREAMS[name].filename
+    return read_stream(run_dir, STREAMS[name], columns) if path.is_file() else None
 
 
 def _calibration(sol: Solution, states_truth: dict[str, float] | None) -> dict:
@@ -149,7 +150,8 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers
                                  rate_hz=record_rate_hz)
     if not methods:
         return out
-    truth, survey = _optional(run_dir, "truth_shearer"), read_stream(run_dir, STREAMS["survey"])
+    truth = _optional(run_dir, "truth_shearer", metrics.SCORED_TRUTH)
+    survey = read_stream(run_dir, STREAMS["survey"])
     cycles = _optional(run_dir, "truth_cycles") if truth is not None else None
     states_truth = true_states(scn) if truth is not None else None
     for name, sol in sols.items():
