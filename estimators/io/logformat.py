@@ -371,7 +371,7 @@ def make_table(stream: Stream, data: dict[str, np.ndarray]) -> pa.Table:
     return pa.Table.from_arrays(arrays, schema=pa.schema(fields, metadata={b"stream": stream.name.encode()}))
 
 
-ROW_GROUP_ROWS = 1 << 20
+ROW_GROUP_ROWS = 1 << 17
 """Rows per Parquet row group of a stream file (the last holds the rest): a file's bytes do not depend on the
 blocks it was written in."""
 

@@ -40,6 +40,7 @@ from twin.config.scenario import (
     scenario_to_toml,
 )
 from twin.config.turntable import Turntable
+from twin.pipeline.malloc import hold_mmap_threshold
 from twin.pipeline.rundir import (
     TIMING,
     RunDirError,
@@ -199,6 +200,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     from twin.view.recording import ESTIMATES_RRD, RUN_RRD, SHEARER_COLUMNS, write_recording
     from twin.view.summary import format_summary, twin_summary
 
+    hold_mmap_threshold()  # memory flat over a long run (twin.pipeline.malloc)
     try:
         check_faults_in_run(scn, Timeline(scn).duration)
     except ScenarioError as err:
@@ -308,6 +310,7 @@ def estimate(run_dir: str | Path, quiet: bool = True, record_rate_hz: float | No
     from twin.view.recording import ESTIMATES_RRD
 
     record_rate_hz = _record_rate(record_rate_hz)
+    hold_mmap_threshold()
     run_dir = Path(run_dir)
     scenario = run_dir / "scenario.toml"
     if not scenario.is_file():
