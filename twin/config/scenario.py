@@ -47,6 +47,11 @@ from twin.face import snake
 from twin.face.layout import floor_pitch_change
 
 BendLimit = Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)]
+PAN_FLOOR_FRICTION = 0.35
+"""Friction coefficient of a pan's feet on the floor (models/pan.xml, class pan_foot; a test keeps them equal)."""
+MAX_FLOOR_TILT_DEG = math.degrees(math.atan(PAN_FLOOR_FRICTION))
+"""Steepest floor the face stands on: a pan's friction angle, 19.3 deg. A pan at rest on a steeper floor slides down
+it, and nothing in the twin holds the AFC against that (no anti-creep rams or anchored drive frames)."""
 
 
 class Face(Section):
@@ -61,15 +66,23 @@ class Face(Section):
     """Optional check: must equal pan_count * pan_length_m within 1 mm when given."""
     bend_limit_horizontal_deg: BendLimit = 1.0
     bend_limit_vertical_deg: BendLimit = 3.0
+    roll_limit_deg: BendLimit = 2.0
+    """Relative roll a pan connector allows between neighbouring pans (twist about the face line), degrees."""
+    axial_play_m: between(0, 0.05) = 0.004
+    """Axial play of a pan connector: neighbouring pans' running lines part or close up by up to half of it each
+    way from the nominal pitch pan_length_m (0: a rigid pin); at most 50 mm, a worn dogbone. Above about 5 mm the
+    shearer's ride, which finds its pans at the nominal pitch (twin.face.ride), strays off the running line: at 10 mm
+    the shoes of seed002_face ran 7 mm beside it against the 5 mm its test allows."""
     initial_bend_horizontal_deg: Literal["random"] | list[Finite] = "random"
     """Per-chute horizontal bend (pan i+1 yaw minus pan i yaw), pan_count - 1 values, or "random"."""
     initial_straightness_deg: between(0, 5) = 0.3
     """Standard deviation of the random initial pan yaw (smooth, AR(1) along the face); at most 5 deg (a face
     line more crooked cannot be pushed straight within any bend limit)."""
     seam_dip_deg: Annotated[float, Field(ge=-20, le=20, allow_inf_nan=False)] = 0.0
-    """Floor slope along the face; positive rises towards the tailgate."""
+    """Floor slope along the face; positive rises towards the tailgate. With advance_dip_deg, the floor's tilt is at
+    most MAX_FLOOR_TILT_DEG (the pans' friction angle, 19.3 deg)."""
     advance_dip_deg: Annotated[float, Field(ge=-20, le=20, allow_inf_nan=False)] = 0.0
-    """Floor slope in the advance direction; positive rises towards the coal wall."""
+    """Floor slope in the advance direction; positive rises towards the coal wall (tilt: see seam_dip_deg)."""
     undulation_amplitude_m: NonNegativeFloat = 0.1
     undulation_wavelength_m: between(5, 10000) = 30.0
     """Above 10 km the floor is a plane over any face and panel."""
@@ -77,6 +90,16 @@ class Face(Section):
     panel_length_m: Annotated[float, Field(gt=0, le=6000, allow_inf_nan=False)] = 20.0
     """Extent of coal (and floor) in the advance direction; cycles * web_depth_m must fit in it. At most 6 km, the
     longest longwall panels (the floor's height field covers the panel: twin.config.resources counts it)."""
+
+    @model_validator(mode="after")
+    def _floor_holds_the_pans(self) -> Face:
+        tilt = math.degrees(math.atan(math.hypot(math.tan(math.radians(self.seam_dip_deg)),
+                                                 math.tan(math.radians(self.advance_dip_deg)))))
+        if tilt > MAX_FLOOR_TILT_DEG:
+            raise ValueError(f"seam_dip_deg: with advance_dip_deg the floor tilts {tilt:.1f} deg, steeper than the pans' "
+                             f"friction angle atan({PAN_FLOOR_FRICTION}) = {MAX_FLOOR_TILT_DEG:.1f} deg: a pan at rest "
+                             f"would slide down it, and nothing anchors the face")
+        return self
 
 
 class Supports(Section):

@@ -147,24 +147,34 @@ def initial_yaws(scn: Scenario, rng: np.random.Generator) -> np.ndarray:
     return yaw - yaw.mean()
 
 
+def running_line_height(floor: Floor, x: float, y: float, eps: float = 0.05) -> float:
+    """Height of a pan's running line above the floor at (x, y): PAN_HEIGHT_M along the floor's normal (a pan stands
+    square on its floor), so 1 / cos(tilt) times it vertically: 22 mm more on a 20 deg dip than on the flat. Laid
+    PAN_HEIGHT_M plumb above a steep floor, the chain stood in it, and the mocap anchors of the first windows, at the
+    unsettled neighbours, held the edge pans down into it and buckled them up (a 3 deg vertical bend at 10 deg)."""
+    sx = (floor.height(x + eps, y) - floor.height(x - eps, y)) / (2 * eps)
+    sy = (floor.height(x, y + eps) - floor.height(x, y - eps)) / (2 * eps)
+    return PAN_HEIGHT_M * float(np.sqrt(1.0 + sx * sx + sy * sy))
+
+
 def initial_pans(scn: Scenario, floor: Floor, rng: np.random.Generator) -> np.ndarray:
     """Initial pan states (N, 6) in F: a chain from the origin laid on the floor.
 
-    Each pan's pitch puts its tailgate end on the floor (three fixed-point passes); roll follows the floor's
-    cross slope at the pan centre. MuJoCo settles the chain further before the first cut.
+    Each pan's pitch puts its tailgate end on the floor (three fixed-point passes; the running line
+    running_line_height above it); roll follows the floor's cross slope at the pan centre. MuJoCo settles the chain further before the first cut.
     """
     f = scn.face
     n, length = f.pan_count, f.pan_length_m
     yaw = initial_yaws(scn, rng)
     states = np.zeros((n, 6))
     states[:, YAW] = yaw
-    joint = np.array([0.0, 0.0, floor.height(0.0, 0.0) + PAN_HEIGHT_M])
+    joint = np.array([0.0, 0.0, floor.height(0.0, 0.0) + running_line_height(floor, 0.0, 0.0)])
     for i in range(n):
         pitch = 0.0
         for _ in range(3):
             d = np.array([-np.sin(yaw[i]) * np.cos(pitch), np.cos(yaw[i]) * np.cos(pitch), np.sin(pitch)])
             end = joint + length * d
-            rise = floor.height(end[0], end[1]) + PAN_HEIGHT_M - joint[2]
+            rise = floor.height(end[0], end[1]) + running_line_height(floor, end[0], end[1]) - joint[2]
             pitch = np.arcsin(np.clip(rise / length, -1, 1))
         d = np.array([-np.sin(yaw[i]) * np.cos(pitch), np.cos(yaw[i]) * np.cos(pitch), np.sin(pitch)])
         centre = joint + 0.5 * length * d

@@ -3,8 +3,9 @@
 Two models come from one scenario:
 
 * the face model (`build_face_spec`): a contiguous range of pans, each its own body with six scalar joints
-  (flat layout), neighbours tied by site-based connect equalities at their running-line ends, the relative
-  horizontal and vertical bend limited by fixed tendons (yaw and pitch differences); one hydraulic support
+  (flat layout), neighbours tied by connectors (twin.face.connectors): a pin at their running-line ends on a coupler with
+  axial play, the relative horizontal bend, vertical bend and roll limited by fixed tendons (yaw, pitch and roll
+  differences); one hydraulic support
   per `pans_per_support` pans with its push ram, a spatial tendon driven by an integrated-velocity actuator
   (the tendon length is the ram reading) and a canopy leg actuator; the floor a height field under the window
   only (FloorBand), on a mocap body, placed at each event (place_floor). A range
@@ -29,6 +30,7 @@ import numpy as np
 
 from estimators.nav.rotations import mat_to_quat
 from twin.config.scenario import Scenario
+from twin.face.connectors import CONNECTOR_KINDS, add_connectors, connector_limits_rad
 from twin.face.layout import (
     MESH_MAX_CELLS,
     PAN_WIDTH_M,
@@ -186,6 +188,16 @@ def _scale_pan(body: mujoco.MjsBody, prefix: str, length: float) -> None:
             site.pos = [0, half, 0]
 
 
+def _add_pans(spec: mujoco.MjSpec, scn: Scenario, quat_tf: np.ndarray, first: int, count: int, anchors: bool) -> None:
+    """Pans first..first+count-1 and their connectors (twin.face.connectors); with `anchors`, the connectors to the
+    mocap anchors standing in for the pans beyond a window."""
+    bodies = {}
+    for i in range(first, first + count):
+        bodies[i] = spec.worldbody.add_frame(quat=quat_tf).attach_body(_piece_copy("pan").body("pan"), f"pan{i}_", "")
+        _scale_pan(bodies[i], f"pan{i}_", scn.face.pan_length_m)
+    add_connectors(spec, scn, bodies, anchors)
+
+
 @dataclass(frozen=True)
 class FaceIndex:
     """Addresses of a compiled face model's state, by pan and support (window-local order)."""
@@ -201,6 +213,11 @@ class FaceIndex:
     ram_tendon: np.ndarray  # (nsup,) tendon ids
     anchor_eq: np.ndarray  # (2,) equality ids of the head and tail anchors (-1 when at a face end)
     anchor_mocap: np.ndarray  # (2,) mocap ids of the anchors (-1 when at a face end)
+    anchor_tendon: np.ndarray  # (2, 3) tendon ids of the anchor connectors' limits (CONNECTOR_KINDS; -1: none)
+    connector_limit: np.ndarray  # (3,) a connector's half ranges [rad] (CONNECTOR_KINDS)
+    coupler_jnt: np.ndarray  # (ncoupler,) slide joints of the connectors' couplers (none without axial play)
+    coupler_qpos: np.ndarray  # (ncoupler,)
+    coupler_pan: np.ndarray  # (ncoupler,) window pan whose tail end each sits at; count: the head coupler
 
 
 def build_face_spec(scn: Scenario, band: FloorBand, first: int, count: int, anchors: bool) -> mujoco.MjSpec:
@@ -222,28 +239,7 @@ def build_face_spec(scn: Scenario, band: FloorBand, first: int, count: int, anch
     spec.option.noslip_iterations = 0
     spec.compiler.degree = False
     _add_floor(spec, band, quat_tf)
-    pans = range(first, first + count)
-    lim_h, lim_v = np.radians(f.bend_limit_horizontal_deg), np.radians(f.bend_limit_vertical_deg)
-    for i in pans:
-        body = spec.worldbody.add_frame(quat=quat_tf).attach_body(_piece_copy("pan").body("pan"), f"pan{i}_", "")
-        _scale_pan(body, f"pan{i}_", f.pan_length_m)
-    for i in pans[:-1]:
-        spec.add_equality(name=f"joint{i}", type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_SITE,
-                          name1=f"pan{i}_rail_end", name2=f"pan{i + 1}_rail_start",
-                          solref=[0.02, 1.0], solimp=[0.99, 0.999, 0.001, 0.5, 2])
-        for kind, lim in (("yaw", lim_h), ("pitch", lim_v)):
-            ten = spec.add_tendon(name=f"bend_{kind}{i}", limited=mujoco.mjtLimited.mjLIMITED_TRUE,
-                                  range=[-float(lim), float(lim)], solref_limit=[0.02, 1.0],
-                                  solimp_limit=[0.99, 0.999, 0.001, 0.5, 2])
-            ten.wrap_joint(f"pan{i + 1}_{kind}", 1.0)
-            ten.wrap_joint(f"pan{i}_{kind}", -1.0)
-    for side, (pan, site) in enumerate(((first, "rail_start"), (first + count - 1, "rail_end"))):
-        if anchors:
-            anchor = spec.worldbody.add_body(name=f"anchor{side}", mocap=True)
-            anchor.add_site(name=f"anchor{side}")
-            spec.add_equality(name=f"anchor{side}", type=mujoco.mjtEq.mjEQ_CONNECT,
-                              objtype=mujoco.mjtObj.mjOBJ_SITE, name1=f"pan{pan}_{site}", name2=f"anchor{side}",
-                              solref=[0.02, 1.0], solimp=[0.99, 0.999, 0.001, 0.5, 2])
+    _add_pans(spec, scn, quat_tf, first, count, anchors)
     stations = support_stations(scn)
     for j in np.flatnonzero((stations >= first) & (stations < first + count)):
         i = stations[j]
@@ -280,6 +276,12 @@ def index_face_model(model: mujoco.MjModel, scn: Scenario, first: int, count: in
     pan_j = np.array([[jnt(f"pan{i}_{n}") for n in PAN_JOINTS] for i in pans])
     sup_j = np.array([[jnt(f"sup{j}_{n}") for n in ("x", "leg")] for j in sups]).reshape(-1, 2)
     anchor_eq, anchor_mocap = [], []
+    coupler_jnt, coupler_pan = [], []
+    for k, name in [*((k, f"pan{i}_play_end") for k, i in enumerate(pans)), (count, f"pan{first}_play_start")]:
+        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if jid >= 0:
+            coupler_jnt.append(jid)
+            coupler_pan.append(k)
     for side in (0, 1):
         eq = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_EQUALITY, f"anchor{side}")
         anchor_eq.append(eq)
@@ -293,6 +295,11 @@ def index_face_model(model: mujoco.MjModel, scn: Scenario, first: int, count: in
         leg_act=np.array([model.actuator(f"leg{j}").id for j in sups], int),
         ram_tendon=np.array([model.tendon(f"ram{j}").id for j in sups], int),
         anchor_eq=np.array(anchor_eq), anchor_mocap=np.array(anchor_mocap),
+        anchor_tendon=np.array([[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_TENDON, f"anchor{side}_{kind}")
+                                 for kind in CONNECTOR_KINDS] for side in (0, 1)]),
+        connector_limit=connector_limits_rad(scn),
+        coupler_jnt=np.array(coupler_jnt, int), coupler_qpos=model.jnt_qposadr[np.array(coupler_jnt, int)],
+        coupler_pan=np.array(coupler_pan, int),
     )
 
 

@@ -16,6 +16,7 @@ import mujoco
 import numpy as np
 
 from twin.config.scenario import Scenario
+from twin.face.connectors import connect_window
 from twin.face.layout import FaceFrame, Floor, joint_ends, pan_axes, support_stations
 from twin.face.model import (
     SUPPORT_FRICTION_LOWERED_N,
@@ -159,6 +160,8 @@ class FaceSimulator:
             d.eq_active[ix.anchor_eq[side]] = active
             if active:
                 d.mocap_pos[ix.anchor_mocap[side]] = self.frame.mat_tf @ point[other]
+        # The connectors to the neighbours beyond the window limited around them, the couplers at their play.
+        connect_window(m, d, ix, state.pans, first, length)
         return pans, sups
 
     def _store(self, win: _Window, state: FaceState, pans: np.ndarray, sups: np.ndarray) -> None:

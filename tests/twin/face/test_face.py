@@ -21,11 +21,13 @@ from twin.view.summary import latest_per_id
 
 SHOE_TOLERANCE_M = 5e-3
 BEND_TOLERANCE_DEG = 0.05
-GAP_TOLERANCE_M = 1.5e-3
-"""Connect equalities are soft: mid-way through the end push (all end pans a full web out, supports not yet
-following) a joint opens by up to 1.2 mm; at rest it closes below 1 mm."""
+GAP_TOLERANCE_M = 2.5e-3
+"""The connectors' pins and play are soft: mid-way through the end push (all end pans a full web out, supports not
+yet following) a pin gave way by up to 1.2 mm with rigid pins; with the couplers of the axial play, by up to 2.0 mm
+(seed004). Along the face a joint opens or closes by up to half the axial play, plus this."""
 PAN_ADVANCE_TOLERANCE_M = 10e-3
-SUPPORT_FOLLOW_TOLERANCE_M = 20e-3
+SUPPORT_FOLLOW_TOLERANCE_M = 25e-3
+"""20.5 mm on seed002_face (6 deg seam dip) with the connectors of issue 25 item 4, under 20 mm before."""
 
 
 def pan_history(scn, pans: dict) -> tuple[np.ndarray, np.ndarray]:
@@ -77,8 +79,11 @@ def test_bends_within_limits_and_joints_closed(run):
     half = scn.face.pan_length_m / 2
     axis = mat_fp[:, :, 1]
     start, end = p_f - half * axis, p_f + half * axis
-    gaps = np.linalg.norm(start[rows[:, 1:]] - end[rows[:, :-1]], axis=-1)
-    assert gaps.max() <= GAP_TOLERANCE_M
+    gaps = start[rows[:, 1:]] - end[rows[:, :-1]]
+    along = np.einsum("tij,tij->ti", gaps, axis[rows[:, :-1]])
+    across = np.linalg.norm(gaps - along[..., None] * axis[rows[:, :-1]], axis=-1)
+    assert np.abs(along).max() <= scn.face.axial_play_m / 2 + GAP_TOLERANCE_M
+    assert across.max() <= GAP_TOLERANCE_M
 
 
 def test_every_pan_and_support_advance_one_web_per_cycle(run):

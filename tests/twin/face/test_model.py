@@ -34,10 +34,11 @@ def test_full_face_model_has_the_flat_layout():
     band = FloorBand.for_window(scn, Floor.from_scenario(scn, rng), n)
     model = build_face_spec(scn, band, 0, n, anchors=False).compile()
     index = index_face_model(model, scn, 0, n)
-    assert model.nbody == 2 + 2 * n + n  # world, the floor, pans, supports and their canopies
+    # World, the floor, pans, supports and their canopies, and a coupler (a connector's play) per joint.
+    assert model.nbody == 2 + 2 * n + n + n - 1
     assert all(model.body_parentid[model.body(f"pan{i}_pan").id] == 0 for i in range(n))  # no chain
-    assert model.neq == n - 1  # a connect per joint
-    assert model.ntendon == 2 * (n - 1) + n  # two bend limits per joint, a ram per support
+    assert model.neq == n - 1  # a pin per joint
+    assert model.ntendon == 3 * (n - 1) + n  # bend and roll limits per joint, a ram per support
     limits = model.tendon_range[[model.tendon(f"bend_yaw{i}").id for i in range(n - 1)]]
     np.testing.assert_allclose(limits[:, 1], np.radians(scn.face.bend_limit_horizontal_deg))
     assert index.ram_act.size == n and index.pan_qpos.shape == (n, 6)
