@@ -110,12 +110,19 @@ def test_noise_burst_within_half_a_window():
 
 def test_stuck_ram_is_flat_through_its_push():
     """Frozen at rest before its push, through the push and the advance: the flat run names it after 30
-    readings (noise = resolution: a reading stays in its quantum with p = 0.38)."""
-    scn, found = findings(faults=[fault("ram_stuck", 250.0, 700.0)])
+    readings (noise = resolution: a reading stays in its quantum with p = 0.38). The run ends at the fault's last
+    reading, or later by exactly the healthy readings after it that happen to fall in the frozen quantum."""
+    faults = [fault("ram_stuck", 250.0, 700.0)]
+    scn, ram = pushram(faults=faults)
+    found = rc.check_log(ram, ram_layout(scn))
     run = _flat_run(ram_layout(scn))
     assert run == 30
     f = only(found, "stuck")
-    assert (f.t_start, f.t_end) == (250.0, 699.0)
+    mine = ram["support"] == SUPPORT
+    t, reading = ram["t"][mine], ram["extension"][mine]
+    after = reading[t >= 700.0]
+    coincident = int(np.argmax(after != reading[t == 250.0][0]))
+    assert (f.t_start, f.t_end) == (250.0, 699.0 + coincident)
     assert f.t_detect - 250.0 == run - 1
 
 

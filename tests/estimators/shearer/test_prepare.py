@@ -18,7 +18,7 @@ from twin.sensors.streams import imu_truth, sensor_streams
 def test_a_coasting_stop_settles_before_the_zero_velocity_update():
     """The twin's haulage coasts after its direction signal drops (0.2 s at the end of a pass, moving by less
     than a pulse) and creeps before it comes on. No epoch within stand_settle_s of the odometer's counts or
-    direction is a stand; the machine stands still (within half the update's noise) in every stand epoch; a longer settle time makes more epochs
+    direction is a stand; the machine stands still (within the update's noise) in every stand epoch; a longer settle time makes more epochs
     settle. Without the settle window the epochs next to a stop or start are stands while the machine moves."""
     scn, result = simulated("default")
     streams = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), 0)
@@ -45,7 +45,9 @@ def test_a_coasting_stop_settles_before_the_zero_velocity_update():
     speed = np.interp(prep.t_kf[1:], truth["t"], np.linalg.norm(np.column_stack(
         [truth[f"v_n_{a}"] for a in "enu"]), axis=1))
     assert speed[settling].max() > cfg.r_zupt
-    assert speed[mode == MODE_STANDING].max() < cfg.r_zupt / 2  # within the zero-velocity update's noise
+    # Within the zero-velocity update's noise: a standing shearer still rides its pans, which move by the connectors'
+    # axial play (mm) while neighbours are pushed.
+    assert speed[mode == MODE_STANDING].max() < cfg.r_zupt
     longer = prepare(log, dataclasses.replace(cfg, stand_settle_s=2 * cfg.stand_settle_s))
     assert (longer.mode == MODE_SETTLING).sum() > (prep.mode == MODE_SETTLING).sum()
 
