@@ -107,13 +107,14 @@ TRUTH_PANS = Stream(
 
 TRUTH_SUPPORTS = Stream(
     "truth_supports",
-    "Every hydraulic support's state whenever it changes.",
+    "Every hydraulic support's state whenever it changes, and through every ram stroke (sampled in real time).",
     (
         T,
         Column("support", "1", "i4", "support index from the headgate"),
         *_xyz("p_t", "m", "base reference point in t", "enu"),
         Column("advance", "m", "f8", "displacement towards the coal wall since t = 0"),
         Column("ram", "m", "f8", "push-ram length (tendon length between support and pan)"),
+        Column("ram_pressure", "MPa", "f8", "pressure in the push ram's loaded side (annulus pushing, bore pulling)"),
         Column("canopy", "m", "f8", "canopy height above the base"),
         Column("set", "1", "i1", "1 when set against the roof, 0 while lowered and advancing"),
     ),

@@ -41,9 +41,11 @@ from twin.config.sensors import (
     SoftIron,
     check_soft_iron,
 )
+from twin.config.supports import Supports
 from twin.config.tomlfile import read_scenario
 from twin.config.turntable import TURNTABLE_KIND, Turntable, parse_turntable
 from twin.face import snake
+from twin.face.hydraulics import RamHydraulics
 from twin.face.layout import floor_pitch_change
 
 BendLimit = Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)]
@@ -52,6 +54,10 @@ PAN_FLOOR_FRICTION = 0.35
 MAX_FLOOR_TILT_DEG = math.degrees(math.atan(PAN_FLOOR_FRICTION))
 """Steepest floor the face stands on: a pan's friction angle, 19.3 deg. A pan at rest on a steeper floor slides down
 it, and nothing in the twin holds the AFC against that (no anti-creep rams or anchored drive frames)."""
+
+
+END_PUSH_MARGIN = 1.25
+"""The end-push stop holds the end pans' push and their supports' advance with this margin (for the re-pushes)."""
 
 
 class Face(Section):
@@ -100,24 +106,6 @@ class Face(Section):
                              f"friction angle atan({PAN_FLOOR_FRICTION}) = {MAX_FLOOR_TILT_DEG:.1f} deg: a pan at rest "
                              f"would slide down it, and nothing anchors the face")
         return self
-
-
-class Supports(Section):
-    """Hydraulic roof supports (shields) and their push rams."""
-
-    pans_per_support: Annotated[int, Field(ge=1, le=4)] = 1
-    ram_length_set_m: Annotated[float, Field(ge=0.5, le=3.0, allow_inf_nan=False)] = 1.2
-    """Ram length between a set support and its pan before a push (fully retracted)."""
-    ram_speed_m_s: Annotated[float, Field(gt=0, le=1, allow_inf_nan=False)] = 0.1
-    sequence: Literal["after_push", "before_push"] = "after_push"
-    """Support-advance sequence: after the pans are pushed (conventional), or before (immediate forward
-    support, the supports following the shearer); see twin.face.pushadvance."""
-    advance_lag_pans: Annotated[int, Field(ge=0, le=20)] = 2
-    """after_push: a support advances once its pan and the pans this many nearer the shearer are fully
-    pushed. before_push: once the shearer's trailing end is this many pans past it."""
-    canopy_height_m: Annotated[float, Field(ge=1.0, le=7.0, allow_inf_nan=False)] = 3.0
-    lower_m: Annotated[float, Field(gt=0, le=0.5, allow_inf_nan=False)] = 0.1
-    """How far the canopy is lowered from the roof while the support advances."""
 
 
 class Shearer(Section):
@@ -256,6 +244,11 @@ class Scenario(Section):
         if f.web_depth_m > max_push:
             raise ValueError(f"pattern.snake_length_pans: {p.snake_length_pans} pans bend at most {max_push:.2f} m "
                              f"within bend_limit_horizontal_deg; web_depth_m {f.web_depth_m} m needs a longer snake")
+        need = RamHydraulics.from_scenario(self.supports.hydraulics).end_push_s(f.web_depth_m) * END_PUSH_MARGIN
+        if self.haulage.end_push_stop_s < need:
+            raise ValueError(f"haulage.end_push_stop_s: {self.haulage.end_push_stop_s:g} s is too short for the rams "
+                             f"to push the end pans a {f.web_depth_m} m web and advance their supports ({need:.1f} s "
+                             f"with supports.hydraulics); lengthen the stop or raise the rams' flows")
         n_supports = support_count(self)
         for k, fault in enumerate(self.faults):
             _check_fault_target(self, k, fault, n_supports)

@@ -7,7 +7,8 @@ Two models come from one scenario:
   axial play, the relative horizontal bend, vertical bend and roll limited by fixed tendons (yaw, pitch and roll
   differences); one hydraulic support
   per `pans_per_support` pans with its push ram, a spatial tendon driven by an integrated-velocity actuator
-  (the tendon length is the ram reading) and a canopy leg actuator; the floor a height field under the window
+  (the metered stroke; the tendon length is the ram reading) limited to the cylinder's force each way
+  (twin.face.hydraulics) and a canopy leg actuator; the floor a height field under the window
   only (FloorBand), on a mocap body, placed at each event (place_floor). A range
   that does not reach a face end is closed by mocap anchors standing in for the neighbouring pans, so a
   window of the face can be simulated alone while the rest stays put.
@@ -29,8 +30,9 @@ import mujoco
 import numpy as np
 
 from estimators.nav.rotations import mat_to_quat
-from twin.config.scenario import Scenario
+from twin.config.scenario import PAN_FLOOR_FRICTION, Scenario
 from twin.face.connectors import CONNECTOR_KINDS, add_connectors, connector_limits_rad
+from twin.face.hydraulics import RamHydraulics
 from twin.face.layout import (
     MESH_MAX_CELLS,
     PAN_WIDTH_M,
@@ -47,9 +49,8 @@ BAND_MARGIN_M = 12.0
 """Floor of a window's band beyond its pans and supports on every side [m]. With 6 m, seed004's largest bend went
 1.12 deg against its 1 deg limit (0.05 deg tolerated; 1.016 deg on the whole-panel floor); from 12 m it is back to
 1.015 deg. The bend limit is a soft tendon limit whose overshoot follows such small changes (issue 25 item 4)."""
-RAM_FORCE_PUSH_N = 4.0e5
-RAM_FORCE_PULL_N = 6.0e5
 RAM_GAIN_N_M = 5.0e7
+"""Stiffness of a ram's servo on its metered stroke (the oil column; 5 mm under a 250 kN load)."""
 RAM_DAMPING_N_S_M = 1.0e6
 SUPPORT_FRICTION_SET_N = 2.0e6
 SUPPORT_FRICTION_LOWERED_N = 1.0e4
@@ -159,8 +160,9 @@ def _add_floor(spec: mujoco.MjSpec, band: FloorBand, quat_tf: np.ndarray) -> Non
                          size=[(band.ncol - 1) * res / 2, (band.nrow - 1) * res / 2, band.elevation_m, 1.0],
                          userdata=[0.0] * (band.nrow * band.ncol))
     body = spec.worldbody.add_body(name="floor", mocap=True, quat=quat_tf)
+    # MuJoCo takes the larger friction of two geoms in contact: the floor's is the pans' feet's, so that theirs holds.
     body.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname=hf.name, contype=0, conaffinity=1,
-                  rgba=[0.35, 0.3, 0.25, 1])
+                  friction=[PAN_FLOOR_FRICTION, 0.005, 0.0001], rgba=[0.35, 0.3, 0.25, 1])
 
 
 def place_floor(model: mujoco.MjModel, data: mujoco.MjData, grid: FloorGrid, z0: float, mat_tf: np.ndarray) -> None:
@@ -229,6 +231,7 @@ def build_face_spec(scn: Scenario, band: FloorBand, first: int, count: int, anch
     face by setting its state and its supports' body positions.
     """
     f, sup = scn.face, scn.supports
+    hyd = RamHydraulics.from_scenario(sup.hydraulics)
     frame = FaceFrame(np.radians(f.azimuth_deg))
     mat_tf = frame.mat_tf
     quat_tf = mat_to_quat(mat_tf)
@@ -256,7 +259,7 @@ def build_face_spec(scn: Scenario, band: FloorBand, first: int, count: int, anch
                           biastype=mujoco.mjtBias.mjBIAS_AFFINE, gainprm=[RAM_GAIN_N_M] + [0] * 9,
                           biasprm=[0, -RAM_GAIN_N_M, -RAM_DAMPING_N_S_M] + [0] * 7, actlimited=True,
                           actrange=[0.3, sup.ram_length_set_m + 2.0 * f.web_depth_m],
-                          forcelimited=True, forcerange=[-RAM_FORCE_PULL_N, RAM_FORCE_PUSH_N],
+                          forcelimited=True, forcerange=[-hyd.force_pull_n, hyd.force_push_n],
                           ctrllimited=True, ctrlrange=[-20.0, 20.0])
         spec.add_actuator(name=f"leg{j}", target=f"sup{j}_leg", trntype=mujoco.mjtTrn.mjTRN_JOINT,
                           gaintype=mujoco.mjtGain.mjGAIN_FIXED, biastype=mujoco.mjtBias.mjBIAS_AFFINE,

@@ -28,15 +28,13 @@ from twin.face.layout import (
 from twin.face.model import FloorGrid
 from twin.face.pushadvance import PushAdvanceController
 from twin.face.ride import PanVersion, ride_targets_t, shoe_pans, simulate_ride
-from twin.face.simulator import WINDOW_MARGIN_PANS, FaceSimulator, FaceState
+from twin.face.simulator import WINDOW_MARGIN_PANS, EventTrace, FaceSimulator, FaceState
 from twin.face.truth import shearer_truth
 from twin.sensors.clock import sample_times
 from twin.sensors.faults import faults_of, shortfall_profile
 
 MIN_EVENT_S = 2.0
 """Shortest time an event takes (valves, a small correction push)."""
-SET_TIME_S = 6.0
-"""Time a support takes to lower and set again around its advance (added to the ram travel time)."""
 
 RAM_DEADBAND_M = 1e-3
 """A ram whose target moves less than this is left alone in an event."""
@@ -67,8 +65,9 @@ class SimResult:
 class _FaceRecorder:
     """Collects pan and support rows whenever they change, and the pan-line versions for the ride."""
 
-    def __init__(self, scn: Scenario, frame: FaceFrame, state: FaceState):
+    def __init__(self, scn: Scenario, frame: FaceFrame, state: FaceState, sim: FaceSimulator):
         self.scn, self.frame = scn, frame
+        self.hydraulics, self.support_z = sim.hydraulics, sim.support_z
         self.pans0 = state.pans.copy()
         self.sup_x0 = state.sup_x.copy()
         self.pan_rows: list[dict[str, np.ndarray]] = []
@@ -92,15 +91,30 @@ class _FaceRecorder:
             "t": np.full(pans.size, t), "pan": pans, **_split(p_t, "p_t", "enu"), **_split(q_tp, "q_tp", "wxyz"),
             "bend_h": pad[0][pans], "bend_v": pad[1][pans], "advance": st[:, 0] - self.pans0[pans, 0]})
         is_lowered = np.zeros(sups.size, bool) if lowered is None else np.isin(sups, lowered)
-        y = (self.scn.face.pan_length_m * (support_stations(self.scn)[sups] + 0.5))
-        p_f = np.column_stack([state.sup_x[sups], y, state.sup_z[sups]])
-        self.sup_rows.append({
-            "t": np.full(sups.size, t), "support": sups, **_split(p_f @ mat_tf.T, "p_t", "enu"),
-            "advance": state.sup_x[sups] - self.sup_x0[sups], "ram": state.ram[sups],
-            "canopy": state.sup_leg[sups] - np.where(is_lowered, self.scn.supports.lower_m, 0.0),
-            "set": (~is_lowered).astype(np.int8)})
+        self._support_rows(np.full(sups.size, t), sups, state.sup_x[sups], state.sup_z[sups], state.ram[sups],
+                           state.ram_force[sups], state.sup_leg[sups], is_lowered)
         if pans.size:
             self.versions.append(PanVersion(t if t_begin is None else t_begin, t, state.pans.copy()))
+
+    def record_trace(self, t0: float, trace: EventTrace, state: FaceState, lowered: np.ndarray) -> None:
+        """Rows of the supports an event moved at every sample of its trace (the event began at t0); supports in
+        `lowered` are logged lowered."""
+        m, sups = trace.t_s.size, trace.supports
+        if not m:
+            return
+        every = np.tile(sups, m)
+        self._support_rows(np.repeat(t0 + trace.t_s, sups.size), every, trace.sup_x.ravel(),
+                           self.support_z(every, trace.sup_x.ravel()), trace.ram.ravel(), trace.ram_force.ravel(),
+                           state.sup_leg[every], np.isin(every, lowered))
+
+    def _support_rows(self, t: np.ndarray, sups: np.ndarray, sup_x: np.ndarray, sup_z: np.ndarray, ram: np.ndarray,
+                      ram_force: np.ndarray, leg: np.ndarray, is_lowered: np.ndarray) -> None:
+        y = self.scn.face.pan_length_m * (support_stations(self.scn)[sups] + 0.5)
+        p_f = np.column_stack([sup_x, y, sup_z])
+        self.sup_rows.append({
+            "t": t, "support": sups, **_split(p_f @ self.frame.mat_tf.T, "p_t", "enu"),
+            "advance": sup_x - self.sup_x0[sups], "ram": ram, "ram_pressure": self.hydraulics.pressure_mpa(ram_force),
+            "canopy": leg - np.where(is_lowered, self.scn.supports.lower_m, 0.0), "set": (~is_lowered).astype(np.int8)})
 
     def forget_before(self, t: float) -> None:
         """Drop the pan-line versions no ride from time t on needs (the one in force at t and its predecessor,
@@ -205,9 +219,10 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     state = sim.initial_supports(initial_pans(scn, floor, rng), ctrl.support_lag_m())
     sim.settle(state)
     pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
-    recorder = _FaceRecorder(scn, frame, state)
-    length, ram_speed = scn.face.pan_length_m, scn.supports.ram_speed_m_s
+    recorder = _FaceRecorder(scn, frame, state, sim)
+    length = scn.face.pan_length_m
     events = 0
+    hydraulics_free = [0.0]  # when the last event's rams are done and its supports set
 
     last_target = np.zeros(sim.stations.size)
     last_moved = np.zeros(sim.stations.size, bool)
@@ -217,8 +232,9 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
         return sum((shortfall_profile(f, sim.stations.size) for f in shortfalls if f.t_start_s <= t < f.t_end_s),
                    np.zeros(sim.stations.size))
 
-    def event(t: float, s_trail: float | None, t_next: float, repush: bool = False) -> bool:
-        """One push-advance event; `repush` pushes the last event's pans again to their targets.
+    def event(t: float, s_trail: float | None, t_limit: float, repush: bool = False) -> bool:
+        """One push-advance event, due at t, its rams stopped at t_limit; `repush` pushes the last event's pans
+        again to their targets. It begins when the last event's hydraulics are done, if that is later.
 
         Returns whether any ram moved."""
         nonlocal events, last_target, last_moved
@@ -246,27 +262,28 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
         if not moved.any():
             return False
         advancing &= moved
-        t_begin = t
+        t_begin = max(t, hydraulics_free[0])
+        if np.any(advancing & (np.abs(push - state.ram) > RAM_DEADBAND_M)):
+            # Push and advance of one support (the end push of snake sumping): the rams extend first, then the
+            # supports pull themselves up.
+            t_begin = hydraulic_event(t_begin, t_limit, moved, push, np.zeros_like(advancing))
+        hydraulic_event(t_begin, t_limit, moved, target, advancing)
+        events += 1
+        return True
+
+    def hydraulic_event(t_begin: float, t_limit: float, moved: np.ndarray, target: np.ndarray,
+                        advancing: np.ndarray) -> float:
+        """Rams of `moved` to `target` from t_begin, the `advancing` supports lowered first and set after; the
+        supports' rows through it and the pans' new line, in force from t_begin to its end (returned)."""
         lowered = np.flatnonzero(advancing)
         if lowered.size:
             recorder.record(t_begin, state, np.zeros(0, int), lowered, lowered)
-        stroke = np.abs(push - state.ram)[moved].max()
-        travel = stroke + np.abs(target - push)[moved].max()
-        # The rams take their stroke at the ram speed, but the controller keeps pace with the shearer: an
-        # event is over before the next one is due (the pans never move under the shearer).
-        duration = max(MIN_EVENT_S, travel / ram_speed + (SET_TIME_S if lowered.size else 0.0))
-        t_done = t_begin + min(duration, 0.9 * (t_next - t_begin))
-        t_push = t_begin
-        if np.any(advancing & (np.abs(push - state.ram) > RAM_DEADBAND_M)):
-            # Push and advance in one event (the end push of snake sumping): the rams extend first, then the
-            # supports pull themselves up. Recorded in two steps, so the strokes show in the ram readings.
-            pans, sups = sim.step_event(state, moved, push, push, np.zeros_like(advancing))
-            t_push = t_begin + (t_done - t_begin) * stroke / max(travel, 1e-9)
-            recorder.record(t_push, state, pans, sups, lowered, t_begin=t_begin)
-        pans, sups = sim.step_event(state, moved, push, target, advancing)
-        recorder.record(t_done, state, pans, sups, t_begin=t_push)
-        events += 1
-        return True
+        pans, sups, trace = sim.step_event(state, moved, target, advancing, t_limit - t_begin)
+        recorder.record_trace(t_begin, trace, state, lowered)
+        t_done = t_begin + max(MIN_EVENT_S, trace.duration_s)
+        recorder.record(t_done, state, pans, sups, t_begin=t_begin)
+        hydraulics_free[0] = t_done
+        return t_done
 
     # The shearer's ride and truth run chunk by chunk on the other core while the face simulates on:
     # a chunk needs only the pan line up to its end, and each starts with the shearer at rest.
@@ -287,14 +304,13 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
             ctrl.begin_cycle(plan.direction)
             step = length * scn.pattern.push_step_pans
             times, marks = timeline.crossings(plan.cycle, -plan.direction * half, step)
-            for t, t_next, mark in zip(times, np.append(times[1:], plan.t_cut_end), marks):
-                event(float(t), float(mark), float(t_next))
+            for t, mark in zip(times, marks):
+                event(float(t), float(mark), plan.t_push_end)
             # Snake sumping: the end pans are pushed while the shearer stands at C, then pushed again where
             # the end supports' advance pulled them back; all before the shearer moves on.
-            end_events = 1 + MAX_REPUSHES
-            t_slot = (plan.t_push_end - plan.t_sump_end) / end_events
-            for k in range(end_events):
-                if not event(plan.t_sump_end + k * t_slot, None, plan.t_sump_end + (k + 1) * t_slot, repush=k > 0):
+            for k in range(1 + MAX_REPUSHES):
+                t_due = max(plan.t_sump_end, hydraulics_free[0])
+                if t_due >= plan.t_push_end - MIN_EVENT_S or not event(t_due, None, plan.t_push_end, repush=k > 0):
                     break
             report("face", (plan.cycle + 1) / len(timeline.cycles))
             last = plan.cycle == len(timeline.cycles) - 1

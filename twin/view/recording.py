@@ -68,6 +68,8 @@ SHEARER_HEIGHT_M = 1.0
 """Body height of the drawn shearer; its underside sits on the running line."""
 DRUM_RADIUS_M = 0.9
 
+SUPPORT_FRAME_HZ = 1.0
+"""Most support states a second of run time in the recording: a ram at 0.1-0.3 m/s moves 0.1-0.3 m between two."""
 _GREY = np.array([150, 150, 150], float)
 _RED = np.array([230, 30, 30], float)
 _SET_RGBA = np.array([70, 110, 170, 255], np.uint8)
@@ -145,10 +147,16 @@ def _log_pans(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table) -> None:
         send_bar_chart(rec, "plots/bend_vertical_deg", times, chutes_v)
 
 
-def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table) -> None:
+def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table, rate_hz: float | None) -> None:
+    """Every support's state at each time one changes, at most SUPPORT_FRAME_HZ (the last state of each interval,
+    so that an event's end shows at once; every time at FULL rate)."""
     if supports.num_rows == 0:
         return
     times, _, rows = latest_rows(col(supports, "t"), col(supports, "support"))
+    if rate_hz is not FULL:
+        frame = np.floor(times * min(rate_hz, SUPPORT_FRAME_HZ) + 1e-9)
+        keep = np.flatnonzero(np.r_[np.diff(frame) > 0, True])
+        times, rows = times[keep], rows[keep]
     n_t, n_s = rows.shape
     p = vec(supports, "p_t")[rows]                   # (n_t, n_s, 3) ram connection on the base
     ram = col(supports, "ram")[rows]
@@ -333,7 +341,7 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         _log_floor(rec, floor_mesh)
         _log_pans(rec, scn, truth["truth_pans"])
-        _log_supports(rec, scn, truth["truth_supports"])
+        _log_supports(rec, scn, truth["truth_supports"], rate_hz)
         _log_shearer(rec, scn, truth["truth_shearer"], rate_hz)
         _log_sensors(rec, sensors or {}, rate_hz)
 

@@ -46,7 +46,8 @@ def every_key_at_its_maximum() -> dict:
                      "bend_limit_horizontal_deg": 10.0}
     data["pattern"] = {"snake_length_pans": 40}
     data["rates"] = {"truth_hz": 2000.0, "ride_hz": 2000.0, "face_timestep_s": 0.001}
-    data["haulage"] = {"cutting_speed_m_min": 1.0, "return_speed_m_min": 1.0, "sump_speed_m_min": 1.0}
+    data["haulage"] = {"cutting_speed_m_min": 1.0, "return_speed_m_min": 1.0, "sump_speed_m_min": 1.0,
+                       "end_push_stop_s": 3600.0, "reversal_stop_s": 3600.0}
     data["sensors"] = {k: {"rate_hz": 2000.0} for k in ("imu", "mag", "odometer", "pushram")}
     return data
 

@@ -1,0 +1,48 @@
+"""The hydraulic roof supports' section of a face scenario, and their push rams' hydraulics."""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import Field, model_validator
+
+from twin.config.section import Section
+
+
+class Hydraulics(Section):
+    """The supports' push rams and the pump that feeds them (twin.face.hydraulics): the ram pushes its pan on the
+    annulus and pulls its support on the full bore."""
+
+    pump_pressure_mpa: Annotated[float, Field(ge=5, le=45, allow_inf_nan=False)] = 31.5
+    """Pump (and relief) pressure: the rams' force limit is this times the pressurised area."""
+    ram_bore_mm: Annotated[float, Field(ge=60, le=300, allow_inf_nan=False)] = 160.0
+    ram_rod_mm: Annotated[float, Field(ge=30, le=250, allow_inf_nan=False)] = 110.0
+    push_flow_l_min: Annotated[float, Field(ge=5, le=1000, allow_inf_nan=False)] = 60.0
+    """Flow the push valve meters into the annulus (the push speed: 0.094 m/s with the defaults)."""
+    pull_flow_l_min: Annotated[float, Field(ge=5, le=2000, allow_inf_nan=False)] = 350.0
+    """Flow into the full bore while the support advances (0.29 m/s with the defaults)."""
+
+    @model_validator(mode="after")
+    def _rod_inside_bore(self) -> Hydraulics:
+        if self.ram_rod_mm >= 0.95 * self.ram_bore_mm:
+            raise ValueError(f"ram_rod_mm: a {self.ram_rod_mm:g} mm rod leaves no annulus in a {self.ram_bore_mm:g} mm "
+                             f"bore; make the rod at most 95 % of the bore")
+        return self
+
+
+class Supports(Section):
+    """Hydraulic roof supports (shields) and their push rams."""
+
+    pans_per_support: Annotated[int, Field(ge=1, le=4)] = 1
+    ram_length_set_m: Annotated[float, Field(ge=0.5, le=3.0, allow_inf_nan=False)] = 1.2
+    """Ram length between a set support and its pan before a push (fully retracted)."""
+    hydraulics: Hydraulics = Hydraulics()
+    sequence: Literal["after_push", "before_push"] = "after_push"
+    """Support-advance sequence: after the pans are pushed (conventional), or before (immediate forward
+    support, the supports following the shearer); see twin.face.pushadvance."""
+    advance_lag_pans: Annotated[int, Field(ge=0, le=20)] = 2
+    """after_push: a support advances once its pan and the pans this many nearer the shearer are fully
+    pushed. before_push: once the shearer's trailing end is this many pans past it."""
+    canopy_height_m: Annotated[float, Field(ge=1.0, le=7.0, allow_inf_nan=False)] = 3.0
+    lower_m: Annotated[float, Field(gt=0, le=0.5, allow_inf_nan=False)] = 0.1
+    """How far the canopy is lowered from the roof while the support advances."""
