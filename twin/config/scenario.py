@@ -47,6 +47,7 @@ from twin.config.turntable import TURNTABLE_KIND, Turntable, parse_turntable
 from twin.face import snake
 from twin.face.hydraulics import RamHydraulics
 from twin.face.layout import floor_pitch_change
+from twin.face.suspension import ringing_hz
 
 BendLimit = Annotated[float, Field(gt=0, le=10, allow_inf_nan=False)]
 PAN_FLOOR_FRICTION = 0.35
@@ -114,6 +115,8 @@ class Shearer(Section):
     body_height_m: Annotated[float, Field(gt=0, le=3, allow_inf_nan=False)] = 0.9
     """Height of the body reference point above the running line."""
     suspension_frequency_hz: Annotated[float, Field(ge=1, le=100, allow_inf_nan=False)] = 10.0
+    """Natural frequency of the body on its suspension (twin.face.suspension). Its ringing, frequency x
+    sqrt(1 - suspension_damping_ratio^2), must stay below the ride's Nyquist frequency rates.ride_hz / 2."""
     suspension_damping_ratio: Annotated[float, Field(gt=0, le=2, allow_inf_nan=False)] = 1.0
 
 
@@ -227,6 +230,12 @@ class Scenario(Section):
         if sh.shoe_spacing_m >= sh.length_m:
             raise ValueError(f"shearer.shoe_spacing_m: {sh.shoe_spacing_m} m must be shorter than "
                              f"shearer.length_m = {sh.length_m} m")
+        ringing = ringing_hz(sh.suspension_frequency_hz, sh.suspension_damping_ratio)
+        if ringing >= self.rates.ride_hz / 2:
+            raise ValueError(f"shearer.suspension_frequency_hz: {sh.suspension_frequency_hz} Hz at damping ratio "
+                             f"{sh.suspension_damping_ratio} rings at {ringing:.1f} Hz, at or above the ride's Nyquist "
+                             f"frequency rates.ride_hz / 2 = {self.rates.ride_hz / 2:g} Hz; raise rates.ride_hz above "
+                             f"{2 * ringing:.1f} Hz, lower the frequency or raise suspension_damping_ratio")
         end_zone = sump_length_m(self)
         if 2 * end_zone > length:
             raise ValueError(f"face.pan_count: a {length:.1f} m face is too short for the shearer and the snake "

@@ -41,6 +41,7 @@ from twin.face.layout import (
     Floor,
     support_stations,
 )
+from twin.face.suspension import weld_solref
 
 PAN_JOINTS = ("x", "y", "z", "yaw", "pitch", "roll")
 HFIELD_RESOLUTION_M = 0.25
@@ -309,8 +310,7 @@ def index_face_model(model: mujoco.MjModel, scn: Scenario, first: int, count: in
 def build_ride_spec(scn: Scenario) -> mujoco.MjSpec:
     """The shearer on its suspension: free body welded softly to the mocap target `ride`.
 
-    The weld's time constant and damping ratio come from the scenario's suspension frequency and damping
-    (MuJoCo solref = [1 / (2 pi f) scaled to the ride timestep's stability bound, zeta]).
+    The weld's solref makes the ride's steps sample the scenario's suspension (twin.face.suspension).
     """
     sh = scn.shearer
     spec = _piece_copy("shearer")
@@ -318,8 +318,7 @@ def build_ride_spec(scn: Scenario) -> mujoco.MjSpec:
     dt = 1.0 / scn.rates.ride_hz
     spec.option.timestep = dt
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    timeconst = max(1.0 / (2 * np.pi * sh.suspension_frequency_hz), 2.0 * dt)
-    spec.equality("suspension").solref = [timeconst, sh.suspension_damping_ratio]
+    spec.equality("suspension").solref = weld_solref(sh.suspension_frequency_hz, sh.suspension_damping_ratio, dt)
     body = spec.body("shearer")
     half = sh.length_m / 2
     body.geoms[0].size = [0.6, half - 1.0, 0.5]

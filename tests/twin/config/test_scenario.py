@@ -104,6 +104,20 @@ def test_bad_values_name_the_key(path, value, words):
         assert word in message
 
 
+def test_a_suspension_the_ride_cannot_sample_is_refused():
+    """A suspension ringing at or above the ride's Nyquist frequency is one line saying what to change; a faster
+    ride takes it."""
+    data = with_value("shearer.suspension_damping_ratio", 0.1)
+    data["shearer"]["suspension_frequency_hz"] = 60.0
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data, "bad.toml")
+    message = str(err.value)
+    assert "\n" not in message and message.startswith("bad.toml: shearer.suspension_frequency_hz: ")
+    assert "rings at 59.7 Hz" in message and "raise rates.ride_hz above 119.4 Hz" in message
+    data["rates"]["ride_hz"] = 120.0
+    assert parse_scenario(data).rates.ride_hz == 120.0
+
+
 def test_missing_and_broken_files(tmp_path):
     with pytest.raises(ScenarioError, match="not found"):
         load_scenario(tmp_path / "nope.toml")

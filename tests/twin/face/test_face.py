@@ -3,6 +3,7 @@ cycle, the closed cutting path of 001 Fig. 3, and self-consistent truth."""
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 
 from estimators.nav import earth
@@ -17,6 +18,7 @@ from tests.conftest import capped
 from twin.config.scenario import parse_scenario
 from twin.face.haulage import CUTTING
 from twin.face.layout import FaceFrame, Floor, bend_angles, initial_pans
+from twin.face.model import FloorBand, build_face_spec, index_face_model
 from twin.view.summary import latest_per_id
 
 SHOE_TOLERANCE_M = 5e-3
@@ -180,15 +182,35 @@ def test_initial_bends_follow_the_seed():
     assert np.abs(bends(5)).max() <= limit
 
 
+def horizontal_bends_in_the_face_model(scn, floor, pans: np.ndarray) -> np.ndarray:
+    """Horizontal bend at each joint [rad] of pans (N, 6) placed in the face model: the angle in the horizontal plane
+    of F from each pan's running line (its rail_start to rail_end sites, where MuJoCo puts them) to the next's."""
+    n = scn.face.pan_count
+    model = build_face_spec(scn, FloorBand.for_window(scn, floor, n), 0, n, anchors=False).compile()
+    data = mujoco.MjData(model)
+    data.qpos[index_face_model(model, scn, 0, n).pan_qpos] = pans
+    mujoco.mj_kinematics(model, data)
+    lines_t = np.array([data.site(f"pan{i}_rail_end").xpos - data.site(f"pan{i}_rail_start").xpos for i in range(n)])
+    u = (lines_t @ FaceFrame(np.radians(scn.face.azimuth_deg)).mat_tf)[:, :2]
+    return np.arctan2(u[:-1, 0] * u[1:, 1] - u[:-1, 1] * u[1:, 0], np.sum(u[:-1] * u[1:], axis=1))
+
+
 def test_explicit_bend_list_is_used():
+    """The pans a scenario's bend list lays out bend by the list at every joint, measured in the face model; another
+    list lays other pans."""
     scn = capped("default")
-    wanted = list(np.round(np.linspace(-0.5, 0.5, scn.face.pan_count - 1), 3))
-    data = scn.model_dump()
-    data["face"]["initial_bend_horizontal_deg"] = wanted
-    scn = parse_scenario(data)
-    rng = np.random.default_rng(0)
-    got = bend_angles(initial_pans(scn, Floor.from_scenario(scn, rng), rng))[0]
-    np.testing.assert_allclose(np.degrees(got), wanted, atol=1e-12)
+    n = scn.face.pan_count
+    lists = {"ramp": np.round(np.linspace(-0.5, 0.5, n - 1), 3), "zigzag": 0.2 * (-1.0) ** np.arange(n - 1)}
+    laid = {}
+    for name, wanted in lists.items():
+        listed = parse_scenario(scn.model_dump() | {"face": scn.face.model_dump() | {
+            "initial_bend_horizontal_deg": wanted.tolist()}})
+        rng = np.random.default_rng(0)
+        floor = Floor.from_scenario(listed, rng)
+        laid[name] = initial_pans(listed, floor, rng)
+        measured = horizontal_bends_in_the_face_model(listed, floor, laid[name])
+        np.testing.assert_allclose(np.degrees(measured), wanted, atol=1e-9, err_msg=name)
+    assert np.abs(laid["ramp"][:, :2] - laid["zigzag"][:, :2]).max() > 0.1
 
 
 def test_truth_clock_has_no_gaps(run):

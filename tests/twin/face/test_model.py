@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import mujoco
 import numpy as np
+import pytest
 
 from tests.conftest import capped
 from twin.face.layout import PAN_HEIGHT_M, PAN_WIDTH_M, Floor
@@ -15,6 +16,7 @@ from twin.face.model import (
     index_face_model,
     models_dir,
 )
+from twin.face.ride import simulate_ride
 
 
 def test_pan_piece_matches_layout_constants():
@@ -44,12 +46,46 @@ def test_full_face_model_has_the_flat_layout():
     assert index.ram_act.size == n and index.pan_qpos.shape == (n, 6)
 
 
-def test_ride_model_suspension_from_the_scenario():
+def test_ride_model_steps_at_the_ride_rate_on_its_shoes():
     scn = capped("default")
     model = build_ride_spec(scn).compile()
     assert np.isclose(model.opt.timestep, 1 / scn.rates.ride_hz)
     shoes = [model.site(f"shoe_{s}").pos for s in ("rear", "front")]
     assert np.isclose(np.linalg.norm(shoes[1] - shoes[0]), scn.shearer.shoe_spacing_m)
+
+
+def natural_frequency_and_damping(decay: np.ndarray, dt: float) -> tuple[float, float]:
+    """Natural frequency [Hz] and damping ratio of a free second-order decay sampled every dt.
+
+    Its samples obey x[k+1] = a x[k] + c x[k-1] (fitted by least squares), whose roots z of z^2 - a z - c are
+    exp(s dt) for the decay's poles s: s1 s2 = w^2 and s1 + s2 = -2 zeta w.
+    """
+    (a, c), *_ = np.linalg.lstsq(np.column_stack([decay[1:-1], decay[:-2]]), decay[2:], rcond=None)
+    s = np.log(np.roots([1.0, -a, -c]).astype(complex)) / dt
+    w = np.sqrt((s[0] * s[1]).real)
+    return w / (2 * np.pi), -(s[0] + s[1]).real / (2 * w)
+
+
+@pytest.mark.parametrize("frequency_hz, damping_ratio, ride_hz", [
+    (10.0, 1.0, 100.0),  # the default scenario's
+    (10.0, 0.1, 100.0),
+    (40.0, 0.3, 100.0),
+    (3.0, 0.7, 250.0),
+])
+def test_ride_model_suspension_from_the_scenario(frequency_hz, damping_ratio, ride_hz):
+    """After its target steps 0.5 mm up and 1 mrad about the face line (the size of the ride's deflections), the body
+    (simulate_ride) rises and tilts after it as a suspension of the scenario's natural frequency and damping ratio."""
+    scn = capped("default", shearer={"suspension_frequency_hz": frequency_hz,
+                                     "suspension_damping_ratio": damping_ratio}, rates={"ride_hz": ride_hz})
+    rise, tilt, steps = 5e-4, 1e-3, int(4 * ride_hz)
+    target_pos, target_quat = np.zeros((steps, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (steps, 1))
+    target_pos[1:, 2] = rise
+    target_quat[1:] = [np.cos(tilt / 2), 0.0, np.sin(tilt / 2), 0.0]
+    pos, quat = simulate_ride(scn, target_pos, target_quat)
+    for decay in (pos[:, 2] - rise, 2 * np.arctan2(quat[:, 2], quat[:, 0]) - tilt):
+        frequency, damping = natural_frequency_and_damping(decay, 1 / ride_hz)
+        assert frequency == pytest.approx(frequency_hz, rel=0.01)
+        assert damping == pytest.approx(damping_ratio, rel=0.01)
 
 
 def test_a_window_models_floor_does_not_grow_with_the_panel():

@@ -6,18 +6,40 @@ import numpy as np
 import pytest
 
 from tests.conftest import capped
+from twin.config.scenario import ScenarioError
 from twin.face import snake
 from twin.face.haulage import CUTTING, RETURN, Leg, Timeline, run_profile
+from twin.face.layout import INITIAL_BEND_FRACTION
 from twin.face.pushadvance import PushAdvanceController
 
 
-def test_snake_bends_stay_within_their_share_of_the_limit():
-    scn = capped("default")
-    step = np.radians(scn.face.bend_limit_horizontal_deg) * snake.BEND_FRACTION
-    offsets = snake.joint_offsets(scn.pattern.snake_length_pans, scn.face.pan_length_m, step)
-    yaw = np.arcsin(np.diff(offsets) / scn.face.pan_length_m)
-    assert np.abs(np.diff(yaw)).max() <= step + 1e-12
-    assert offsets[-1] >= scn.face.web_depth_m
+def joints_from_pans(advance: np.ndarray) -> np.ndarray:
+    """Advance of the joints of a chain of pans whose centres advance by `advance`, its first pan straight."""
+    joints = np.empty(advance.size + 1)
+    joints[0] = advance[0]
+    for i, centre in enumerate(advance):
+        joints[i + 1] = 2 * centre - joints[i]
+    return joints
+
+
+@pytest.mark.parametrize("direction", [+1, -1])
+def test_snake_bends_stay_within_their_share_of_the_limit(direction):
+    """At the largest web the validator accepts, the pans the controller pushes mid-cut bend by at most the limit
+    less the initial face's share (twin.face.layout.INITIAL_BEND_FRACTION), and by all of it at the steepest joint,
+    and the snake takes up the web: each pan's yaw from the advance of its two joints over its length."""
+    base = capped("default")
+    length, limit = base.face.pan_length_m, np.radians(base.face.bend_limit_horizontal_deg)
+    web = snake.capacity_m(base.pattern.snake_length_pans, length, limit)
+    with pytest.raises(ScenarioError, match="snake_length_pans"):
+        capped("default", face={"web_depth_m": web + 1e-3})
+    ctrl = PushAdvanceController(capped("default", face={"web_depth_m": web}))
+    ctrl.begin_cycle(direction)
+    ctrl.update((30 if direction > 0 else 14) * length)  # the snake mid-face, both its ends straight
+    joints = joints_from_pans(ctrl.pan_target)
+    bends = np.abs(np.diff(np.arcsin(np.diff(joints) / length)))
+    share = (1 - INITIAL_BEND_FRACTION) * limit
+    assert share * (1 - 1e-9) <= bends.max() <= share * (1 + 1e-9)
+    np.testing.assert_allclose(sorted([joints[0], joints[-1]]), [0.0, web], atol=1e-12)  # unpushed ahead, a web behind
 
 
 def test_pushes_trail_the_shearer_and_supports_follow():
