@@ -174,15 +174,17 @@ class Sensors(Section):
 
 
 FaultKind = Literal["ram_stuck", "ram_offset", "ram_drift", "ram_scale", "ram_dropout", "ram_noise_burst",
-                    "push_shortfall", "rail_deviation", "mag_interference", "odometer_slip"]
+                    "push_shortfall", "obstruction", "rail_deviation", "mag_interference", "odometer_slip"]
 
 
 class Fault(Section):
-    """A fault injected on a sensor (or, for push_shortfall and rail_deviation, on the face) in a window.
+    """A fault injected on a sensor (or, for push_shortfall, obstruction and rail_deviation, on the face) in a window.
 
     value: ram_stuck (ignored: the reading freezes), ram_offset [m], ram_drift [m/s], ram_scale (relative
     error), ram_dropout (ignored: readings invalid), ram_noise_burst (standard deviation [m]), push_shortfall
-    (metres the pan falls short while the sensor reads the full stroke), rail_deviation (horizontal angle
+    (metres the pan falls short while the sensor reads the full stroke), obstruction (metres the target's pan can
+    still advance from where it stands at t_start before it meets an obstacle: its ram stalls at its relief
+    pressure, the push falls short and the sensor reads it, until t_end clears it), rail_deviation (horizontal angle
     [deg] per two chutes, 004 section V), mag_interference (field magnitude [T]), odometer_slip (fraction of
     travel the encoder misses).
     """
@@ -191,7 +193,7 @@ class Fault(Section):
     t_start_s: NonNegativeFloat
     t_end_s: NonNegativeFloat
     target: Annotated[int, Field(ge=0)] | None = None
-    """Support index for ram faults and push_shortfall; for mag_interference, a support whose canopy unit is
+    """Support index for ram faults, push_shortfall and obstruction; for mag_interference, a support whose canopy unit is
     disturbed (None: the shearer magnetometer); None for the others (the scenario checks that it exists)."""
     value: Finite = 0.0
     """Within FAULT_VALUES[kind]."""
@@ -206,7 +208,8 @@ class Fault(Section):
         return self
 
 
-TARGETED = ("ram_stuck", "ram_offset", "ram_drift", "ram_scale", "ram_dropout", "ram_noise_burst", "push_shortfall")
+TARGETED = ("ram_stuck", "ram_offset", "ram_drift", "ram_scale", "ram_dropout", "ram_noise_burst", "push_shortfall",
+            "obstruction")
 """The fault kinds that need a target support."""
 FAULT_VALUES: dict[str, tuple[float, float, str]] = {
     "ram_stuck": (-math.inf, math.inf, "ignored"),
@@ -216,6 +219,7 @@ FAULT_VALUES: dict[str, tuple[float, float, str]] = {
     "ram_dropout": (-math.inf, math.inf, "ignored"),
     "ram_noise_burst": (0.0, 1.0, "standard deviation [m]; more than a metre is no reading"),
     "push_shortfall": (0.0, 1.5, "metres; the scenario also keeps it within face.web_depth_m"),
+    "obstruction": (0.0, 1.5, "metres of free advance; beyond a web the obstacle is never met"),
     "rail_deviation": (-10.0, 10.0, "deg per two chutes; the largest face.bend_limit_horizontal_deg"),
     "mag_interference": (-2 * EARTH_FIELD_T, 2 * EARTH_FIELD_T, "tesla; twice the Earth's field saturates"),
     "odometer_slip": (0.0, 1.0, "fraction of the travel missed; 1 misses all of it"),

@@ -56,6 +56,8 @@ WINDOW_MARGIN_PANS = 2
 AFC_HOLD_N = 3.0e5
 """While supports advance, the rest of the AFC is held by the set supports' rams; the window stands in for
 that hold with a sliding resistance on every pan (so a support pulls itself up, not its pan back)."""
+OPEN_WALL_M = 1.0e6
+"""A pan slide's limits where nothing stands in its way."""
 DRIVE_FRAME_MASS_SCALE = 6.0
 """The end pans are the drive frames (gearbox, motors, sprocket): several times a line pan's mass."""
 SKID_OFFSET_X_M = -1.5
@@ -73,6 +75,8 @@ class FaceState:
     sup_leg: np.ndarray
     ram: np.ndarray
     ram_force: np.ndarray
+    pan_wall_x: np.ndarray
+    """Per pan, the x of an obstacle in front of it (an obstruction fault), or inf."""
 
 
 @dataclass
@@ -160,7 +164,7 @@ class FaceSimulator:
         sup_x = self._pan_ram_points(pans)[st, 0] - sup.ram_length_set_m - ram_extension_m
         sup_z = self.support_z(np.arange(st.size), sup_x)
         state = FaceState(pans.copy(), sup_x, sup_z, np.full(st.size, sup.canopy_height_m), np.zeros(st.size),
-                          np.zeros(st.size))
+                          np.zeros(st.size), np.full(pans.shape[0], np.inf))
         state.ram = self.ram_lengths(state, np.zeros(st.size), sup_x)
         return state
 
@@ -202,6 +206,11 @@ class FaceSimulator:
         place_floor(m, d, *win.band.place(self.floor, float(state.pans[pans, 0].min()), first * length),
                     self.frame.mat_tf)
         d.qpos[ix.pan_qpos] = state.pans[pans]
+        # An obstacle in front of a pan: its advance slide limited there.
+        wall = state.pan_wall_x[pans]
+        x_joint = m.dof_jntid[ix.pan_dof[:, 0]]
+        m.jnt_limited[x_joint] = np.isfinite(wall)
+        m.jnt_range[x_joint] = np.column_stack([np.full(wall.size, -OPEN_WALL_M), np.minimum(wall, OPEN_WALL_M)])
         scale = np.where((pans == 0) | (pans == n - 1), DRIVE_FRAME_MASS_SCALE, 1.0)
         m.body_mass[win.pan_body] = win.pan_mass * scale
         m.body_inertia[win.pan_body] = win.pan_inertia * scale[:, None]

@@ -227,6 +227,17 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     last_target = np.zeros(sim.stations.size)
     last_moved = np.zeros(sim.stations.size, bool)
     shortfalls = faults_of(scn.faults, "push_shortfall")
+    obstructions = faults_of(scn.faults, "obstruction")
+    walls: dict[int, float] = {}  # obstruction -> the x of its obstacle, placed when it begins
+
+    def obstruct(t: float) -> None:
+        """Place (and clear) the obstacles of the obstruction faults in force at t, in front of their pans."""
+        state.pan_wall_x[:] = np.inf
+        for k, f in enumerate(obstructions):
+            pan = sim.stations[f.target]
+            if f.t_start_s <= t < f.t_end_s:
+                walls.setdefault(k, float(state.pans[pan, 0]) + f.value)
+                state.pan_wall_x[pan] = min(state.pan_wall_x[pan], walls[k])
 
     def shortfall_at(t: float) -> np.ndarray:
         return sum((shortfall_profile(f, sim.stations.size) for f in shortfalls if f.t_start_s <= t < f.t_end_s),
@@ -263,6 +274,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
             return False
         advancing &= moved
         t_begin = max(t, hydraulics_free[0])
+        obstruct(t_begin)
         if np.any(advancing & (np.abs(push - state.ram) > RAM_DEADBAND_M)):
             # Push and advance of one support (the end push of snake sumping): the rams extend first, then the
             # supports pull themselves up.

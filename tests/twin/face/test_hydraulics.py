@@ -15,7 +15,7 @@ from twin.config.scenario import PAN_FLOOR_FRICTION, ScenarioError, parse_scenar
 from twin.face.hydraulics import RamHydraulics
 from twin.face.layout import Floor, initial_pans
 from twin.face.simulator import FaceSimulator
-from twin.pipeline.simulate import window_sizes
+from twin.pipeline.simulate import simulate, window_sizes
 
 SPEED_TOLERANCE = 0.1
 """A rod may run faster than its metered flow by catching up its lag: a drive frame (30 t) lags while it accelerates
@@ -103,3 +103,22 @@ def test_the_pans_slide_on_the_floor_with_their_own_friction():
     on_floor = (contacts.geom[:, 0] == floor_geom) | (contacts.geom[:, 1] == floor_geom)
     assert on_floor.sum() >= 4 * win.count  # every foot of every pan
     np.testing.assert_array_equal(contacts.friction[on_floor, 0], PAN_FLOOR_FRICTION)
+
+
+def test_an_obstruction_stalls_the_ram_at_its_relief_pressure():
+    """An obstacle 0.1 m in front of support 20's pan from 250 s to 700 s: the pan stops at it (within the slide
+    limit's give), its ram stands at its relief pressure; once the obstacle is cleared the pan catches up."""
+    obstacle = {"kind": "obstruction", "t_start_s": 250.0, "t_end_s": 700.0, "target": 20, "value": 0.1}
+    scn = capped("default", faults=[obstacle])
+    result = simulate(scn)
+    pans, sup = result.tables["truth_pans"], result.tables["truth_supports"]
+    mine, t = pans["pan"] == 20, pans["t"]
+    blocked = mine & (t > 250.0) & (t < 700.0)
+    assert pans["advance"][blocked].max() == pytest.approx(0.1, abs=0.02)
+    # The pans three away are pushed on past it as far as the connectors let them, short of the web.
+    neighbours = np.isin(pans["pan"], [17, 23]) & (t > 500.0) & (t < 700.0)
+    assert 0.2 < pans["advance"][neighbours].max() < scn.face.web_depth_m - 0.2
+    s20 = (sup["support"] == 20) & (sup["t"] > 250.0) & (sup["t"] < 700.0)
+    assert sup["ram_pressure"][s20].max() == pytest.approx(scn.supports.hydraulics.pump_pressure_mpa, rel=0.02)
+    at_end = pans["advance"][mine & (t > 1000.0)]
+    assert at_end[-1] == pytest.approx(2 * scn.face.web_depth_m, abs=0.01)  # caught up by the end of the run
