@@ -19,8 +19,9 @@ from twin.pipeline.simulate import simulate, window_sizes
 
 SPEED_TOLERANCE = 0.1
 """A rod may run faster than its metered flow by catching up its lag: a drive frame (30 t) lags while it accelerates
-in the time-scaled simulation (twin.face.simulator: inertia k^2 times the real one) and then catches up 8 % faster
-(measured on the default face, supports 0 and 43; the line pans' rams stay within 0.5 %)."""
+in the time-scaled simulation (twin.face.simulator: inertia k^2 times the real one) and then catches up by the servo's
+lead, 4 % faster (measured on the default face, support 43; 42 % before the relief valve capped the lead); the line
+pans' rams stay within 0.5 %."""
 SAME_TIME_JUMP_M = 2e-3
 """Change of a ram between two rows of one time (a trace's last sample and the event's settled end)."""
 
