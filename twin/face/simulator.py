@@ -94,8 +94,6 @@ class EventTrace:
     sup_x: np.ndarray
     ram_force: np.ndarray
     """Ram force [N], positive pushing the pan (twin.face.hydraulics.RamHydraulics.pressure_mpa)."""
-    stalled: np.ndarray
-    """Per support of `supports`: its ram stalled at its force limit short of its goal."""
     duration_s: float
     """From the event's beginning to its supports set again."""
 
@@ -105,7 +103,6 @@ class _TraceBuilder:
 
     def __init__(self, sups: np.ndarray, moved: np.ndarray):
         self.sups, self.moved = sups, moved
-        self.stalled = np.zeros(sups.size, bool)
         self.rows: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
 
     def sample(self, t: float, ram: np.ndarray, sup_x: np.ndarray, force: np.ndarray) -> None:
@@ -116,7 +113,7 @@ class _TraceBuilder:
         t = np.array([r[0] for r in self.rows], float)
         ram, sup_x, force = (np.array([r[i] for r in self.rows], float).reshape(t.size, int(self.moved.sum()))
                              for i in (1, 2, 3))
-        return EventTrace(self.sups[self.moved], t, ram, sup_x, force, self.stalled[self.moved], duration_s)
+        return EventTrace(self.sups[self.moved], t, ram, sup_x, force, duration_s)
 
 
 @dataclass
@@ -330,7 +327,6 @@ class FaceSimulator:
             trail = (np.where(standing, 0.0, RAM_DAMPING_N_S_M * speed * k) + hyd.force_pull_n) / RAM_GAIN_N_M
             d.act[adr] = np.clip(d.act[adr], rod - trail, rod + lead)
             held_s = np.where(standing & moving, held_s + seg_real, 0.0)
-            trace.stalled |= moving & (held_s >= STALL_S)
             moving &= (np.abs(goal - d.act[adr]) > ARRIVED_M) & (held_s < STALL_S) & (t < deadline)
             trace.sample(t, rod, d.qpos[ix.sup_qpos[:, 0]], force)
         d.ctrl[ix.ram_act] = 0.0

@@ -222,7 +222,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     recorder = _FaceRecorder(scn, frame, state, sim)
     length = scn.face.pan_length_m
     events = 0
-    hydraulics_free = [0.0]  # when the last event's rams are done and its supports set
+    hydraulics_free = 0.0  # when the last event's rams are done and its supports set
 
     last_target = np.zeros(sim.stations.size)
     last_moved = np.zeros(sim.stations.size, bool)
@@ -273,7 +273,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
         if not moved.any():
             return False
         advancing &= moved
-        t_begin = max(t, hydraulics_free[0])
+        t_begin = max(t, hydraulics_free)
         obstruct(t_begin)
         if np.any(advancing & (np.abs(push - state.ram) > RAM_DEADBAND_M)):
             # Push and advance of one support (the end push of snake sumping): the rams extend first, then the
@@ -287,6 +287,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
                         advancing: np.ndarray) -> float:
         """Rams of `moved` to `target` from t_begin, the `advancing` supports lowered first and set after; the
         supports' rows through it and the pans' new line, in force from t_begin to its end (returned)."""
+        nonlocal hydraulics_free
         lowered = np.flatnonzero(advancing)
         if lowered.size:
             recorder.record(t_begin, state, np.zeros(0, int), lowered, lowered)
@@ -294,7 +295,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
         recorder.record_trace(t_begin, trace, state, lowered)
         t_done = t_begin + max(MIN_EVENT_S, trace.duration_s)
         recorder.record(t_done, state, pans, sups, t_begin=t_begin)
-        hydraulics_free[0] = t_done
+        hydraulics_free = t_done
         return t_done
 
     # The shearer's ride and truth run chunk by chunk on the other core while the face simulates on:
@@ -321,7 +322,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
             # Snake sumping: the end pans are pushed while the shearer stands at C, then pushed again where
             # the end supports' advance pulled them back; all before the shearer moves on.
             for k in range(1 + MAX_REPUSHES):
-                t_due = max(plan.t_sump_end, hydraulics_free[0])
+                t_due = max(plan.t_sump_end, hydraulics_free)
                 if t_due >= plan.t_push_end - MIN_EVENT_S or not event(t_due, None, plan.t_push_end, repush=k > 0):
                     break
             report("face", (plan.cycle + 1) / len(timeline.cycles))
