@@ -107,7 +107,8 @@ TRUTH_PANS = Stream(
 
 TRUTH_SUPPORTS = Stream(
     "truth_supports",
-    "Every hydraulic support's state whenever it changes, and through every ram stroke (sampled in real time).",
+    "Every hydraulic support's state whenever it changes: through every ram stroke and lowering and setting of its "
+    "legs (sampled in real time), and as the roof converges on it.",
     (
         T,
         Column("support", "1", "i4", "support index from the headgate"),
@@ -115,8 +116,9 @@ TRUTH_SUPPORTS = Stream(
         Column("advance", "m", "f8", "displacement towards the coal wall since t = 0"),
         Column("ram", "m", "f8", "push-ram length (tendon length between support and pan)"),
         Column("ram_pressure", "MPa", "f8", "pressure in the push ram's loaded side (annulus pushing, bore pulling)"),
-        Column("canopy", "m", "f8", "canopy height above the base"),
-        Column("set", "1", "i1", "1 when set against the roof, 0 while lowered and advancing"),
+        Column("canopy", "m", "f8", "canopy height above the base (its leg joint)"),
+        Column("leg_pressure", "MPa", "f8", "pressure in the legs"),
+        Column("set", "1", "i1", "1 when set against the roof, 0 from the legs' lowering to their set"),
     ),
     time_order="nondecreasing",
 )
@@ -165,6 +167,21 @@ PUSHRAM = Stream(
         Column("support", "1", "i4", "support index from the headgate"),
         Column("extension", "m", "f8", "ram length reading", nan_ok=True),
         Column("valid", "1", "i1", "1 when the sensor reports a reading, 0 on dropout"),
+    ),
+    time_order="nondecreasing",
+)
+
+PRESSURE = Stream(
+    "pressure",
+    "Pressure transducers of the supports' legs and push rams, one row per support per sample; invalid readings are "
+    "flagged, not dropped.",
+    (
+        T,
+        Column("support", "1", "i4", "support index from the headgate"),
+        Column("leg", "MPa", "f8", "legs' pressure reading", nan_ok=True),
+        Column("ram", "MPa", "f8", "push ram's pressure reading (its loaded side)", nan_ok=True),
+        Column("valid_leg", "1", "i1", "1 when the leg transducer reports a reading, 0 on dropout"),
+        Column("valid_ram", "1", "i1", "1 when the ram transducer reports a reading, 0 on dropout"),
     ),
     time_order="nondecreasing",
 )
@@ -352,7 +369,7 @@ ESTIMATE_SUPPORT_ATTITUDE = Stream(
 )
 
 TRUTH_STREAMS = (TRUTH_SHEARER, TRUTH_PANS, TRUTH_SUPPORTS, TRUTH_CYCLES)
-SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, MAG, SUPPORT_IMU, FAULTS, SURVEY, FACE_SURVEY)
+SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, PRESSURE, MAG, SUPPORT_IMU, FAULTS, SURVEY, FACE_SURVEY)
 ESTIMATE_STREAMS = (ESTIMATE, ESTIMATE_STATES, ESTIMATE_FUSION, ESTIMATE_DETECTORS, ESTIMATE_SUPPORT_ATTITUDE)
 STREAMS = {s.name: s for s in TRUTH_STREAMS + SENSOR_STREAMS}
 

@@ -76,12 +76,12 @@ class RowCost:
 
 ROW_COSTS = {
     "truth_shearer": RowCost(208.0, 114.0), "imu": RowCost(57.0, 41.0), "mag": RowCost(33.0, 18.0),
-    "odometer": RowCost(25.0, 2.0), "pushram": RowCost(21.0, 5.0), "support_imu": RowCost(85.0, 59.0),
+    "odometer": RowCost(25.0, 2.0), "pushram": RowCost(21.0, 5.0), "pressure": RowCost(38.0, 8.0), "support_imu": RowCost(85.0, 59.0),
     "estimates": RowCost(386.0, 694.0),
 }
 """Measured on default.toml's run (support_imu on seed002_face's); `estimates` per method and filter epoch: the
 solution, the filter's states and their share of estimates.rrd."""
-SENSOR_STREAMS = ("imu", "mag", "odometer", "pushram", "support_imu", "estimates")
+SENSOR_STREAMS = ("imu", "mag", "odometer", "pushram", "pressure", "support_imu", "estimates")
 """What each Monte Carlo trial draws and writes again (the truth is shared)."""
 TWIN_S_PER_STEP = 1.1e-5
 """Wall time per step of the twin (face steps, ride steps and truth samples; default.toml: 9.8 s for 904 900;
@@ -139,6 +139,7 @@ def face_resources(scn: Scenario, trials: int = 1, sensors: bool = True, workers
     if sensors:
         rows |= {"imu": t * s.imu.rate_hz, "mag": t * s.mag.rate_hz, "odometer": t * s.odometer.rate_hz,
                  "pushram": t * s.pushram.rate_hz * support_count(scn),
+                 "pressure": t * s.pressure.rate_hz * support_count(scn),
                  "support_imu": t * s.support_imu.rate_hz * len(s.support_imu.supports),
                  "estimates": t * scn.estimators.shearer.filter_rate_hz * len(scn.estimators.shearer.methods)}
     table = {k: n * ROW_COSTS[k].memory for k, n in rows.items()}

@@ -41,11 +41,11 @@ from twin.config.sensors import (
     SoftIron,
     check_soft_iron,
 )
-from twin.config.supports import Supports
+from twin.config.supports import Roof, Supports
 from twin.config.tomlfile import read_scenario
 from twin.config.turntable import TURNTABLE_KIND, Turntable, parse_turntable
 from twin.face import snake
-from twin.face.hydraulics import RamHydraulics
+from twin.face.hydraulics import SupportHydraulics
 from twin.face.layout import floor_pitch_change
 from twin.face.suspension import ringing_hz
 
@@ -203,6 +203,7 @@ class Scenario(Section):
     site: Site = Site()
     face: Face = Face()
     supports: Supports = Supports()
+    roof: Roof = Roof()
     shearer: Shearer = Shearer()
     haulage: Haulage = Haulage()
     pattern: Pattern = Pattern()
@@ -253,7 +254,8 @@ class Scenario(Section):
         if f.web_depth_m > max_push:
             raise ValueError(f"pattern.snake_length_pans: {p.snake_length_pans} pans bend at most {max_push:.2f} m "
                              f"within bend_limit_horizontal_deg; web_depth_m {f.web_depth_m} m needs a longer snake")
-        need = RamHydraulics.from_scenario(self.supports.hydraulics).end_push_s(f.web_depth_m) * END_PUSH_MARGIN
+        need = SupportHydraulics.from_scenario(self.supports, self.roof).end_push_s(
+            f.web_depth_m, self.supports.lower_m) * END_PUSH_MARGIN
         if self.haulage.end_push_stop_s < need:
             raise ValueError(f"haulage.end_push_stop_s: {self.haulage.end_push_stop_s:g} s is too short for the rams "
                              f"to push the end pans a {f.web_depth_m} m web and advance their supports ({need:.1f} s "

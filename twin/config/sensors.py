@@ -110,6 +110,16 @@ class PushRam(Section):
     """Reading step; at most 0.1 m, as the noise."""
 
 
+class Pressure(Section):
+    """Pressure transducers on every support's legs and push ram (0-60 MPa)."""
+
+    rate_hz: Rate = 1.0
+    noise_mpa: between(0, 5.0) = 0.05
+    """Standard deviation of a reading; at most 5 MPa (a tenth of the range: noisier tells no set from a yield)."""
+    resolution_mpa: between(0, 5.0) = 0.1
+    """Reading step; at most 5 MPa, as the noise."""
+
+
 class Magnetometer(Section):
     """The shearer's three-axis magnetometer."""
 
@@ -168,23 +178,32 @@ class Sensors(Section):
     vibration: Vibration = Vibration()
     odometer: Odometer = Odometer()
     pushram: PushRam = PushRam()
+    pressure: Pressure = Pressure()
     mag: Magnetometer = Magnetometer()
     support_imu: SupportImu = SupportImu()
     survey: Survey = Survey()
 
 
 FaultKind = Literal["ram_stuck", "ram_offset", "ram_drift", "ram_scale", "ram_dropout", "ram_noise_burst",
-                    "push_shortfall", "obstruction", "rail_deviation", "mag_interference", "odometer_slip"]
+                    "leg_pressure_stuck", "leg_pressure_offset", "leg_pressure_drift", "leg_pressure_scale",
+                    "leg_pressure_dropout", "leg_pressure_noise_burst", "ram_pressure_stuck", "ram_pressure_offset",
+                    "ram_pressure_drift", "ram_pressure_scale", "ram_pressure_dropout", "ram_pressure_noise_burst",
+                    "push_shortfall", "obstruction", "leg_leak", "failed_set", "sticking_valve", "rail_deviation",
+                    "mag_interference", "odometer_slip"]
 
 
 class Fault(Section):
     """A fault injected on a sensor (or, for push_shortfall, obstruction and rail_deviation, on the face) in a window.
 
     value: ram_stuck (ignored: the reading freezes), ram_offset [m], ram_drift [m/s], ram_scale (relative
-    error), ram_dropout (ignored: readings invalid), ram_noise_burst (standard deviation [m]), push_shortfall
+    error), ram_dropout (ignored: readings invalid), ram_noise_burst (standard deviation [m]); the same six on the
+    pressure transducers of the legs (leg_pressure_*) and of the push ram (ram_pressure_*) in MPa and MPa/s; push_shortfall
     (metres the pan falls short while the sensor reads the full stroke), obstruction (metres the target's pan can
     still advance from where it stands at t_start before it meets an obstacle: its ram stalls at its relief
-    pressure, the push falls short and the sensor reads it, until t_end clears it), rail_deviation (horizontal angle
+    pressure, the push falls short and the sensor reads it, until t_end clears it), leg_leak (oil the target's legs lose
+    [L/min]: their pressure decays and the canopy comes off the roof), failed_set (pressure [MPa] at which the target's
+    setting valve closes when it sets inside the window, short of the set pressure), sticking_valve (fraction of the
+    metered flow the target's ram valve passes: a slow ram), rail_deviation (horizontal angle
     [deg] per two chutes, 004 section V), mag_interference (field magnitude [T]), odometer_slip (fraction of
     travel the encoder misses).
     """
@@ -208,8 +227,12 @@ class Fault(Section):
         return self
 
 
-TARGETED = ("ram_stuck", "ram_offset", "ram_drift", "ram_scale", "ram_dropout", "ram_noise_burst", "push_shortfall",
-            "obstruction")
+READING_FAULTS = ("stuck", "offset", "drift", "scale", "dropout", "noise_burst")
+"""The sensor faults of a support's readings, each kind `<sensor>_<fault>` (twin.sensors.faults.apply_reading_faults)."""
+SUPPORT_SENSORS = ("ram", "leg_pressure", "ram_pressure")
+"""The support sensors the reading faults act on: the ram's stroke, the legs' and the ram's pressure transducers."""
+TARGETED = (*(f"{sensor}_{fault}" for sensor in SUPPORT_SENSORS for fault in READING_FAULTS), "push_shortfall",
+            "obstruction", "leg_leak", "failed_set", "sticking_valve")
 """The fault kinds that need a target support."""
 FAULT_VALUES: dict[str, tuple[float, float, str]] = {
     "ram_stuck": (-math.inf, math.inf, "ignored"),
@@ -218,8 +241,16 @@ FAULT_VALUES: dict[str, tuple[float, float, str]] = {
     "ram_scale": (-1.0, 1.0, "relative error; -1 reads zero"),
     "ram_dropout": (-math.inf, math.inf, "ignored"),
     "ram_noise_burst": (0.0, 1.0, "standard deviation [m]; more than a metre is no reading"),
+    **{f"{sensor}_{kind}": limits for sensor in ("leg_pressure", "ram_pressure") for kind, limits in {
+        "stuck": (-math.inf, math.inf, "ignored"), "offset": (-60.0, 60.0, "MPa; the transducer's range"),
+        "drift": (-0.1, 0.1, "MPa/s; faster is an offset"), "scale": (-1.0, 1.0, "relative error; -1 reads zero"),
+        "dropout": (-math.inf, math.inf, "ignored"),
+        "noise_burst": (0.0, 20.0, "standard deviation [MPa]; a third of the range is no reading")}.items()},
     "push_shortfall": (0.0, 1.5, "metres; the scenario also keeps it within face.web_depth_m"),
     "obstruction": (0.0, 1.5, "metres of free advance; beyond a web the obstacle is never met"),
+    "leg_leak": (0.0, 100.0, "L/min; a burst hose loses 100"),
+    "failed_set": (0.0, 45.0, "MPa; at most the highest set pressure"),
+    "sticking_valve": (0.05, 1.0, "fraction of the metered flow; below 5 % the valve is shut, not sticking"),
     "rail_deviation": (-10.0, 10.0, "deg per two chutes; the largest face.bend_limit_horizontal_deg"),
     "mag_interference": (-2 * EARTH_FIELD_T, 2 * EARTH_FIELD_T, "tesla; twice the Earth's field saturates"),
     "odometer_slip": (0.0, 1.0, "fraction of the travel missed; 1 misses all of it"),

@@ -1,4 +1,4 @@
-"""Face layout: the face frame, the floor, pan geometry and the initial chain of pans.
+"""Face layout: the face frame, the floor and the roof, pan geometry and the initial chain of pans.
 
 Face frame F: origin at the headgate end of the first pan's running line at the start (the scenario's
 reference point, so F and the MuJoCo world t share their origin), x towards the coal wall (advance), y along
@@ -108,6 +108,34 @@ class Floor:
         modulation = 1.0 + 0.3 * np.sin(2 * np.pi * x / self.advance_wavelength + self.advance_phase)
         return self.dip_y * y + self.dip_x * x + self.amplitude * und * modulation / 1.3
 
+
+
+ROOF_SEED_STREAM = 25
+"""The roof's random phase comes from its own stream of the scenario's seed, so that adding the roof left every other
+draw of a run unchanged."""
+
+
+@dataclass(frozen=True)
+class Roof:
+    """Roof height z(x, y) in F, before convergence: the floor's height plus the mining height, with an undulation of
+    its own (the seam's thickness varying) along the face and, slower, in the advance direction."""
+
+    floor: Floor
+    mining_height: float
+    amplitude: float
+    wavelength: float
+    phase: float
+
+    @classmethod
+    def from_scenario(cls, scn: Scenario, floor: Floor) -> "Roof":
+        r = scn.roof
+        phase = float(np.random.default_rng([scn.seed, ROOF_SEED_STREAM]).uniform(0, 2 * np.pi))
+        return cls(floor, r.mining_height_m, r.undulation_amplitude_m, r.undulation_wavelength_m, phase)
+
+    def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        x, y = np.asarray(x, float), np.asarray(y, float)
+        return (self.floor.height(x, y) + self.mining_height
+                + self.amplitude * np.sin(2 * np.pi * (y + 0.3 * x) / self.wavelength + self.phase))
 
 
 def pan_axes(states: np.ndarray) -> np.ndarray:

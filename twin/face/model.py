@@ -8,7 +8,8 @@ Two models come from one scenario:
   differences); one hydraulic support
   per `pans_per_support` pans with its push ram, a spatial tendon driven by an integrated-velocity actuator
   (the metered stroke; the tendon length is the ram reading) limited to the cylinder's force each way
-  (twin.face.hydraulics) and a canopy leg actuator; the floor a height field under the window
+  (twin.face.hydraulics) and a canopy leg actuator of the same kind (the oil column, set against the roof limit
+  of its slide and limited to the yield load); the floor a height field under the window
   only (FloorBand), on a mocap body, placed at each event (place_floor). A range
   that does not reach a face end is closed by mocap anchors standing in for the neighbouring pans, so a
   window of the face can be simulated alone while the rest stays put.
@@ -32,7 +33,7 @@ import numpy as np
 from estimators.nav.rotations import mat_to_quat
 from twin.config.scenario import PAN_FLOOR_FRICTION, Scenario
 from twin.face.connectors import CONNECTOR_KINDS, add_connectors, connector_limits_rad
-from twin.face.hydraulics import RamHydraulics
+from twin.face.hydraulics import SupportHydraulics
 from twin.face.layout import (
     MESH_MAX_CELLS,
     PAN_WIDTH_M,
@@ -53,9 +54,16 @@ BAND_MARGIN_M = 12.0
 RAM_GAIN_N_M = 5.0e7
 """Stiffness of a ram's servo on its metered stroke (the oil column; 5 mm under a 250 kN load)."""
 RAM_DAMPING_N_S_M = 1.0e6
-SUPPORT_FRICTION_SET_N = 2.0e6
+LEG_DAMPING_N_S_M = 3.0e6
+"""Damping of the legs' servo (near critical with the leg's armature): a canopy free of the roof follows its oil column
+within 0.024 s (simulated)."""
+LEG_RETRACT_FRACTION = 0.2
+"""The legs pull the canopy down (on their annuli) with at most this fraction of their set load."""
 SUPPORT_FRICTION_LOWERED_N = 1.0e4
 """Base sliding resistance of a lowered support (base lift on) [N]."""
+SUPPORT_GRIP = 0.25
+"""Sliding resistance of a set support per newton of leg load (canopy on the roof and base on the floor): 2 MN at
+the default set load."""
 
 
 def models_dir() -> Path:
@@ -212,7 +220,7 @@ class FaceIndex:
     sup_qpos: np.ndarray  # (nsup, 2) qpos of x, leg
     sup_dof: np.ndarray  # (nsup, 2)
     ram_act: np.ndarray  # (nsup,) actuator ids of rams (integrated velocity; act = target length)
-    leg_act: np.ndarray  # (nsup,) actuator ids of canopy legs
+    leg_act: np.ndarray  # (nsup,) actuator ids of the legs (integrated velocity; act = the oil column's length)
     ram_tendon: np.ndarray  # (nsup,) tendon ids
     anchor_eq: np.ndarray  # (2,) equality ids of the head and tail anchors (-1 when at a face end)
     anchor_mocap: np.ndarray  # (2,) mocap ids of the anchors (-1 when at a face end)
@@ -232,7 +240,7 @@ def build_face_spec(scn: Scenario, band: FloorBand, first: int, count: int, anch
     face by setting its state and its supports' body positions.
     """
     f, sup = scn.face, scn.supports
-    hyd = RamHydraulics.from_scenario(sup.hydraulics)
+    hyd = SupportHydraulics.from_scenario(sup, scn.roof)
     frame = FaceFrame(np.radians(f.azimuth_deg))
     mat_tf = frame.mat_tf
     quat_tf = mat_to_quat(mat_tf)
@@ -260,12 +268,16 @@ def build_face_spec(scn: Scenario, band: FloorBand, first: int, count: int, anch
                           biastype=mujoco.mjtBias.mjBIAS_AFFINE, gainprm=[RAM_GAIN_N_M] + [0] * 9,
                           biasprm=[0, -RAM_GAIN_N_M, -RAM_DAMPING_N_S_M] + [0] * 7, actlimited=True,
                           actrange=[0.3, sup.ram_length_set_m + 2.0 * f.web_depth_m],
-                          forcelimited=True, forcerange=[-hyd.force_pull_n, hyd.force_push_n],
+                          forcelimited=True, forcerange=[-hyd.ram.force_pull_n, hyd.ram.force_push_n],
                           ctrllimited=True, ctrlrange=[-20.0, 20.0])
+        k_leg = hyd.legs.stiffness_n_m
         spec.add_actuator(name=f"leg{j}", target=f"sup{j}_leg", trntype=mujoco.mjtTrn.mjTRN_JOINT,
-                          gaintype=mujoco.mjtGain.mjGAIN_FIXED, biastype=mujoco.mjtBias.mjBIAS_AFFINE,
-                          gainprm=[2e6] + [0] * 9, biasprm=[0, -2e6, -2e5] + [0] * 7,
-                          ctrllimited=True, ctrlrange=[0.5, 7.0])
+                          dyntype=mujoco.mjtDyn.mjDYN_INTEGRATOR, gaintype=mujoco.mjtGain.mjGAIN_FIXED,
+                          biastype=mujoco.mjtBias.mjBIAS_AFFINE, gainprm=[k_leg] + [0] * 9,
+                          biasprm=[0, -k_leg, -LEG_DAMPING_N_S_M] + [0] * 7, actlimited=True, actrange=[0.3, 7.5],
+                          forcelimited=True,
+                          forcerange=[-LEG_RETRACT_FRACTION * hyd.legs.force_set_n, hyd.legs.force_yield_n],
+                          ctrllimited=True, ctrlrange=[-20.0, 20.0])
     return spec
 
 

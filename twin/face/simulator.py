@@ -4,9 +4,12 @@ The face is slow, local and event-driven: a push touches the pans of the snake a
 nothing else. `FaceSimulator` compiles one window model (a run of pans with their supports and two mocap
 anchors standing in for the neighbours) and moves it along the face: for each push event it loads the
 window's part of the global `FaceState`, places its floor (a height field of fixed size under the window only:
-model.FloorBand), drives the rams to their new targets as the hydraulics would (each at its flow-limited speed up
-to its force limit, in real time scaled to a quasi-static speed, sampled as it goes: EventTrace), then the supports
-set and the window settles, and writes the result back.
+model.FloorBand) and the roof over its canopies (the legs' slide limits), lowers the supports that advance (their
+legs' valves open), drives the rams to their new targets as the hydraulics would (each at its flow-limited speed up
+to its force limit), sets the advanced supports against the roof to their set load, each phase in real time scaled
+to a quasi-static speed and sampled as it goes (EventTrace), lets the window settle, and writes the result back.
+Between events the set supports' legs are held closed while the roof converges on them (`hold_legs`, the same
+hydraulics in closed form, which a test checks against MuJoCo).
 """
 
 from __future__ import annotations
@@ -18,13 +21,13 @@ import numpy as np
 
 from twin.config.scenario import Scenario
 from twin.face.connectors import connect_window
-from twin.face.hydraulics import LOWER_S, SET_S, VALVE_RAMP_S, RamHydraulics
-from twin.face.layout import FaceFrame, Floor, joint_ends, pan_axes, support_stations
+from twin.face.hydraulics import CANOPY_CENTRE_X_M, CANOPY_TOP_M, VALVE_RAMP_S, SupportHydraulics
+from twin.face.layout import FaceFrame, Floor, Roof, joint_ends, pan_axes, support_stations
 from twin.face.model import (
     RAM_DAMPING_N_S_M,
     RAM_GAIN_N_M,
     SUPPORT_FRICTION_LOWERED_N,
-    SUPPORT_FRICTION_SET_N,
+    SUPPORT_GRIP,
     FaceIndex,
     FloorBand,
     build_face_spec,
@@ -38,8 +41,17 @@ neither drags nor overshoots the pans); the event's real time is its simulated t
 k^2 times the real one: accelerating a pan shows in its ram's force, so the pressure truth carries transients at the
 start of a push (up to relief for a drive frame). At 0.6 m/s the default run's 99th percentile pressure was 9.8 MPa
 against 31.5 here, but seed004's twin ran at 321x real time against 479x here (issue 2's target: 400x)."""
+QS_LEG_SPEED_M_S = 0.3
+"""Speed at which MuJoCo moves the legs' oil columns while supports lower and set (the canopy follows within 12 mm)."""
 RAM_SAMPLE_S = 0.25
-"""Real time between the samples of an event's trace (the supports' truth rows while the rams move)."""
+"""Real time between the samples of an event's trace (the supports' truth rows while the rams and legs move)."""
+ROOF_CONTACT_M = 1e-5
+"""A canopy at the roof is loaded this far into its slide's limit, so that the limit holds from the first step (a
+limit at exactly zero distance is not active yet): 1.3 kN of the legs' 7.9 MN."""
+ROOF_APPROACH_M = 0.05
+"""A setting canopy this close under the roof slows down (to RAMP_FLOOR of its flow at the roof)."""
+LEG_SETTLE_STEPS = 10
+"""Steps for a canopy to come to its legs' oil column after they lowered (the servo's time constant is 4 steps)."""
 RAMP_FLOOR = 0.2
 """Least fraction of its metered speed a ram moves at while its valve ramps."""
 ARRIVED_M = 1e-6
@@ -70,8 +82,9 @@ SKID_OFFSET_X_M = -1.5
 
 @dataclass
 class FaceState:
-    """The whole face in F: pan states (N, 6), support base x and z, canopy leg, ram length and ram force [N]
-    (positive pushing)."""
+    """The whole face in F: pan states (N, 6); per support its base x and z, canopy height (the leg joint), ram
+    length and force [N] (positive pushing), legs' oil column [m] and load [N], and the times its legs' state holds
+    at and it was last set [s]; the faults of the face in force."""
 
     pans: np.ndarray
     sup_x: np.ndarray
@@ -79,14 +92,24 @@ class FaceState:
     sup_leg: np.ndarray
     ram: np.ndarray
     ram_force: np.ndarray
+    leg_oil: np.ndarray
+    leg_force: np.ndarray
+    leg_t: np.ndarray
+    t_set: np.ndarray
     pan_wall_x: np.ndarray
     """Per pan, the x of an obstacle in front of it (an obstruction fault), or inf."""
+    ram_speed_factor: np.ndarray
+    """Per support, the fraction of its metered speed its ram's valve passes (below 1: a sticking valve)."""
+    leg_leak_m_s: np.ndarray
+    """Per support, the oil its legs lose [m of the column per s] (a leaking leg)."""
+    set_force_n: np.ndarray
+    """Per support, the load at which its setting valve closes (below the set load: a failed set)."""
 
 
 @dataclass
 class EventTrace:
-    """The moved supports of an event through it, sampled in real time while their rams move: one row per sample
-    (t_s since the event began), one column per support of `supports` (global indices)."""
+    """The moved supports of an event through it, sampled in real time while their rams and legs move: one row per
+    sample (t_s since the event began), one column per support of `supports` (global indices)."""
 
     supports: np.ndarray
     t_s: np.ndarray
@@ -94,26 +117,35 @@ class EventTrace:
     sup_x: np.ndarray
     ram_force: np.ndarray
     """Ram force [N], positive pushing the pan (twin.face.hydraulics.RamHydraulics.pressure_mpa)."""
+    leg: np.ndarray
+    """Canopy height above the base [m]."""
+    leg_force: np.ndarray
+    """The legs' load [N] (twin.face.hydraulics.LegHydraulics.pressure_mpa)."""
     duration_s: float
     """From the event's beginning to its supports set again."""
 
+    FIELDS = ("ram", "sup_x", "ram_force", "leg", "leg_force")
+
 
 class _TraceBuilder:
-    """Collects an event's samples of the moved supports of a window (window order)."""
+    """Collects an event's samples of the moved supports of a window (window order; `sups` their global indices)."""
 
-    def __init__(self, sups: np.ndarray, moved: np.ndarray):
-        self.sups, self.moved = sups, moved
-        self.rows: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
+    def __init__(self, win: _Window, sups: np.ndarray, moved: np.ndarray):
+        self.win, self.sups, self.moved = win, sups, moved
+        self.t: list[float] = []
+        self.rows: list[np.ndarray] = []
 
-    def sample(self, t: float, ram: np.ndarray, sup_x: np.ndarray, force: np.ndarray) -> None:
-        mv = self.moved
-        self.rows.append((t, ram[mv].copy(), sup_x[mv].copy(), force[mv].copy()))
+    def sample(self, t: float) -> None:
+        d, ix, mv = self.win.data, self.win.index, self.moved
+        self.t.append(t)
+        self.rows.append(np.stack([d.ten_length[ix.ram_tendon[mv]], d.qpos[ix.sup_qpos[mv, 0]],
+                                   d.actuator_force[ix.ram_act[mv]], d.qpos[ix.sup_qpos[mv, 1]],
+                                   self.win.leg_load()[mv]]))
 
     def build(self, duration_s: float) -> EventTrace:
-        t = np.array([r[0] for r in self.rows], float)
-        ram, sup_x, force = (np.array([r[i] for r in self.rows], float).reshape(t.size, int(self.moved.sum()))
-                             for i in (1, 2, 3))
-        return EventTrace(self.sups[self.moved], t, ram, sup_x, force, duration_s)
+        cols = np.array(self.rows, float).reshape(len(self.t), len(EventTrace.FIELDS), int(self.moved.sum()))
+        return EventTrace(self.sups[self.moved], np.array(self.t, float),
+                          *(cols[:, i] for i in range(len(EventTrace.FIELDS))), duration_s)
 
 
 @dataclass
@@ -129,6 +161,14 @@ class _Window:
     pan_mass: np.ndarray
     pan_inertia: np.ndarray
     sup_body: np.ndarray
+
+    def leg_load(self) -> np.ndarray:
+        """The legs' load [N] per support: their oil column's squeeze (its pressure; the servo's damping, a numerical
+        aid of the time scaling, left out) within the actuator's range."""
+        m, d, ix = self.model, self.data, self.index
+        squeeze = d.act[m.actuator_actadr[ix.leg_act]] - d.qpos[ix.sup_qpos[:, 1]]
+        rng = m.actuator_forcerange[ix.leg_act]
+        return np.clip(m.actuator_gainprm[ix.leg_act, 0] * squeeze, rng[:, 0], rng[:, 1])
 
     @classmethod
     def compile(cls, scn: Scenario, floor: Floor, count: int) -> "_Window":
@@ -147,11 +187,13 @@ class FaceSimulator:
     def __init__(self, scn: Scenario, floor: Floor, window_sizes: list[int]):
         self.scn = scn
         self.floor = floor
+        self.roof = Roof.from_scenario(scn, floor)
+        self.convergence_m_s = scn.roof.convergence_mm_h * 1e-3 / 3600.0
         self.frame = FaceFrame(np.radians(scn.face.azimuth_deg))
         self.stations = support_stations(scn)
         k, n = scn.supports.pans_per_support, scn.face.pan_count
         counts = sorted({min(n, int(np.ceil(c / k)) * k) for c in window_sizes})
-        self.hydraulics = RamHydraulics.from_scenario(scn.supports.hydraulics)
+        self.hydraulics = SupportHydraulics.from_scenario(scn.supports, scn.roof)
         self.windows = [_Window.compile(scn, floor, c) for c in counts]
         model = self.windows[0].model
         self.ram_site_local = np.array(model.site("pan0_ram").pos)
@@ -159,19 +201,53 @@ class FaceSimulator:
 
     # -- geometry ---------------------------------------------------------------------------------------
     def initial_supports(self, pans: np.ndarray, ram_extension_m: float = 0.0) -> FaceState:
-        """Supports set behind their pans with the rams at their set length plus `ram_extension_m`."""
-        sup = self.scn.supports
+        """Supports set to their set load behind their pans, with the rams at their set length plus
+        `ram_extension_m`, at time 0."""
+        sup, legs = self.scn.supports, self.hydraulics.legs
         st = self.stations
+        n = st.size
         sup_x = self._pan_ram_points(pans)[st, 0] - sup.ram_length_set_m - ram_extension_m
-        sup_z = self.support_z(np.arange(st.size), sup_x)
-        state = FaceState(pans.copy(), sup_x, sup_z, np.full(st.size, sup.canopy_height_m), np.zeros(st.size),
-                          np.zeros(st.size), np.full(pans.shape[0], np.inf))
-        state.ram = self.ram_lengths(state, np.zeros(st.size), sup_x)
+        sup_z = self.support_z(np.arange(n), sup_x)
+        zeros = np.zeros(n)
+        state = FaceState(pans.copy(), sup_x, sup_z, zeros.copy(), zeros.copy(), zeros.copy(), zeros.copy(),
+                          np.full(n, legs.force_set_n), zeros.copy(), zeros.copy(), np.full(pans.shape[0], np.inf),
+                          np.ones(n), zeros.copy(), np.full(n, legs.force_set_n))
+        state.sup_leg = self.roof_clearance(state, np.arange(n), 0.0)
+        state.leg_oil = state.sup_leg + legs.squeeze_set_m
+        state.ram = self.ram_lengths(state, zeros, sup_x)
         return state
 
     def support_z(self, sups: np.ndarray, sup_x: np.ndarray) -> np.ndarray:
         """Height of supports `sups` standing with their bases at `sup_x`: the floor under their skids."""
         return self.floor.height(sup_x + SKID_OFFSET_X_M, (self.stations[sups] + 0.5) * self.scn.face.pan_length_m)
+
+    def roof_clearance(self, state: FaceState, sups: np.ndarray, t: float, sup_x: np.ndarray | None = None,
+                       sup_z: np.ndarray | None = None, t_set: np.ndarray | None = None) -> np.ndarray:
+        """How far the legs of supports `sups` (with their bases at `sup_x`, `sup_z`, set at `t_set`; default: the
+        state's) reach to the roof at time t: the roof over their canopies, converged since they were set."""
+        x = state.sup_x[sups] if sup_x is None else sup_x
+        z = state.sup_z[sups] if sup_z is None else sup_z
+        since = t - (state.t_set[sups] if t_set is None else t_set)
+        y = (self.stations[sups] + 0.5) * self.scn.face.pan_length_m
+        return (self.roof.height(x + CANOPY_CENTRE_X_M, y) - self.convergence_m_s * np.maximum(since, 0.0) - z
+                - CANOPY_TOP_M)
+
+    def hold_legs(self, state: FaceState, t: float) -> None:
+        """Bring the supports' legs whose state is older than t to t with their valves closed (LegHydraulics.hold):
+        the roof converging squeezes them up to yield, a leak relieves them and lowers the canopy."""
+        legs = self.hydraulics.legs
+        sups = np.flatnonzero(state.leg_t < t)
+        dt = t - state.leg_t[sups]
+        # The roof where a loaded canopy stands (MuJoCo's limit with its fraction of a millimetre of give), or the
+        # roof's surface over a canopy hanging below it; converging on since.
+        loaded = state.leg_oil[sups] > state.sup_leg[sups]
+        c_then = np.where(loaded, state.sup_leg[sups], self.roof_clearance(state, sups, state.leg_t[sups]))
+        c_now = c_then - self.convergence_m_s * np.minimum(dt, np.maximum(t - state.t_set[sups], 0.0))
+        g = legs.hold(state.leg_oil[sups] - c_then, dt, self.convergence_m_s, state.leg_leak_m_s[sups])
+        state.leg_oil[sups] = c_now + g
+        state.sup_leg[sups] = c_now + np.minimum(g, 0.0)
+        state.leg_force[sups] = legs.force_n(g)
+        state.leg_t[sups] = t
 
     def _pan_ram_points(self, pans: np.ndarray) -> np.ndarray:
         return pans[:, :3] + pan_axes(pans) @ self.ram_site_local
@@ -218,7 +294,7 @@ class FaceSimulator:
         d.qpos[ix.sup_qpos[:, 0]] = state.sup_x[sups]
         d.qpos[ix.sup_qpos[:, 1]] = state.sup_leg[sups]
         d.act[m.actuator_actadr[ix.ram_act]] = state.ram[sups]
-        d.ctrl[ix.leg_act] = state.sup_leg[sups]
+        d.act[m.actuator_actadr[ix.leg_act]] = state.leg_oil[sups]
         y = (self.stations[sups] + 0.5) * length
         m.body_pos[win.sup_body] = np.column_stack([np.zeros_like(y), y, state.sup_z[sups]]) @ self.frame.mat_tf.T
         start, end = joint_ends(state.pans, length)
@@ -229,28 +305,34 @@ class FaceSimulator:
                 d.mocap_pos[ix.anchor_mocap[side]] = self.frame.mat_tf @ point[other]
         # The connectors to the neighbours beyond the window limited around them, the couplers at their play.
         connect_window(m, d, ix, state.pans, first, length)
-        mujoco.mj_forward(m, d)  # the rams' lengths and forces of the loaded state
+        mujoco.mj_forward(m, d)  # the rams' and legs' lengths and forces of the loaded state
         return pans, sups
 
-    def _store(self, win: _Window, state: FaceState, pans: np.ndarray, sups: np.ndarray) -> None:
-        d, ix = win.data, win.index
+    def _store(self, win: _Window, state: FaceState, pans: np.ndarray, sups: np.ndarray, t: float) -> None:
+        m, d, ix = win.model, win.data, win.index
         state.pans[pans] = d.qpos[ix.pan_qpos]
         state.sup_x[sups] = d.qpos[ix.sup_qpos[:, 0]]
         state.sup_leg[sups] = d.qpos[ix.sup_qpos[:, 1]]
+        state.leg_oil[sups] = d.act[m.actuator_actadr[ix.leg_act]]
         state.ram[sups] = d.ten_length[ix.ram_tendon]
         state.ram_force[sups] = d.actuator_force[ix.ram_act]
+        state.leg_force[sups] = win.leg_load()
+        state.leg_t[sups] = t
         state.sup_z[sups] = self.support_z(sups, state.sup_x[sups])
 
     def step_event(self, state: FaceState, moved: np.ndarray, target: np.ndarray, advancing: np.ndarray,
-                   time_limit_s: float = np.inf) -> tuple[np.ndarray, np.ndarray, EventTrace]:
-        """One push-advance event for the supports in `moved` (global per-support arrays), in real time.
+                   t_begin_s: float = 0.0, time_limit_s: float = np.inf
+                   ) -> tuple[np.ndarray, np.ndarray, EventTrace]:
+        """One push-advance event for the supports in `moved` (global per-support arrays), from `t_begin_s`, in
+        real time.
 
-        The supports flagged in `advancing` lower (LOWER_S), their rams pull them up to their pans while the
-        AFC is held, and they set again (SET_S), each ram keeping the stroke it reached; the other moved rams
-        push their pans, all at once. Every ram travels to its `target` length at its flow-limited speed
-        (twin.face.hydraulics) and stops there, or where its load reaches its force limit (it stalls), or
-        when the event's `time_limit_s` is up (its valve closes). A support that must push and then advance
-        takes two events. Returns the pans and supports of the window that was simulated and the trace.
+        The supports flagged in `advancing` lower (their legs' valves release the load and the canopy drops
+        supports.lower_m), their rams pull them up to their pans while the AFC is held, and they set again against
+        the roof to their set load, each ram keeping the stroke it reached; the other moved rams push their pans,
+        all at once. Every ram travels to its `target` length at its flow-limited speed (twin.face.hydraulics) and
+        stops there, or where its load reaches its force limit (it stalls), or when the event's `time_limit_s` is up
+        (its valve closes). A support that must push and then advance takes two events. The state's legs must hold
+        at t_begin_s (hold_legs). Returns the pans and supports of the window that was simulated and the trace.
         """
         if np.any(advancing & ~moved):
             raise ValueError("an advancing support must be among the moved ones")
@@ -258,33 +340,103 @@ class FaceSimulator:
         win, first = self._window_for(int(moved_pans.min()), int(moved_pans.max()))
         m, d, ix = win.model, win.data, win.index
         pans, sups = self._load(win, state, first)
+        roof = _RoofLimits(self, win, state, sups, t_begin_s)
         adv = advancing[sups]
         act = d.act[m.actuator_actadr[ix.ram_act]]
         goal = np.where(moved[sups], target[sups], act)
         self._set_supports(win, adv, ~adv & (goal > act + ARRIVED_M))
-        set_s = SET_S if adv.any() else VALVE_RAMP_S  # set again, or the valves closed and the window at rest
-        trace = _TraceBuilder(sups, moved[sups])
-        t_rams = self._drive_rams(win, goal, LOWER_S if adv.any() else 0.0, time_limit_s - set_s, trace)
+        trace = _TraceBuilder(win, sups, moved[sups])
+        lower_m = self.scn.supports.lower_m
+        legs = self.hydraulics.legs
+        if adv.any():
+            t = self._drive_legs(win, state, sups, adv, roof, -lower_m, 0.0, trace)
+            set_s = legs.set_s(lower_m)
+        else:
+            t, set_s = 0.0, VALVE_RAMP_S  # the valves closed and the window at rest
+        t = self._drive_rams(win, state, sups, goal, roof, t, time_limit_s - set_s, trace)
         if adv.any():
             mujoco.mj_step(m, d, nstep=SETTLE_STEPS)  # the released supports come up to their rams
             # Setting closes the ram valves: each ram holds the stroke it has, pulling no further.
             d.act[m.actuator_actadr[ix.ram_act]] = d.ten_length[ix.ram_tendon]
+            roof.advance(adv, t_begin_s + t)  # on the floor and under fresh roof where they stand now
+            t = self._drive_legs(win, state, sups, adv, roof, None, t, trace)
+            state.t_set[sups[adv]] = t_begin_s + t
             self._set_supports(win, np.zeros_like(adv))
+            t_legs = t
+        else:
+            t_legs = t
+            t += set_s  # the valves closing: the legs' state holds at t_legs (hold_legs brings it on)
         mujoco.mj_step(m, d, nstep=SETTLE_STEPS)
-        self._store(win, state, pans, sups)
-        return pans, sups, trace.build(t_rams + set_s)
+        self._store(win, state, pans, sups, t_begin_s + t_legs)
+        return pans, sups, trace.build(t)
 
-    def _drive_rams(self, win: _Window, goal: np.ndarray, t0: float, t_limit: float,
-                    trace: _TraceBuilder) -> float:
+    def _leak(self, win: _Window, state: FaceState, sups: np.ndarray, dt_s: float) -> None:
+        """The oil the leaking legs lose over `dt_s` of real time."""
+        adr = win.model.actuator_actadr[win.index.leg_act]
+        win.data.act[adr] -= state.leg_leak_m_s[sups] * dt_s
+
+    def _leg_valves(self, win: _Window, state: FaceState, sups: np.ndarray, cap_n: np.ndarray) -> None:
+        """After a step: the legs' oil no more than the load `cap_n` needs (the yield valve, or a setting valve
+        closing at the set load), so the column never winds up past its relief."""
+        m, d, ix = win.model, win.data, win.index
+        adr = m.actuator_actadr[ix.leg_act]
+        d.act[adr] = np.minimum(d.act[adr], d.qpos[ix.sup_qpos[:, 1]] + cap_n / self.hydraulics.legs.stiffness_n_m)
+
+    def _drive_legs(self, win: _Window, state: FaceState, sups: np.ndarray, which: np.ndarray,
+                    roof: _RoofLimits, lower_m: float | None, t0: float, trace: _TraceBuilder) -> float:
+        """Lower the legs of supports `which` (window order) `lower_m` below the roof (their load released first), or
+        with lower_m None set them against the roof to their set load (state.set_force_n); returns the real time
+        when all are done. The oil columns move at the valve's flow, MuJoCo at the quasi-static QS_LEG_SPEED_M_S."""
+        m, d, ix, legs = win.model, win.data, win.index, self.hydraulics.legs
+        adr = m.actuator_actadr[ix.leg_act]
+        k = QS_LEG_SPEED_M_S / legs.speed_m_s
+        nstep = max(1, round(RAM_SAMPLE_S / (k * m.opt.timestep)))
+        seg_sim = nstep * m.opt.timestep
+        set_force = state.set_force_n[sups]
+        yield_cap = np.full(sups.size, legs.force_yield_n)
+        deadline = t0 + VALVE_TIMEOUT_FACTOR * legs.lower_s(abs(lower_m or self.scn.supports.lower_m)) + STALL_S
+        t, moving = t0, which.copy()
+        while moving.any() and t < deadline:
+            roof.place(t + seg_sim * k)  # the roof where it is at the end of the step
+            if lower_m is None:
+                goal = d.qpos[ix.sup_qpos[:, 1]] + set_force / legs.stiffness_n_m
+            else:
+                goal = roof.clearance + lower_m
+            reach = legs.speed_m_s * k * seg_sim
+            if lower_m is None:
+                # The canopy meets the roof at the valve's least flow: in the quasi-static time scale its inertia is
+                # k^2 times the real one, and it would bounce off the roof.
+                gap = roof.clearance - d.qpos[ix.sup_qpos[:, 1]]
+                reach = reach * np.where(gap > ROOF_CONTACT_M, np.clip(gap / ROOF_APPROACH_M, RAMP_FLOOR, 1.0), 1.0)
+            flow = np.where(moving, np.clip(goal - d.act[adr], -reach, reach) / seg_sim, 0.0)
+            d.ctrl[ix.leg_act] = flow
+            mujoco.mj_step(m, d, nstep=nstep)
+            t += seg_sim * k
+            self._leak(win, state, sups, seg_sim * k)
+            self._leg_valves(win, state, sups, np.where(which & (lower_m is None), set_force, yield_cap))
+            if lower_m is None:
+                moving &= win.leg_load() < (1.0 - 1e-3) * set_force
+            else:
+                moving &= d.act[adr] > goal + ARRIVED_M
+            trace.sample(t)
+        d.ctrl[ix.leg_act] = 0.0
+        mujoco.mj_step(m, d, nstep=LEG_SETTLE_STEPS)  # the canopies come to rest on their oil columns
+        if lower_m is None:
+            self._leg_valves(win, state, sups, np.where(which, set_force, yield_cap))  # closed at the set load
+        return t
+
+    def _drive_rams(self, win: _Window, state: FaceState, sups: np.ndarray, goal: np.ndarray, roof: _RoofLimits,
+                    t0: float, t_limit: float, trace: _TraceBuilder) -> float:
         """Meter every ram (window order) towards its `goal` length from real time t0; returns the real time
         when the last ram has arrived, stalled or timed out, or t_limit.
 
         MuJoCo steps the rams at their real speeds times one factor k (the fastest at the quasi-static
         QS_RAM_SPEED_M_S); real time is simulated time times k. Each ram's stroke leads its rod by the
         servo's compression under load; where that load reaches the cylinder's force limit the relief valve
-        opens (the stroke is held at the limit, no wind-up), and a ram held there STALL_S has stalled.
+        opens (the stroke is held at the limit, no wind-up), and a ram held there STALL_S has stalled. A sticking
+        valve (state.ram_speed_factor) passes a fraction of the metered flow.
         """
-        m, d, ix, hyd = win.model, win.data, win.index, self.hydraulics
+        m, d, ix, hyd = win.model, win.data, win.index, self.hydraulics.ram
         adr = m.actuator_actadr[ix.ram_act]
         stroke = goal - d.act[adr]
         moving = np.abs(stroke) > ARRIVED_M
@@ -297,15 +449,18 @@ class FaceSimulator:
         speed = hyd.speed(stroke)
         if pushes.any():
             speed[pushes] *= stroke[pushes] / stroke[pushes].max()
+        speed *= state.ram_speed_factor[sups]
         k = QS_RAM_SPEED_M_S / speed[moving].max()
         nstep = max(1, round(RAM_SAMPLE_S / (k * m.opt.timestep)))
         seg_sim = nstep * m.opt.timestep
         seg_real = seg_sim * k
         travel_s = np.divide(np.abs(stroke), speed, out=np.zeros_like(stroke), where=moving)
-        deadline = t0 + VALVE_TIMEOUT_FACTOR * travel_s + STALL_S
+        deadline = t0 + VALVE_RAMP_S + VALVE_TIMEOUT_FACTOR * travel_s + STALL_S
         held_s = np.zeros(goal.size)
+        yield_cap = np.full(sups.size, self.hydraulics.legs.force_yield_n)
         t = t0
         while moving.any() and t < t_limit - 1e-9:
+            roof.place(t + seg_real)  # the roof where it is at the end of the step
             # The valves open and close over VALVE_RAMP_S: the speed ramps up from the start and down towards the
             # goal (to a floor, so that the ram arrives).
             togo = np.abs(goal - d.act[adr])
@@ -315,6 +470,8 @@ class FaceSimulator:
             d.ctrl[ix.ram_act] = np.where(moving, np.clip(goal - d.act[adr], -reach, reach), 0.0) / seg_sim
             mujoco.mj_step(m, d, nstep=nstep)
             t += seg_real
+            self._leak(win, state, sups, seg_real)
+            self._leg_valves(win, state, sups, yield_cap)
             rod, rod_v = d.ten_length[ix.ram_tendon], d.ten_velocity[ix.ram_tendon]
             force = d.actuator_force[ix.ram_act]
             at_limit = (force >= RELIEF_FRACTION * hyd.force_push_n) | (force <= -RELIEF_FRACTION * hyd.force_pull_n)
@@ -328,19 +485,20 @@ class FaceSimulator:
             d.act[adr] = np.clip(d.act[adr], rod - trail, rod + lead)
             held_s = np.where(standing & moving, held_s + seg_real, 0.0)
             moving &= (np.abs(goal - d.act[adr]) > ARRIVED_M) & (held_s < STALL_S) & (t < deadline)
-            trace.sample(t, rod, d.qpos[ix.sup_qpos[:, 0]], force)
+            trace.sample(t)
         d.ctrl[ix.ram_act] = 0.0
         short = np.abs(goal - d.act[adr]) > ARRIVED_M
         d.act[adr[short]] = d.ten_length[ix.ram_tendon[short]]  # valves closed where the rams stand
         return t
 
     def _set_supports(self, win: _Window, lowered: np.ndarray, pushing: np.ndarray | None = None) -> None:
-        """Set every support of the window but those `lowered` (window order); hold the AFC at their pans and
-        their neighbours, but for the pans of the `pushing` supports (their rams move them)."""
-        ix, sup = win.index, self.scn.supports
+        """Grip every support of the window by its legs' load (SUPPORT_GRIP), those `lowered` (window order) free;
+        hold the AFC at their pans and their neighbours, but for the pans of the `pushing` supports (their rams
+        move them)."""
+        ix = win.index
+        grip = SUPPORT_GRIP * np.maximum(win.leg_load(), 0.0)
         win.model.dof_frictionloss[ix.sup_dof[:, 0]] = np.where(lowered, SUPPORT_FRICTION_LOWERED_N,
-                                                                SUPPORT_FRICTION_SET_N)
-        win.data.ctrl[ix.leg_act] = np.where(lowered, sup.canopy_height_m - sup.lower_m, sup.canopy_height_m)
+                                                                np.maximum(grip, SUPPORT_FRICTION_LOWERED_N))
         at = np.zeros(ix.pans.size + 2, bool)  # padded by a pan each side
         at[self.stations[ix.supports[lowered]] - ix.pans[0] + 1] = True
         held = at[1:-1] | at[:-2] | at[2:]
@@ -349,12 +507,48 @@ class FaceSimulator:
         win.model.dof_frictionloss[ix.pan_dof[:, :2]] = np.where(held, AFC_HOLD_N, 0.0)[:, None]
 
     def settle(self, state: FaceState) -> None:
-        """Let the whole face come to rest on the floor, window by window from the headgate."""
+        """Let the whole face come to rest on the floor at time 0, window by window from the headgate."""
         win = self.windows[-1]
         n = self.scn.face.pan_count
         starts = list(range(0, max(1, n - win.count + 1), max(1, win.count // 2))) + [n - win.count]
         for first in starts:
             pans, sups = self._load(win, state, first)
+            _RoofLimits(self, win, state, sups, 0.0)
             self._set_supports(win, np.zeros(win.index.supports.size, bool))
             mujoco.mj_step(win.model, win.data, nstep=2 * SETTLE_STEPS)
-            self._store(win, state, pans, sups)
+            self._store(win, state, pans, sups, 0.0)
+
+
+class _RoofLimits:
+    """The roof over a window's canopies through an event: the upper limits of their leg slides, converging from the
+    event's beginning t_begin (real time t since it began); `advance` puts advanced supports on the floor and under
+    fresh roof where they stand."""
+
+    def __init__(self, sim: FaceSimulator, win: _Window, state: FaceState, sups: np.ndarray, t_begin: float):
+        self.sim, self.win, self.state, self.sups, self.t_begin = sim, win, state, sups, t_begin
+        self.t_set = state.t_set[sups].copy()
+        self.sup_z = state.sup_z[sups].copy()
+        self.leg_jnt = win.model.dof_jntid[win.index.sup_dof[:, 1]]
+        self.clearance = np.zeros(sups.size)
+        self.place(0.0)
+        q_leg = win.data.qpos[win.index.sup_qpos[:, 1]]
+        at_roof = q_leg >= self.clearance - ROOF_CONTACT_M
+        q_leg[at_roof] = np.maximum(q_leg[at_roof], self.clearance[at_roof] + ROOF_CONTACT_M)
+        win.data.qpos[win.index.sup_qpos[:, 1]] = q_leg
+
+    def advance(self, which: np.ndarray, t_abs: float) -> None:
+        """Supports `which` (lowered) set from t_abs where they stand: their bases lifted onto the floor there."""
+        m, d, ix = self.win.model, self.win.data, self.win.index
+        x = d.qpos[ix.sup_qpos[which, 0]]
+        self.sup_z[which] = self.sim.support_z(self.sups[which], x)
+        pos_t = m.body_pos[self.win.sup_body[which]]
+        pos_t += np.outer(self.sup_z[which] - self.state.sup_z[self.sups[which]], self.sim.frame.mat_tf[:, 2])
+        m.body_pos[self.win.sup_body[which]] = pos_t
+        self.t_set[which] = t_abs
+        mujoco.mj_forward(m, d)
+
+    def place(self, t: float) -> None:
+        d, ix = self.win.data, self.win.index
+        self.clearance = self.sim.roof_clearance(self.state, self.sups, self.t_begin + t, d.qpos[ix.sup_qpos[:, 0]],
+                                                 self.sup_z, self.t_set)
+        self.win.model.jnt_range[self.leg_jnt, 1] = self.clearance

@@ -14,7 +14,7 @@ def log_layout(scn: Scenario, source: str = "scenario.toml") -> LogLayout:
     """The sample rates, supports and odometer pulse length of the scenario's sensors (`source` names the file)."""
     sensors = scn.sensors
     rates = {name: Expected(getattr(sensors, name).rate_hz, f"[sensors.{name}] rate_hz")
-             for name in ("imu", "odometer", "pushram", "mag", "support_imu")}
+             for name in ("imu", "odometer", "pushram", "pressure", "mag", "support_imu")}
     n = int(support_stations(scn).size)
     return LogLayout(
         rates_hz=rates,

@@ -36,6 +36,13 @@ from twin.sensors.faults import faults_of, shortfall_profile
 MIN_EVENT_S = 2.0
 """Shortest time an event takes (valves, a small correction push)."""
 
+LEG_TICK_S = 10.0
+"""Between events the set supports' legs are brought forward (the roof converging, a leak) every this many seconds."""
+LEG_ROW_MPA = 0.1
+"""A support gets a truth row between events when its legs' pressure has moved this much since its last row (a
+pressure transducer's step), or its canopy a millimetre (LEG_ROW_M)."""
+LEG_ROW_M = 1e-3
+
 RAM_DEADBAND_M = 1e-3
 """A ram whose target moves less than this is left alone in an event."""
 
@@ -70,6 +77,8 @@ class _FaceRecorder:
         self.hydraulics, self.support_z = sim.hydraulics, sim.support_z
         self.pans0 = state.pans.copy()
         self.sup_x0 = state.sup_x.copy()
+        self.last_leg_mpa = np.full(state.sup_x.size, np.nan)  # each support's latest row's leg pressure and canopy
+        self.last_canopy = np.full(state.sup_x.size, np.nan)
         self.pan_rows: list[dict[str, np.ndarray]] = []
         self.sup_rows: list[dict[str, np.ndarray]] = []
         self.versions: list[PanVersion] = []
@@ -92,7 +101,7 @@ class _FaceRecorder:
             "bend_h": pad[0][pans], "bend_v": pad[1][pans], "advance": st[:, 0] - self.pans0[pans, 0]})
         is_lowered = np.zeros(sups.size, bool) if lowered is None else np.isin(sups, lowered)
         self._support_rows(np.full(sups.size, t), sups, state.sup_x[sups], state.sup_z[sups], state.ram[sups],
-                           state.ram_force[sups], state.sup_leg[sups], is_lowered)
+                           state.ram_force[sups], state.sup_leg[sups], state.leg_force[sups], is_lowered)
         if pans.size:
             self.versions.append(PanVersion(t if t_begin is None else t_begin, t, state.pans.copy()))
 
@@ -105,16 +114,31 @@ class _FaceRecorder:
         every = np.tile(sups, m)
         self._support_rows(np.repeat(t0 + trace.t_s, sups.size), every, trace.sup_x.ravel(),
                            self.support_z(every, trace.sup_x.ravel()), trace.ram.ravel(), trace.ram_force.ravel(),
-                           state.sup_leg[every], np.isin(every, lowered))
+                           trace.leg.ravel(), trace.leg_force.ravel(), np.isin(every, lowered))
+
+    def record_legs(self, t: float, state: FaceState) -> None:
+        """Rows at t (between events) for the supports whose legs' pressure or canopy has moved since their last
+        row (LEG_ROW_MPA, LEG_ROW_M): the roof converging on them, a leak."""
+        moved = ((np.abs(self.hydraulics.legs.pressure_mpa(state.leg_force) - self.last_leg_mpa) >= LEG_ROW_MPA)
+                 | (np.abs(state.sup_leg - self.last_canopy) >= LEG_ROW_M))
+        sups = np.flatnonzero(moved)
+        if sups.size:
+            self._support_rows(np.full(sups.size, t), sups, state.sup_x[sups], state.sup_z[sups], state.ram[sups],
+                               state.ram_force[sups], state.sup_leg[sups], state.leg_force[sups],
+                               np.zeros(sups.size, bool))
 
     def _support_rows(self, t: np.ndarray, sups: np.ndarray, sup_x: np.ndarray, sup_z: np.ndarray, ram: np.ndarray,
-                      ram_force: np.ndarray, leg: np.ndarray, is_lowered: np.ndarray) -> None:
+                      ram_force: np.ndarray, leg: np.ndarray, leg_force: np.ndarray, is_lowered: np.ndarray) -> None:
         y = self.scn.face.pan_length_m * (support_stations(self.scn)[sups] + 0.5)
         p_f = np.column_stack([sup_x, y, sup_z])
+        leg_mpa = self.hydraulics.legs.pressure_mpa(leg_force)
         self.sup_rows.append({
             "t": t, "support": sups, **_split(p_f @ self.frame.mat_tf.T, "p_t", "enu"),
-            "advance": sup_x - self.sup_x0[sups], "ram": ram, "ram_pressure": self.hydraulics.pressure_mpa(ram_force),
-            "canopy": leg - np.where(is_lowered, self.scn.supports.lower_m, 0.0), "set": (~is_lowered).astype(np.int8)})
+            "advance": sup_x - self.sup_x0[sups], "ram": ram,
+            "ram_pressure": self.hydraulics.ram.pressure_mpa(ram_force), "canopy": leg, "leg_pressure": leg_mpa,
+            "set": (~is_lowered).astype(np.int8)})
+        self.last_leg_mpa[sups] = leg_mpa  # rows come in time order: the last of a support's is its latest
+        self.last_canopy[sups] = leg
 
     def forget_before(self, t: float) -> None:
         """Drop the pan-line versions no ride from time t on needs (the one in force at t and its predecessor,
@@ -226,6 +250,40 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
 
     last_target = np.zeros(sim.stations.size)
     last_moved = np.zeros(sim.stations.size, bool)
+    legs = sim.hydraulics.legs
+    hydraulic_faults = faults_of(scn.faults, "leg_leak", "failed_set", "sticking_valve")
+    fault_edges = np.unique([e for f in hydraulic_faults for e in (f.t_start_s, f.t_end_s)])
+    legs_t = 0.0  # the time the supports' legs are brought to
+
+    def hydraulic_faults_at(t: float) -> None:
+        """The faults of the supports' hydraulics in force at t (a leaking leg, a failed set, a sticking valve)."""
+        state.leg_leak_m_s[:] = 0.0
+        state.set_force_n[:] = legs.force_set_n
+        state.ram_speed_factor[:] = 1.0
+        for f in hydraulic_faults:
+            if f.t_start_s <= t < f.t_end_s:
+                if f.kind == "leg_leak":
+                    state.leg_leak_m_s[f.target] += f.value / 6e4 / legs.area_m2
+                elif f.kind == "failed_set":
+                    state.set_force_n[f.target] = min(state.set_force_n[f.target], f.value * 1e6 * legs.area_m2)
+                else:
+                    state.ram_speed_factor[f.target] = min(state.ram_speed_factor[f.target], f.value)
+
+    hydraulic_faults_at(0.0)
+
+    def legs_until(t: float) -> None:
+        """Bring the set supports' legs to t (the roof converging, leaks), with rows every LEG_TICK_S and at the
+        edges of the hydraulic faults' windows on the way."""
+        nonlocal legs_t
+        grid = np.arange(np.floor(legs_t / LEG_TICK_S) + 1, np.ceil(t / LEG_TICK_S)) * LEG_TICK_S
+        ticks = np.union1d(grid, fault_edges[(fault_edges > legs_t) & (fault_edges < t)])
+        for tick in (*ticks, t):
+            sim.hold_legs(state, float(tick))
+            hydraulic_faults_at(float(tick))
+            if tick < t:
+                recorder.record_legs(float(tick), state)
+        legs_t = max(legs_t, t)
+
     shortfalls = faults_of(scn.faults, "push_shortfall")
     obstructions = faults_of(scn.faults, "obstruction")
     walls: dict[int, float] = {}  # obstruction -> the x of its obstacle, placed when it begins
@@ -288,10 +346,11 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
         """Rams of `moved` to `target` from t_begin, the `advancing` supports lowered first and set after; the
         supports' rows through it and the pans' new line, in force from t_begin to its end (returned)."""
         nonlocal hydraulics_free
+        legs_until(t_begin)
         lowered = np.flatnonzero(advancing)
         if lowered.size:
             recorder.record(t_begin, state, np.zeros(0, int), lowered, lowered)
-        pans, sups, trace = sim.step_event(state, moved, target, advancing, t_limit - t_begin)
+        pans, sups, trace = sim.step_event(state, moved, target, advancing, t_begin, t_limit - t_begin)
         recorder.record_trace(t_begin, trace, state, lowered)
         t_done = t_begin + max(MIN_EVENT_S, trace.duration_s)
         recorder.record(t_done, state, pans, sups, t_begin=t_begin)
@@ -337,6 +396,8 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
             # The face runs at most one chunk ahead of the ride: memory stays that of two chunks.
             hand_over(keep=1)
         hand_over(keep=0)
+    legs_until(timeline.duration)
+    recorder.record_legs(timeline.duration, state)
     pans_tab, sups_tab = recorder.tables()
     tables = {lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab, lf.TRUTH_CYCLES.name: cycles_table(timeline)}
     return SimResult(tables, FloorGrid.from_scenario(scn, floor), frame, timeline.duration, events)

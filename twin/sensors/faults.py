@@ -51,6 +51,45 @@ def faults_of(faults: Iterable[Fault], *kinds: FaultKind) -> list[Fault]:
     return [f for f in faults if f.kind in kinds]
 
 
+def apply_gain_faults(x: np.ndarray, t: np.ndarray, faults: Iterable[Fault], sensor: str) -> None:
+    """The scale, offset and drift faults of `sensor` (`<sensor>_scale` ...: twin.config.sensors.SUPPORT_SENSORS) on
+    their target's column of the true readings x (samples t x supports), in place, in that order:
+
+        x (1 + value),   + value,   + value (t - t_start)
+    """
+    for f in faults_of(faults, f"{sensor}_scale"):
+        x[window_mask(t, f), f.target] *= 1.0 + f.value
+    for f in faults_of(faults, f"{sensor}_offset"):
+        x[window_mask(t, f), f.target] += f.value
+    for f in faults_of(faults, f"{sensor}_drift"):
+        m = window_mask(t, f)
+        x[m, f.target] += f.value * (t[m] - f.t_start_s)
+
+
+def apply_reading_faults(x: np.ndarray, t: np.ndarray, faults: Iterable[Fault], sensor: str, noise: np.ndarray,
+                         rng: np.random.Generator, resolution: float) -> np.ndarray:
+    """The rest of a reading, in place on x (samples t x supports): the base `noise` (drawn for the whole stream
+    before any fault's, so that a fault changes nothing outside its window), `<sensor>_noise_burst` (+ value N(0, 1)),
+    quantization to `resolution`, `<sensor>_stuck` (frozen at the window's first quantized reading) and
+    `<sensor>_dropout` (NaN). Returns the valid flags (int8, 0 on dropout)."""
+    x += noise
+    for f in faults_of(faults, f"{sensor}_noise_burst"):
+        m = window_mask(t, f)
+        x[m, f.target] += f.value * rng.standard_normal(int(m.sum()))
+    if resolution > 0:
+        x[:] = np.round(x / resolution) * resolution
+    for f in faults_of(faults, f"{sensor}_stuck"):
+        rows = np.flatnonzero(window_mask(t, f))
+        if rows.size:
+            x[rows, f.target] = x[rows[0], f.target]
+    valid = np.ones(x.shape, dtype=np.int8)
+    for f in faults_of(faults, f"{sensor}_dropout"):
+        m = window_mask(t, f)
+        x[m, f.target] = np.nan
+        valid[m, f.target] = 0
+    return valid
+
+
 def faults_table(scn: Scenario) -> dict[str, np.ndarray]:
     """The FAULTS stream (estimators.io.logformat.FAULTS) of the scenario's schedule, one row per fault."""
     faults = scn.faults

@@ -58,7 +58,7 @@ from twin.config.scenario import Scenario
 from twin.config.sensors import Fault
 from twin.face.layout import support_stations
 from twin.sensors.clock import sample_times
-from twin.sensors.faults import faults_of, window_mask
+from twin.sensors.faults import apply_gain_faults, apply_reading_faults, faults_of, window_mask
 
 
 def rail_deviation_m(n_chutes: np.ndarray, value_deg: float, chute_length_m: float) -> np.ndarray:
@@ -72,11 +72,12 @@ def rail_deviation_m(n_chutes: np.ndarray, value_deg: float, chute_length_m: flo
     return e[np.clip(n, 0, n_max)]
 
 
-def true_ram_at(supports: dict[str, np.ndarray], t_grid: np.ndarray, n_supports: int) -> np.ndarray:
-    """(len(t_grid), n_supports) true ram lengths: the latest row of each support at or before each time."""
+def true_at(supports: dict[str, np.ndarray], column: str, t_grid: np.ndarray, n_supports: int) -> np.ndarray:
+    """(len(t_grid), n_supports) true values of a truth_supports `column`: the latest row of each support at or
+    before each time."""
     t_row = np.asarray(supports["t"], dtype=float)
     sup = np.asarray(supports["support"], dtype=np.int64)
-    ram = np.asarray(supports["ram"], dtype=float)
+    ram = np.asarray(supports[column], dtype=float)
     if sup.size and (sup.min() < 0 or sup.max() >= n_supports):
         raise ValueError(f"truth_supports: support index {sup.max() if sup.max() >= n_supports else sup.min()} "
                          f"outside 0..{n_supports - 1}")
@@ -149,32 +150,11 @@ def pushram_stream(scn: Scenario, supports: dict[str, np.ndarray], t_end: float,
     stations = support_stations(scn)
     n_sup = stations.size
     t_grid = sample_times(0.0, t_end, cfg.rate_hz)
-    x = true_ram_at(supports, t_grid, n_sup)
+    x = true_at(supports, "ram", t_grid, n_sup)
     noise = rng.standard_normal(x.shape)  # drawn first, whatever the faults: see the module doc
-    for f in faults_of(faults, "ram_scale"):
-        m = window_mask(t_grid, f)
-        x[m, f.target] *= 1.0 + f.value
-    for f in faults_of(faults, "ram_offset"):
-        x[window_mask(t_grid, f), f.target] += f.value
-    for f in faults_of(faults, "ram_drift"):
-        m = window_mask(t_grid, f)
-        x[m, f.target] += f.value * (t_grid[m] - f.t_start_s)
+    apply_gain_faults(x, t_grid, faults, "ram")
     for f in faults_of(faults, "rail_deviation"):
         _rail_deviation(x, t_grid, f, scn, stations, shearer)
-    x += cfg.noise_m * noise
-    for f in faults_of(faults, "ram_noise_burst"):
-        m = window_mask(t_grid, f)
-        x[m, f.target] += f.value * rng.standard_normal(int(m.sum()))
-    if cfg.resolution_m > 0:
-        x = np.round(x / cfg.resolution_m) * cfg.resolution_m
-    for f in faults_of(faults, "ram_stuck"):
-        rows = np.flatnonzero(window_mask(t_grid, f))
-        if rows.size:
-            x[rows, f.target] = x[rows[0], f.target]
-    valid = np.ones(x.shape, dtype=np.int8)
-    for f in faults_of(faults, "ram_dropout"):
-        m = window_mask(t_grid, f)
-        x[m, f.target] = np.nan
-        valid[m, f.target] = 0
+    valid = apply_reading_faults(x, t_grid, faults, "ram", cfg.noise_m * noise, rng, cfg.resolution_m)
     return {"t": np.repeat(t_grid, n_sup), "support": np.tile(np.arange(n_sup, dtype=np.int32), t_grid.size),
             "extension": x.ravel(), "valid": valid.ravel()}

@@ -29,13 +29,14 @@ from twin.sensors.imu import IdealImu
 from twin.sensors.imu_errors import ImuErrorModel
 from twin.sensors.magnetometer import Magnetometer
 from twin.sensors.odometer import Odometer
+from twin.sensors.pressure import pressure_stream
 from twin.sensors.pushram import pushram_stream
 from twin.sensors.support_imu import support_imu_stream
 from twin.sensors.survey import FaceSurvey, Survey
 
 # Stream keys of the per-trial generators (fixed, so streams do not shift each other).
 _IMU, _ODOMETER, _PUSHRAM, _MAG, _SUPPORT_IMU = range(5)
-_SURVEY, _FACE_SURVEY = 5, 6
+_SURVEY, _FACE_SURVEY, _PRESSURE = 5, 6, 7
 
 
 @dataclass(frozen=True)
@@ -83,8 +84,8 @@ class ShearerSensors:
 
 def support_streams(scn: Scenario, truth: dict[str, dict[str, np.ndarray]], trial: int = 0
                     ) -> dict[str, dict[str, np.ndarray]]:
-    """The streams of the supports (pushram, support_imu) and the fault schedule, from the whole run's truth (the
-    shearer's truth is read for its position along the face)."""
+    """The streams of the supports (pushram, pressure, support_imu) and the fault schedule, from the whole run's truth
+    (the shearer's truth is read for its position along the face)."""
     shearer, supports = truth["truth_shearer"], truth["truth_supports"]
     duration = float(shearer["t"][-1])
     faults = list(scn.faults)
@@ -93,7 +94,9 @@ def support_streams(scn: Scenario, truth: dict[str, dict[str, np.ndarray]], tria
     for fault in faults_of(faults, "push_shortfall"):
         short = shortfall_profile(fault, int(pushram["support"].max()) + 1)[pushram["support"]]
         pushram["extension"] = pushram["extension"] + np.where(window_mask(pushram["t"], fault), short, 0.0)
-    streams = {"pushram": pushram, "faults": faults_table(scn)}
+    streams = {"pushram": pushram, "pressure": pressure_stream(scn, supports, duration, trial_rng(scn, trial, _PRESSURE),
+                                                               faults),
+               "faults": faults_table(scn)}
     if scn.sensors.support_imu.supports:
         streams["support_imu"] = support_imu_stream(scn, supports, shearer, trial_rng(scn, trial, _SUPPORT_IMU),
                                                     faults)

@@ -18,9 +18,10 @@ Motion between rows
     Every quantity (base position p_t, canopy height, tilt) moves from one row's value to the next row's over
     the interval between the rows with the quintic smooth step S(tau) = 10 tau^3 - 15 tau^4 + 6 tau^5 (zero
     rate and acceleration at both ends). A support is static while set: its values do not change between set
-    rows. An advance is a set = 0 row (old position, canopy lowered; later set = 0 rows of the same advance are
-    left out) followed by the next set row (new position): the unit moves forward by the advance over that
-    interval, and the canopy drops by `supports.lower_m` and rises again with the bump 64 tau^3 (1 - tau)^3.
+    rows. An advance is a set = 0 row (old position, the legs' valves opening with the canopy still at the roof;
+    later set = 0 rows of the same advance are left out) followed by the next set row (new position): the unit moves
+    forward by the advance over that interval, and the canopy drops by `supports.lower_m` and rises again with the
+    bump 64 tau^3 (1 - tau)^3.
     The unit sits on the canopy at the canopy height above the base reference point, so its position is
     p = p_base + C_c^t [0, 0, h].
 
@@ -128,8 +129,7 @@ def canopy_rows(scn: Scenario, supports: dict, support: int) -> CanopyRows:
     t = np.asarray(supports["t"], float)[sel]
     p_t = np.column_stack([np.asarray(supports[f"p_t_{a}"], float)[sel] for a in "enu"])
     lowered = np.asarray(supports["set"])[sel] == 0
-    canopy = np.asarray(supports["canopy"], float)[sel]
-    height = np.where(lowered, canopy + scn.supports.lower_m, canopy)
+    height = np.asarray(supports["canopy"], float)[sel]
     adv = np.asarray(supports["advance"], float)[sel]
     reach = np.maximum.accumulate(adv)
     anchor = np.searchsorted(reach, adv - TILT_CHORD_M, side="right") - 1

@@ -285,12 +285,42 @@ def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz:
         grid[inverse, support] = col(ram, "extension")
         keep = decimate(times, FULL if rate_hz is FULL else min(rate_hz, 0.2))
         send_bar_chart(rec, "sensors/pushram", times[keep], grid[keep])
+    if "pressure" in sensors:
+        _log_pressures(rec, sensors["pressure"], rate_hz)
     if "faults" in sensors and sensors["faults"].num_rows:
         faults = sensors["faults"]
         for kind, target, t0, t1 in zip(faults.column("kind").to_pylist(), col(faults, "target"),
                                        col(faults, "t_start"), col(faults, "t_end")):
             name = f"faults/{kind}" + (f"_{target}" if target >= 0 else "")
             series(rec, name, np.array([0.0, t0, t1]), np.array([[0.0], [1.0], [0.0]]), [f"{name} active"])
+
+
+PRESSURE_BAR_HZ = 0.2
+"""Rate of the pressure bar charts (one bar per support) at the default record rate."""
+
+
+def _log_pressures(rec: rr.RecordingStream, pressure: pa.Table, rate_hz: float | None) -> None:
+    """The legs' and rams' pressure readings as a bar chart per support each, and the face's lowest leg pressure and
+    highest ram pressure as time series (a support that failed to set, a leaking leg, a stalled ram stand out)."""
+    t, support = col(pressure, "t"), col(pressure, "support")
+    times, inverse = np.unique(t, return_inverse=True)
+    keep = decimate(times, FULL if rate_hz is FULL else min(rate_hz, PRESSURE_BAR_HZ))
+    extremes = []
+    for column, reduce in (("leg", np.nanmin), ("ram", np.nanmax)):
+        grid = np.full((times.size, int(support.max()) + 1), np.nan)
+        grid[inverse, support] = col(pressure, column)
+        send_bar_chart(rec, f"sensors/pressure/{column}_bars", times[keep], grid[keep])
+        extremes.append(_nan_reduce(reduce, grid))
+    series(rec, "sensors/pressure/extremes", times, np.column_stack(extremes),
+           ["lowest leg [MPa]", "highest ram [MPa]"], rate_hz=rate_hz)
+
+
+def _nan_reduce(reduce, grid: np.ndarray) -> np.ndarray:
+    """Row-wise nanmin/nanmax, NaN where a row has no reading."""
+    any_valid = np.isfinite(grid).any(axis=1)
+    out = np.full(grid.shape[0], np.nan)
+    out[any_valid] = reduce(grid[any_valid], axis=1)
+    return out
 
 
 def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
@@ -302,7 +332,10 @@ def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
         rrb.BarChartView(name="Horizontal bend per chute [deg]", origin="plots/bend_horizontal_deg"),
         rrb.BarChartView(name="Vertical bend per chute [deg]", origin="plots/bend_vertical_deg"),
         rrb.BarChartView(name="Ram length [m]", origin="plots/ram_length"),
-        rrb.TimeSeriesView(name="Sensors", origin="sensors", contents="sensors/**"),
+        rrb.BarChartView(name="Leg pressure per support [MPa]", origin="sensors/pressure/leg_bars"),
+        rrb.BarChartView(name="Ram pressure per support [MPa]", origin="sensors/pressure/ram_bars"),
+        rrb.TimeSeriesView(name="Sensors", origin="sensors",
+                           contents=["sensors/**", "- sensors/pressure/leg_bars", "- sensors/pressure/ram_bars"]),
         rrb.TimeSeriesView(name="Fault windows", origin="faults"),
         name="Twin",
     )

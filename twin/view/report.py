@@ -43,6 +43,7 @@ from twin.view.report_figures import (
     method_stats,
     pan_line,
     pan_line_plot,
+    pressure_plot,
     top_view,
 )
 from twin.view.run_data import RunData, load_run
@@ -141,6 +142,12 @@ def build_report(run_dir: Path) -> Path:
         figs.add(f"detectors_{m}.png", detector_plot(m, table, thresholds, cycles), f"Fault detectors: {m}",
                  "One point per rail-model fix; red: thresholds (chi-square at the false-alarm probability, fading "
                  "SPRT T1/T0); shaded: the rail model isolated.")
+    if run.pressure is not None and run.pressure.num_rows:
+        legs = run.scenario.supports.legs if run.scenario else None
+        figs.add("pressures.png", pressure_plot(run.pressure, cycles, legs and legs.set_pressure_mpa,
+                                                legs and legs.yield_pressure_mpa), "Support pressures",
+                 "Pressure transducers of the legs and the push rams (the PRESSURE stream, readings with their faults); "
+                 "dashed: the set and yield pressures of the scenario.")
     pan_html = ""
     if {"truth_pans", "truth_cycles"} <= run.truth.keys():
         labels, along_m, lateral_m = pan_line(run.truth["truth_pans"], cycles)

@@ -202,3 +202,34 @@ def pan_line_plot(labels: list[str], along_m: np.ndarray, lateral_m: np.ndarray)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, ncols=min(len(labels), 6))
     return fig
+
+
+def pressure_plot(pressure: pa.Table, cycles: pa.Table | None, set_mpa: float | None, yield_mpa: float | None
+                  ) -> Figure:
+    """The supports' leg and ram pressure readings against time: the face's median, its 5-95 % band, the lowest leg
+    and the highest ram (a support that failed to set or leaks, a stalled ram), with the set and yield pressures."""
+    t, support = column(pressure, "t"), column(pressure, "support").astype(int)
+    times, inverse = np.unique(t, return_inverse=True)
+    fig = Figure(figsize=(13, 6), layout="constrained")
+    axes = fig.subplots(2, 1, sharex=True)
+    for ax, name, label in zip(axes, ("leg", "ram"), ("legs", "push ram")):
+        grid = np.full((times.size, support.max() + 1), np.nan)
+        grid[inverse, support] = column(pressure, name)
+        rows = np.isfinite(grid).any(axis=1)
+        tm, g = times[rows] / 60, grid[rows]
+        lo, med, hi = np.nanpercentile(g, [5, 50, 95], axis=1)
+        ax.fill_between(tm, lo, hi, color="C0", alpha=0.25, linewidth=0, label="5-95 % of the supports")
+        ax.plot(tm, med, color="C0", linewidth=1, label="median")
+        extreme = np.nanmin(g, axis=1) if name == "leg" else np.nanmax(g, axis=1)
+        ax.plot(tm, extreme, color="C3", linewidth=0.8, label="lowest" if name == "leg" else "highest")
+        if name == "leg":
+            for value, what in ((set_mpa, "set"), (yield_mpa, "yield")):
+                if value is not None:
+                    ax.axhline(value, color="0.4", linestyle="--", linewidth=0.8)
+                    ax.annotate(what, (tm[0], value), fontsize=8, va="bottom")
+        _cycle_lines(ax, cycles)
+        ax.set_ylabel(f"{label} [MPa]")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8, loc="upper right")
+    axes[-1].set_xlabel("t [min]")
+    return fig

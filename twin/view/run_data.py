@@ -12,6 +12,7 @@ from estimators.io.logformat import (
     ESTIMATE,
     ESTIMATE_DETECTORS,
     ESTIMATES_DIR,
+    PRESSURE,
     STREAMS,
     Stream,
     estimate_path,
@@ -36,6 +37,8 @@ class RunData:
     truth: dict[str, pa.Table]
     estimates: dict[str, pa.Table]
     detectors: dict[str, pa.Table]
+    pressure: pa.Table | None = None
+    """The supports' pressure readings (PRESSURE), when the log has them."""
     notes: list[str] = field(default_factory=list)
     """What the report leaves out and why."""
 
@@ -64,7 +67,8 @@ def load_run(run_dir: Path) -> RunData:
     scenario = run_dir / "scenario.toml"
     data = RunData(run_dir, load_face_scenario(scenario) if scenario.is_file() else None,
                    read_metrics(run_dir), truth, estimates,
-                   {m: read_estimate(run_dir, m, ESTIMATE_DETECTORS) for m in _methods(run_dir, ESTIMATE_DETECTORS)})
+                   {m: read_estimate(run_dir, m, ESTIMATE_DETECTORS) for m in _methods(run_dir, ESTIMATE_DETECTORS)},
+                   read_stream(run_dir, PRESSURE) if (run_dir / PRESSURE.filename).is_file() else None)
     missing = [STREAMS[name].filename for name in TRUTH_NAMES if name not in truth]
     if missing:
         data.notes.append(f"no {', '.join(missing)} (a run without truth, e.g. imported): left out "

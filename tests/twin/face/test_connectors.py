@@ -105,8 +105,8 @@ def _worst_connectors(monkeypatch, scn) -> dict[str, float]:
     store = face_simulator.FaceSimulator._store
     worst = dict.fromkeys(("yaw", "pitch", "roll", "open", "close"), 0.0)
 
-    def measured_store(self, win, state, pans, sups):
-        store(self, win, state, pans, sups)
+    def measured_store(self, win, state, pans, sups, t):
+        store(self, win, state, pans, sups, t)
         p = state.pans
         for k, kind in enumerate(CONNECTOR_KINDS):
             worst[kind] = max(worst[kind], float(np.degrees(np.abs(np.diff(p[:, 3 + k])).max())))

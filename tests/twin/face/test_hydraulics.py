@@ -12,7 +12,7 @@ import pytest
 
 from tests.conftest import capped, simulated
 from twin.config.scenario import PAN_FLOOR_FRICTION, ScenarioError, parse_scenario
-from twin.face.hydraulics import RamHydraulics
+from twin.face.hydraulics import RamHydraulics, SupportHydraulics
 from twin.face.layout import Floor, initial_pans
 from twin.face.simulator import FaceSimulator
 from twin.pipeline.simulate import simulate, window_sizes
@@ -71,8 +71,8 @@ def test_pressures_stay_within_the_relief_valves():
 
 def test_an_end_stop_too_short_for_the_hydraulics_is_refused():
     data = capped("default").model_dump()
-    hyd = RamHydraulics.from_scenario(capped("default").supports.hydraulics)
-    need = hyd.end_push_s(data["face"]["web_depth_m"])
+    scn = capped("default")
+    need = SupportHydraulics.from_scenario(scn.supports, scn.roof).end_push_s(scn.face.web_depth_m, scn.supports.lower_m)
     data["haulage"]["end_push_stop_s"] = math.floor(need)  # shorter than the push and advance alone
     with pytest.raises(ScenarioError, match="end_push_stop_s") as err:
         parse_scenario(data, "short.toml")

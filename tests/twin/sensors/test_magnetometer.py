@@ -260,7 +260,7 @@ def support_truth(scn, ids, advances=()):
     is_set = np.array([r[3] for r in rows], np.int8)
     return {"t": np.array([r[0] for r in rows]), "support": np.array([r[1] for r in rows], np.int32),
             "p_t_e": p_t[:, 0], "p_t_n": p_t[:, 1], "p_t_u": p_t[:, 2], "advance": p_f[:, 0],
-            "ram": np.full(len(rows), 1.2), "canopy": np.where(is_set == 1, 3.0, 3.0 - scn.supports.lower_m),
+            "ram": np.full(len(rows), 1.2), "canopy": np.full(len(rows), 3.0),
             "set": is_set}
 
 

@@ -50,7 +50,7 @@ def synthetic_truth(n_pans: int = 4, n_supports: int = 4, n_updates: int = 3, sh
         "t": st, "support": sid,
         "p_t_e": -1.2 + 0.01 * st, "p_t_n": (sid + 0.5) * pan_length, "p_t_u": np.zeros(m),
         "advance": 0.01 * st, "ram": 1.2 + 0.1 * rng.random(m), "ram_pressure": np.full(m, 2.0),
-        "canopy": np.full(m, 3.0),
+        "canopy": np.full(m, 3.0), "leg_pressure": np.full(m, 31.5),
         "set": (sid % 2).astype(np.int8),
     })
     # Shearer: straight run along the face, one cycle change half way.

@@ -23,7 +23,8 @@ from twin.view.report import REPORT_DIR, REPORT_HTML, build_report
 from twin.view.report_figures import pan_line
 
 CHROMIUM = Path("/usr/bin/chromium")
-FIGURES = ("top_view.png", "errors.png", "cycle_errors.png", "detectors_fkf_rail.png", "pan_line.png")
+FIGURES = ("top_view.png", "errors.png", "cycle_errors.png", "detectors_fkf_rail.png", "pan_line.png",
+           "pressures.png")
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +122,7 @@ def test_run_without_truth_builds_and_says_what_is_left_out(run_dir, tmp_path):
     shutil.copytree(run_dir, copy, ignore=shutil.ignore_patterns("truth_*", "*.rrd", REPORT_DIR))
     text = build_report(copy).read_text()
     written = {p.name for p in (copy / REPORT_DIR).glob("*.png")}
-    assert written == {"top_view.png", "cycle_errors.png", "detectors_fkf_rail.png"}
+    assert written == {"top_view.png", "cycle_errors.png", "detectors_fkf_rail.png", "pressures.png"}
     assert "truth_shearer.parquet" in text and "truth_pans.parquet" in text
     assert "left out" in text and "errors against time" in text and "straightness" in text
 

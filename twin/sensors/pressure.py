@@ -1,0 +1,45 @@
+"""Pressure transducers of the supports' legs and push rams (the PRESSURE stream) and their faults.
+
+Every support is sampled at scn.sensors.pressure.rate_hz at t = k / rate for 0 <= t <= t_end, each transducer reading
+the latest truth_supports row of its support at or before the sample (twin.sensors.pushram.true_at): the legs'
+pressure `leg_pressure` and the ram's loaded side `ram_pressure` (MPa). Each reading is
+
+    reading = quantize(true_with_faults + noise_mpa N(0, 1) [+ burst noise]),   quantize = round to resolution_mpa,
+
+with the sensor faults of twin.sensors.faults (apply_gain_faults, apply_reading_faults) on the samples inside their
+window, on their target: `leg_pressure_*` on the leg transducer, `ram_pressure_*` on the ram's. The faults of the
+face (leg_leak, failed_set, sticking_valve, obstruction) are in the truth: the transducers read them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from twin.config.scenario import Scenario
+from twin.config.sensors import Fault
+from twin.face.layout import support_stations
+from twin.sensors.clock import sample_times
+from twin.sensors.faults import apply_gain_faults, apply_reading_faults
+from twin.sensors.pushram import true_at
+
+CHANNELS = (("leg", "leg_pressure"), ("ram", "ram_pressure"))
+"""The stream's columns and the truth_supports column (and fault prefix) each reads."""
+
+
+def pressure_stream(scn: Scenario, supports: dict[str, np.ndarray], t_end: float, rng: np.random.Generator,
+                    faults: list[Fault]) -> dict[str, np.ndarray]:
+    """The PRESSURE stream (t, support, leg, ram, valid_leg, valid_ram): every support at each sample of [0, t_end].
+
+    `supports` holds the truth_supports columns (t, support, leg_pressure, ram_pressure are used)."""
+    cfg = scn.sensors.pressure
+    n_sup = support_stations(scn).size
+    t_grid = sample_times(0.0, t_end, cfg.rate_hz)
+    noise = rng.standard_normal((len(CHANNELS), t_grid.size, n_sup))  # drawn first, whatever the faults
+    out = {"t": np.repeat(t_grid, n_sup), "support": np.tile(np.arange(n_sup, dtype=np.int32), t_grid.size)}
+    for k, (column, sensor) in enumerate(CHANNELS):
+        x = true_at(supports, sensor, t_grid, n_sup)
+        apply_gain_faults(x, t_grid, faults, sensor)
+        valid = apply_reading_faults(x, t_grid, faults, sensor, cfg.noise_mpa * noise[k], rng, cfg.resolution_mpa)
+        out[column] = x.ravel()
+        out[f"valid_{column}"] = valid.ravel()
+    return {key: out[key] for key in ("t", "support", "leg", "ram", "valid_leg", "valid_ram")}
