@@ -7,36 +7,37 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 
-def _grid(t, support, extension, valid, n_sup: int) -> tuple[np.ndarray, np.ndarray]:
-    """(times (T,), readings (T, S) with NaN where invalid or missing) on the log's sample grid."""
+def _grid(t, support, extension, valid, n_sup: int, stream: str = "pushram") -> tuple[np.ndarray, np.ndarray]:
+    """(times (T,), readings (T, S) with NaN where invalid or missing) on the log's sample grid (`stream` names the
+    log in the errors)."""
     t = np.asarray(t, dtype=float).ravel()
     sup = np.asarray(support).ravel()
     ext = np.asarray(extension, dtype=float).ravel()
     val = np.asarray(valid).ravel()
     if t.size == 0:
-        raise ValueError("pushram: the log has no rows; pass the PUSHRAM stream (t, support, extension, valid) "
-                         "of a run with push-ram sensors")
+        raise ValueError(f"{stream}: the log has no rows; pass the {stream.upper()} stream "
+                         "of a run with the supports' sensors")
     if not (sup.size == ext.size == val.size == t.size):
-        raise ValueError(f"pushram: columns of different lengths (t {t.size}, support {sup.size}, extension "
+        raise ValueError(f"{stream}: columns of different lengths (t {t.size}, support {sup.size}, extension "
                          f"{ext.size}, valid {val.size}); pass the columns of one stream")
     if not np.all(np.isfinite(t)):
-        raise ValueError(f"pushram: time is not finite at row {np.flatnonzero(~np.isfinite(t))[0]}; "
+        raise ValueError(f"{stream}: time is not finite at row {np.flatnonzero(~np.isfinite(t))[0]}; "
                          "drop or repair those rows")
     if sup.dtype.kind not in "iu" and (not np.all(np.isfinite(sup.astype(float))) or np.any(sup.astype(float) % 1)):
-        raise ValueError("pushram: support ids must be integers (support index from the headgate)")
+        raise ValueError(f"{stream}: support ids must be integers (support index from the headgate)")
     sup = sup.astype(np.int64)
     bad = (sup < 0) | (sup >= n_sup)
     if bad.any():
-        raise ValueError(f"pushram: support id {sup[bad][0]} is not one of the layout's supports 0..{n_sup - 1}; "
+        raise ValueError(f"{stream}: support id {sup[bad][0]} is not one of the layout's supports 0..{n_sup - 1}; "
                          "give RamLayout the face's support count (n_supports)")
     tg, ti = np.unique(t, return_inverse=True)
     if tg.size < 2:
-        raise ValueError("pushram: the log has a single sample time; the checks need a record over time")
+        raise ValueError(f"{stream}: the log has a single sample time; the checks need a record over time")
     flat = ti * n_sup + sup
     uniq, first, counts = np.unique(flat, return_index=True, return_counts=True)
     if uniq.size != flat.size:
         k = first[np.flatnonzero(counts > 1)[0]]
-        raise ValueError(f"pushram: support {sup[k]} has two rows at t = {t[k]:g} s; keep one row per support "
+        raise ValueError(f"{stream}: support {sup[k]} has two rows at t = {t[k]:g} s; keep one row per support "
                          "per sample")
     x = np.full(tg.size * n_sup, np.nan)
     ok = (val > 0) & np.isfinite(ext)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimators.faults.hydraulic_checks import HydraulicLayout
 from estimators.faults.ram_checks import RamLayout
 from estimators.io import metrics
 from estimators.io.log import load_log
@@ -77,6 +78,14 @@ def ram_layout(scn: Scenario) -> RamLayout:
                      stroke_m=scn.face.web_depth_m, noise_m=scn.sensors.pushram.noise_m,
                      resolution_m=scn.sensors.pushram.resolution_m, pan_length_m=scn.face.pan_length_m,
                      bend_limit_deg=scn.face.bend_limit_horizontal_deg)
+
+
+def hydraulic_layout(scn: Scenario) -> HydraulicLayout:
+    """What a user knows of the scenario's supports' hydraulics and transducers (estimators.faults.hydraulic_checks)."""
+    return HydraulicLayout(n_supports=support_stations(scn).size,
+                           relief_mpa=scn.supports.hydraulics.pump_pressure_mpa,
+                           set_mpa=scn.supports.legs.set_pressure_mpa, noise_mpa=scn.sensors.pressure.noise_mpa,
+                           ram_noise_m=scn.sensors.pushram.noise_m)
 
 
 def true_states(scn: Scenario) -> dict[str, float]:
