@@ -7,21 +7,23 @@ A case counts as right when a finding of the expected kind on the target support
 window, carries the right cause, and nothing is attributed to the other cause on that support. The fault-free run
 gives the false findings.
 
-Run: python benchmarks/bench_hydraulic_faults.py [--cycles N]
+Run: python benchmarks/bench_hydraulic_faults.py [--cycles N]   (the default face's first N cycles, default 2)
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 from estimators.faults.hydraulic_checks import check_hydraulics, format_attribution
 from estimators.faults.ram_checks import check_log
-from tests.conftest import capped
+from twin.config.scenario import Scenario, load_face_scenario, parse_scenario
 from twin.pipeline.estimate import hydraulic_layout, ram_layout
 from twin.pipeline.simulate import simulate
 from twin.sensors.streams import imu_truth, sensor_streams
 
+SCENARIO = Path(__file__).resolve().parent.parent / "scenarios" / "default.toml"
 CASES = [
     # (fault, expected kind, expected cause)
     ({"kind": "obstruction", "t_start_s": 250.0, "t_end_s": 700.0, "target": 20, "value": 0.3}, "ram_stall", "face"),
@@ -41,7 +43,13 @@ CASES = [
 ]
 
 
-def run(scn, trial: int = 0):
+def face(cycles: int, faults: list[dict]) -> Scenario:
+    """The default face's first `cycles` cycles with `faults`."""
+    return parse_scenario({**load_face_scenario(SCENARIO).model_dump(), "cycles": cycles, "faults": faults},
+                          SCENARIO.name)
+
+
+def run(scn: Scenario, trial: int = 0):
     result = simulate(scn)
     streams = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), trial)
     ram = streams["pushram"]
@@ -53,14 +61,14 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=2)
     args = parser.parse_args()
     start = time.perf_counter()
-    clean = run(capped("default", cycles=args.cycles))
+    clean = run(face(args.cycles, []))
     print(f"default face, {args.cycles} cycles: {len(clean)} findings without a fault")
     for a in clean:
         print(f"    {format_attribution(a)}")
     print(f"\n{'fault':<22}{'value':>7}{'support':>8}  {'expected':<24}{'found':<24}{'delay [s]':>10}  right")
     right = 0
     for fault, kind, cause in CASES:
-        scn = capped("default", cycles=args.cycles, faults=[fault])
+        scn = face(args.cycles, [fault])
         found = run(scn)
         target, t0, t1 = fault["target"], fault["t_start_s"], fault["t_end_s"]
         mine = [a for a in found if a.support == target and t0 <= a.t_detect < t1 + 60.0]
