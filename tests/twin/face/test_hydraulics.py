@@ -102,7 +102,7 @@ def test_the_pans_slide_on_the_floor_with_their_own_friction():
     floor_geom = win.model.geom("floor").id
     contacts = win.data.contact[: win.data.ncon]
     on_floor = (contacts.geom[:, 0] == floor_geom) | (contacts.geom[:, 1] == floor_geom)
-    assert on_floor.sum() >= 4 * win.count  # every foot of every pan
+    assert on_floor.sum() >= 3 * win.count  # every pan on three feet or four
     np.testing.assert_array_equal(contacts.friction[on_floor, 0], PAN_FLOOR_FRICTION)
 
 
