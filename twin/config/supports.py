@@ -6,6 +6,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from twin.config.push import PushControl
 from twin.config.section import Section
 
 
@@ -37,6 +38,7 @@ class Supports(Section):
     ram_length_set_m: Annotated[float, Field(ge=0.5, le=3.0, allow_inf_nan=False)] = 1.2
     """Ram length between a set support and its pan before a push (fully retracted)."""
     hydraulics: Hydraulics = Hydraulics()
+    push: PushControl = PushControl()
     sequence: Literal["after_push", "before_push"] = "after_push"
     """Support-advance sequence: after the pans are pushed (conventional), or before (immediate forward
     support, the supports following the shearer); see twin.face.pushadvance."""

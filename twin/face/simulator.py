@@ -18,6 +18,7 @@ import numpy as np
 
 from twin.config.scenario import Scenario
 from twin.face.connectors import connect_window
+from twin.face.drift import stand_supports
 from twin.face.hydraulics import LOWER_S, SET_S, VALVE_RAMP_S, RamHydraulics
 from twin.face.layout import FaceFrame, Floor, joint_ends, pan_axes, support_stations
 from twin.face.model import (
@@ -81,6 +82,8 @@ class FaceState:
     ram_force: np.ndarray
     pan_wall_x: np.ndarray
     """Per pan, the x of an obstacle in front of it (an obstruction fault), or inf."""
+    sup_y: np.ndarray
+    """Per support, the y of its base: behind its pan, following it along the face (twin.face.drift)."""
 
 
 @dataclass
@@ -163,15 +166,16 @@ class FaceSimulator:
         sup = self.scn.supports
         st = self.stations
         sup_x = self._pan_ram_points(pans)[st, 0] - sup.ram_length_set_m - ram_extension_m
-        sup_z = self.support_z(np.arange(st.size), sup_x)
-        state = FaceState(pans.copy(), sup_x, sup_z, np.full(st.size, sup.canopy_height_m), np.zeros(st.size),
-                          np.zeros(st.size), np.full(pans.shape[0], np.inf))
+        state = FaceState(pans.copy(), sup_x, np.zeros(st.size), np.full(st.size, sup.canopy_height_m),
+                          np.zeros(st.size), np.zeros(st.size), np.full(pans.shape[0], np.inf), np.zeros(st.size))
+        stand_supports(self.scn, self.ram_site_local, state, np.arange(st.size))
+        state.sup_z = self.support_z(sup_x, state.sup_y)
         state.ram = self.ram_lengths(state, np.zeros(st.size), sup_x)
         return state
 
-    def support_z(self, sups: np.ndarray, sup_x: np.ndarray) -> np.ndarray:
-        """Height of supports `sups` standing with their bases at `sup_x`: the floor under their skids."""
-        return self.floor.height(sup_x + SKID_OFFSET_X_M, (self.stations[sups] + 0.5) * self.scn.face.pan_length_m)
+    def support_z(self, sup_x: np.ndarray, sup_y: np.ndarray) -> np.ndarray:
+        """Height of supports standing with their bases at `sup_x`, `sup_y`: the floor under their skids."""
+        return self.floor.height(sup_x + SKID_OFFSET_X_M, sup_y)
 
     def _pan_ram_points(self, pans: np.ndarray) -> np.ndarray:
         return pans[:, :3] + pan_axes(pans) @ self.ram_site_local
@@ -179,11 +183,9 @@ class FaceSimulator:
     def ram_lengths(self, state: FaceState, pan_shift: np.ndarray, sup_x: np.ndarray) -> np.ndarray:
         """Ram lengths (per support) that put each support's pan `pan_shift` further towards the coal wall
         with the support base at `sup_x` (on the floor there): the stroke a push or an advance commands."""
-        y = (self.stations + 0.5) * self.scn.face.pan_length_m
         pan_site = self._pan_ram_points(state.pans)[self.stations]
         pan_site[:, 0] += pan_shift
-        sup_z = self.support_z(np.arange(self.stations.size), sup_x)
-        sup_site = np.column_stack([sup_x, y, sup_z]) + self.sup_site_local
+        sup_site = np.column_stack([sup_x, state.sup_y, self.support_z(sup_x, state.sup_y)]) + self.sup_site_local
         return np.linalg.norm(pan_site - sup_site, axis=1)
 
     # -- window stepping --------------------------------------------------------------------------------
@@ -219,7 +221,7 @@ class FaceSimulator:
         d.qpos[ix.sup_qpos[:, 1]] = state.sup_leg[sups]
         d.act[m.actuator_actadr[ix.ram_act]] = state.ram[sups]
         d.ctrl[ix.leg_act] = state.sup_leg[sups]
-        y = (self.stations[sups] + 0.5) * length
+        y = state.sup_y[sups]
         m.body_pos[win.sup_body] = np.column_stack([np.zeros_like(y), y, state.sup_z[sups]]) @ self.frame.mat_tf.T
         start, end = joint_ends(state.pans, length)
         for side, (other, point) in enumerate(((first - 1, end), (first + win.count, start))):
@@ -239,7 +241,7 @@ class FaceSimulator:
         state.sup_leg[sups] = d.qpos[ix.sup_qpos[:, 1]]
         state.ram[sups] = d.ten_length[ix.ram_tendon]
         state.ram_force[sups] = d.actuator_force[ix.ram_act]
-        state.sup_z[sups] = self.support_z(sups, state.sup_x[sups])
+        state.sup_z[sups] = self.support_z(state.sup_x[sups], state.sup_y[sups])
 
     def step_event(self, state: FaceState, moved: np.ndarray, target: np.ndarray, advancing: np.ndarray,
                    time_limit_s: float = np.inf) -> tuple[np.ndarray, np.ndarray, EventTrace]:
