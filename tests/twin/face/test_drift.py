@@ -60,8 +60,9 @@ def _run(dip_deg: float = 1.5, noise_m: float = 0.0, offsets: tuple = (), api: b
     return scn, res
 
 
-def _advance(scn, res) -> np.ndarray:
-    pans = res.tables["truth_pans"]
+def _advance(scn, res, pans: dict | None = None) -> np.ndarray:
+    """Every pan's advance at the end of the run (from `pans`, a truth_pans table, instead of the result's)."""
+    pans = res.tables["truth_pans"] if pans is None else pans
     t_end = res.tables["truth_cycles"]["t_end"][-1]
     return pans["advance"][latest_per_id(pans["t"], pans["pan"], scn.face.pan_count, t_end)]
 
@@ -132,3 +133,18 @@ def test_offsets_a_face_cannot_push_are_refused_in_one_line(offsets, words):
     scn = capped("default", cycles=1)
     with pytest.raises(ValueError, match=re.escape(words)):
         simulate(scn, offsets=lambda cycle, pans: np.array(offsets))
+
+
+def test_twin_run_takes_the_offsets_of_the_api(tmp_path):
+    """twin.run passes its `offsets` source to the face: its truth_pans are those of simulate with the same source."""
+    import pyarrow.parquet as pq
+
+    import twin
+
+    scn, called = _run(offsets=_profile(), api=True)
+    seen = []
+    run = twin.run(scn, tmp_path / "run", sensors=False, offsets=lambda cycle, pans: seen.append(cycle) or
+                   np.array(_profile()))
+    written = {k: np.asarray(v) for k, v in pq.read_table(run.dir / "truth_pans.parquet").to_pydict().items()}
+    assert seen == [0]
+    np.testing.assert_array_equal(_advance(scn, called, written), _advance(scn, called))
