@@ -17,6 +17,7 @@ import numpy as np
 from estimators.io import logformat as lf
 from estimators.nav.rotations import euler_to_quat, mat_to_quat, quat_mul
 from twin.config.scenario import Scenario
+from twin.face.drift import SUPPORT_DEADBAND_M, OffsetSource, StrokeControl, cycle_offsets, stand_supports
 from twin.face.haulage import Timeline
 from twin.face.layout import (
     FaceFrame,
@@ -25,7 +26,6 @@ from twin.face.layout import (
     initial_pans,
 )
 from twin.face.model import FloorGrid
-from twin.face.drift import SUPPORT_DEADBAND_M, OffsetSource, StrokeControl, cycle_offsets, stand_supports
 from twin.face.pushadvance import PushAdvanceController
 from twin.face.ride import PanVersion, ride_targets_t, shoe_pans, simulate_ride
 from twin.face.simulator import WINDOW_MARGIN_PANS, EventTrace, FaceSimulator, FaceState
