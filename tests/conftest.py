@@ -26,6 +26,9 @@ benchmarks/bench_rail.py (simulating them again here would only repeat seed004).
 SCENARIOS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")
                    if not (is_experiment(p) or is_turntable(p) or p.stem in SEED004_VARIANTS))
 """The shipped face scenarios; the SINS experiment files (kind = "sins_experiment") are tests/twin/papers/test_sins_experiments.py's."""
+DRIFTING = ("drift_200",)
+"""Scenarios whose faces drift by design (stroke-controlled pushes with stop errors, a shortfall kept): their pans do
+not advance one web each, so the `run` fixture's checks leave them out; benchmarks/bench_drift.py runs them."""
 EXPERIMENTS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml") if is_experiment(p))
 TEST_CYCLES = 2
 VARIANTS = {"default-before-push": ("default", {"supports": {"sequence": "before_push"}})}
@@ -52,7 +55,7 @@ def simulated(name: str) -> tuple[Scenario, SimResult]:
     return scn, simulate(scn)
 
 
-@pytest.fixture(params=SCENARIOS + list(VARIANTS))
+@pytest.fixture(params=[s for s in SCENARIOS if s not in DRIFTING] + list(VARIANTS))
 def run(request) -> tuple[Scenario, SimResult]:
     return simulated(request.param)
 

@@ -54,6 +54,7 @@ def test_existing_directory_is_refused_without_force(default_run, capsys):
     ('name = "x"\n[face]\npan_count = "many"\n', ["face.pan_count"]),
     ('name = "x"\nbogus = 1\n', ["bogus", "unknown key"]),
     ('name = "x"\ncycles = 99\n', ["cycles"]),
+    ('name = "x"\n[[supports.push.offsets]]\ncycle = 0\noffsets_m = [0.0]\n', ["supports.push.offsets[0]", "44"]),
 ])
 def test_bad_scenario_is_one_line_exit_2_nothing_written(tmp_path, capsys, content, words):
     scenario = tmp_path / "bad.toml"

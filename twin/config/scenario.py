@@ -21,6 +21,7 @@ from pydantic import BaseModel, Field, model_validator
 
 from twin.config.experiments import EXPERIMENT_KIND, Experiment, parse_experiment
 from twin.config.imu_grades import GRADES
+from twin.config.push import check_scenario_offsets
 from twin.config.section import (
     Duration,
     Finite,
@@ -261,6 +262,7 @@ class Scenario(Section):
                              f"to push the end pans a {f.web_depth_m} m web and advance their supports ({need:.1f} s "
                              f"with supports.hydraulics); lengthen the stop or raise the rams' flows")
         n_supports = support_count(self)
+        check_scenario_offsets(self, n_supports)
         for k, fault in enumerate(self.faults):
             _check_fault_target(self, k, fault, n_supports)
         for where, name in (("sensors.imu.grade", self.sensors.imu.grade),

@@ -7,6 +7,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field, model_validator
 
+from twin.config.push import PushControl
 from twin.config.section import Section
 
 
@@ -75,6 +76,7 @@ class Supports(Section):
     """Ram length between a set support and its pan before a push (fully retracted)."""
     hydraulics: Hydraulics = Hydraulics()
     legs: Legs = Legs()
+    push: PushControl = PushControl()
     sequence: Literal["after_push", "before_push"] = "after_push"
     """Support-advance sequence: after the pans are pushed (conventional), or before (immediate forward
     support, the supports following the shearer); see twin.face.pushadvance."""

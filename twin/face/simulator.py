@@ -21,6 +21,7 @@ import numpy as np
 
 from twin.config.scenario import Scenario
 from twin.face.connectors import connect_window
+from twin.face.drift import stand_supports
 from twin.face.hydraulics import CANOPY_CENTRE_X_M, CANOPY_TOP_M, VALVE_RAMP_S, SupportHydraulics
 from twin.face.layout import FaceFrame, Floor, Roof, joint_ends, pan_axes, support_stations
 from twin.face.model import (
@@ -104,6 +105,8 @@ class FaceState:
     """Per support, the oil its legs lose [m of the column per s] (a leaking leg)."""
     set_force_n: np.ndarray
     """Per support, the load at which its setting valve closes (below the set load: a failed set)."""
+    sup_y: np.ndarray
+    """Per support, the y of its base: behind its pan, following it along the face (twin.face.drift)."""
 
 
 @dataclass
@@ -207,19 +210,22 @@ class FaceSimulator:
         st = self.stations
         n = st.size
         sup_x = self._pan_ram_points(pans)[st, 0] - sup.ram_length_set_m - ram_extension_m
-        sup_z = self.support_z(np.arange(n), sup_x)
         zeros = np.zeros(n)
-        state = FaceState(pans.copy(), sup_x, sup_z, zeros.copy(), zeros.copy(), zeros.copy(), zeros.copy(),
-                          np.full(n, legs.force_set_n), zeros.copy(), zeros.copy(), np.full(pans.shape[0], np.inf),
-                          np.ones(n), zeros.copy(), np.full(n, legs.force_set_n))
+        state = FaceState(pans=pans.copy(), sup_x=sup_x, sup_z=zeros.copy(), sup_leg=zeros.copy(), ram=zeros.copy(),
+                          ram_force=zeros.copy(), leg_oil=zeros.copy(), leg_force=np.full(n, legs.force_set_n),
+                          leg_t=zeros.copy(), t_set=zeros.copy(), pan_wall_x=np.full(pans.shape[0], np.inf),
+                          ram_speed_factor=np.ones(n), leg_leak_m_s=zeros.copy(),
+                          set_force_n=np.full(n, legs.force_set_n), sup_y=zeros.copy())
+        stand_supports(self.scn, self.ram_site_local, state, np.arange(n))
+        state.sup_z = self.support_z(sup_x, state.sup_y)
         state.sup_leg = self.roof_clearance(state, np.arange(n), 0.0)
         state.leg_oil = state.sup_leg + legs.squeeze_set_m
         state.ram = self.ram_lengths(state, zeros, sup_x)
         return state
 
-    def support_z(self, sups: np.ndarray, sup_x: np.ndarray) -> np.ndarray:
-        """Height of supports `sups` standing with their bases at `sup_x`: the floor under their skids."""
-        return self.floor.height(sup_x + SKID_OFFSET_X_M, (self.stations[sups] + 0.5) * self.scn.face.pan_length_m)
+    def support_z(self, sup_x: np.ndarray, sup_y: np.ndarray) -> np.ndarray:
+        """Height of supports standing with their bases at `sup_x`, `sup_y`: the floor under their skids."""
+        return self.floor.height(sup_x + SKID_OFFSET_X_M, sup_y)
 
     def roof_clearance(self, state: FaceState, sups: np.ndarray, t: float, sup_x: np.ndarray | None = None,
                        sup_z: np.ndarray | None = None, t_set: np.ndarray | None = None) -> np.ndarray:
@@ -228,8 +234,7 @@ class FaceSimulator:
         x = state.sup_x[sups] if sup_x is None else sup_x
         z = state.sup_z[sups] if sup_z is None else sup_z
         since = t - (state.t_set[sups] if t_set is None else t_set)
-        y = (self.stations[sups] + 0.5) * self.scn.face.pan_length_m
-        return (self.roof.height(x + CANOPY_CENTRE_X_M, y) - self.convergence_m_s * np.maximum(since, 0.0) - z
+        return (self.roof.height(x + CANOPY_CENTRE_X_M, state.sup_y[sups]) - self.convergence_m_s * np.maximum(since, 0.0) - z
                 - CANOPY_TOP_M)
 
     def hold_legs(self, state: FaceState, t: float) -> None:
@@ -255,11 +260,9 @@ class FaceSimulator:
     def ram_lengths(self, state: FaceState, pan_shift: np.ndarray, sup_x: np.ndarray) -> np.ndarray:
         """Ram lengths (per support) that put each support's pan `pan_shift` further towards the coal wall
         with the support base at `sup_x` (on the floor there): the stroke a push or an advance commands."""
-        y = (self.stations + 0.5) * self.scn.face.pan_length_m
         pan_site = self._pan_ram_points(state.pans)[self.stations]
         pan_site[:, 0] += pan_shift
-        sup_z = self.support_z(np.arange(self.stations.size), sup_x)
-        sup_site = np.column_stack([sup_x, y, sup_z]) + self.sup_site_local
+        sup_site = np.column_stack([sup_x, state.sup_y, self.support_z(sup_x, state.sup_y)]) + self.sup_site_local
         return np.linalg.norm(pan_site - sup_site, axis=1)
 
     # -- window stepping --------------------------------------------------------------------------------
@@ -295,7 +298,7 @@ class FaceSimulator:
         d.qpos[ix.sup_qpos[:, 1]] = state.sup_leg[sups]
         d.act[m.actuator_actadr[ix.ram_act]] = state.ram[sups]
         d.act[m.actuator_actadr[ix.leg_act]] = state.leg_oil[sups]
-        y = (self.stations[sups] + 0.5) * length
+        y = state.sup_y[sups]
         m.body_pos[win.sup_body] = np.column_stack([np.zeros_like(y), y, state.sup_z[sups]]) @ self.frame.mat_tf.T
         start, end = joint_ends(state.pans, length)
         for side, (other, point) in enumerate(((first - 1, end), (first + win.count, start))):
@@ -318,7 +321,7 @@ class FaceSimulator:
         state.ram_force[sups] = d.actuator_force[ix.ram_act]
         state.leg_force[sups] = win.leg_load()
         state.leg_t[sups] = t
-        state.sup_z[sups] = self.support_z(sups, state.sup_x[sups])
+        state.sup_z[sups] = self.support_z(state.sup_x[sups], state.sup_y[sups])
 
     def step_event(self, state: FaceState, moved: np.ndarray, target: np.ndarray, advancing: np.ndarray,
                    t_begin_s: float = 0.0, time_limit_s: float = np.inf
@@ -540,7 +543,7 @@ class _RoofLimits:
         """Supports `which` (lowered) set from t_abs where they stand: their bases lifted onto the floor there."""
         m, d, ix = self.win.model, self.win.data, self.win.index
         x = d.qpos[ix.sup_qpos[which, 0]]
-        self.sup_z[which] = self.sim.support_z(self.sups[which], x)
+        self.sup_z[which] = self.sim.support_z(x, self.state.sup_y[self.sups[which]])
         pos_t = m.body_pos[self.win.sup_body[which]]
         pos_t += np.outer(self.sup_z[which] - self.state.sup_z[self.sups[which]], self.sim.frame.mat_tf[:, 2])
         m.body_pos[self.win.sup_body[which]] = pos_t

@@ -17,6 +17,7 @@ import time
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pyarrow as pa
 from tqdm import tqdm
@@ -52,6 +53,9 @@ from twin.pipeline.rundir import (
     write_timing,
 )
 from twin.view.record_rate import RECORD_RATE_HZ, check_record_rate, rate_label
+
+if TYPE_CHECKING:
+    from twin.face.drift import OffsetSource
 
 
 @dataclass(frozen=True)
@@ -102,7 +106,7 @@ def _seeded(scn, seed: int | None):
 def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Path | None = None,
         seed: int | None = None, trials: int = 1, *, force: bool = False, quiet: bool = True, sensors: bool = True,
         workers: int = 1, ray_address: str | None = None, cycles: int | None = None,
-        record_rate_hz: float | None = RECORD_RATE_HZ) -> Run:
+        record_rate_hz: float | None = RECORD_RATE_HZ, offsets: OffsetSource | None = None) -> Run:
     """Run a scenario (a TOML path, or what twin.load_scenario gave) into a run directory (default
     runs/NAME-seedN; runs/NAME-Ncycles-seedN with `cycles`, which replaces a face scenario's number of cutting
     cycles, validated as the file's would be).
@@ -112,7 +116,9 @@ def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Pat
     `workers` local processes or on the Ray cluster at `ray_address`; `sensors=False` writes the truth only.
     000's SINS experiments and 002's turntable run their experiment. `quiet=False` shows the progress bar and
     prints the summary tables, as `longwall run` does. `record_rate_hz` is the rate of the face run's recordings
-    run.rrd and estimates.rrd (twin.view.record_rate: Hz, or None for every sample), recorded in metrics.json."""
+    run.rrd and estimates.rrd (twin.view.record_rate: Hz, or None for every sample), recorded in metrics.json.
+    `offsets` is the roof support system's input per cycle (twin.face.drift.OffsetSource: the cycle and the pans'
+    states in, per-support offsets out), added to the scenario's supports.push.offsets."""
     record_rate_hz = _record_rate(record_rate_hz)
     if isinstance(scenario, str | Path):
         source, scenario = str(scenario), load_scenario(scenario, seed)
@@ -130,7 +136,8 @@ def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Pat
         return _run_paper(scenario, out, force, quiet)
     check_trials(trials, workers, ray_address)
     check_resources(source, estimate_resources(scenario, trials, sensors, workers))
-    return _run_face(scenario, source, out, force, quiet, trials, sensors, workers, ray_address, record_rate_hz)
+    return _run_face(scenario, source, out, force, quiet, trials, sensors, workers, ray_address, record_rate_hz,
+                     offsets)
 
 
 def check_trials(trials: int, workers: int, ray_address: str | None,
@@ -188,7 +195,8 @@ def note_recordings(run_dir: Path, rates: dict[str, float | None]) -> None:
 
 
 def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, trials: int, sensors: bool,
-              workers: int, ray_address: str | None, record_rate_hz: float | None) -> Run:
+              workers: int, ray_address: str | None, record_rate_hz: float | None,
+              offsets: OffsetSource | None = None) -> Run:
     from numba.core import event as numba_event
 
     from twin.face.haulage import Timeline
@@ -256,7 +264,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     with (atomic_run_dir(out, force) as staging, trial_runner(workers, ray_address) as runner,
           numba_event.install_listener("numba:compile", CompileNotice())):
         # The truth and trial 0's sensors go to the run directory as the twin makes them (twin.pipeline.twin_stream).
-        result, shearer_stats = stream_twin(scn, staging, sensors, progress)
+        result, shearer_stats = stream_twin(scn, staging, sensors, progress, offsets=offsets)
         summary = twin_summary(scn, result.tables, shearer_stats)
         if mc_trials:
             runner.submit(scn, staging, mc_trials)  # runs beside trial 0 unless sequential

@@ -17,13 +17,13 @@ import numpy as np
 from estimators.io import logformat as lf
 from estimators.nav.rotations import euler_to_quat, mat_to_quat, quat_mul
 from twin.config.scenario import Scenario
+from twin.face.drift import SUPPORT_DEADBAND_M, OffsetSource, StrokeControl, cycle_offsets, stand_supports
 from twin.face.haulage import Timeline
 from twin.face.layout import (
     FaceFrame,
     Floor,
     bend_angles,
     initial_pans,
-    support_stations,
 )
 from twin.face.model import FloorGrid
 from twin.face.pushadvance import PushAdvanceController
@@ -48,8 +48,6 @@ RAM_DEADBAND_M = 1e-3
 
 MAX_REPUSHES = 8
 """Most times the end pans are pushed again after the snake sumping (each only where still off target)."""
-SUPPORT_DEADBAND_M = 5e-3
-"""A support this far short of its advance target is advanced again at the next event."""
 
 Progress = Callable[[str, float], None]
 """Callback (stage, fraction done in 0..1)."""
@@ -60,13 +58,15 @@ ShearerSink = Callable[[dict[str, np.ndarray]], None]
 @dataclass
 class SimResult:
     """The truth tables (logformat stream name -> columns; truth_shearer only from `simulate`, a streaming run's
-    sink takes it), the floor, the face frame, the simulated time and the number of push-advance events."""
+    sink takes it), the floor, the face frame, the simulated time, the number of push-advance events and the
+    per-support offsets [m] each cycle's shear applied (cycles, supports)."""
 
     tables: dict[str, dict[str, np.ndarray]]
     floor_grid: FloorGrid
     frame: FaceFrame
     duration_s: float
     events: int
+    offsets: np.ndarray
 
 
 class _FaceRecorder:
@@ -100,8 +100,9 @@ class _FaceRecorder:
             "t": np.full(pans.size, t), "pan": pans, **_split(p_t, "p_t", "enu"), **_split(q_tp, "q_tp", "wxyz"),
             "bend_h": pad[0][pans], "bend_v": pad[1][pans], "advance": st[:, 0] - self.pans0[pans, 0]})
         is_lowered = np.zeros(sups.size, bool) if lowered is None else np.isin(sups, lowered)
-        self._support_rows(np.full(sups.size, t), sups, state.sup_x[sups], state.sup_z[sups], state.ram[sups],
-                           state.ram_force[sups], state.sup_leg[sups], state.leg_force[sups], is_lowered)
+        self._support_rows(np.full(sups.size, t), sups, state.sup_x[sups], state.sup_y[sups], state.sup_z[sups],
+                           state.ram[sups], state.ram_force[sups], state.sup_leg[sups], state.leg_force[sups],
+                           is_lowered)
         if pans.size:
             self.versions.append(PanVersion(t if t_begin is None else t_begin, t, state.pans.copy()))
 
@@ -112,9 +113,9 @@ class _FaceRecorder:
         if not m:
             return
         every = np.tile(sups, m)
-        self._support_rows(np.repeat(t0 + trace.t_s, sups.size), every, trace.sup_x.ravel(),
-                           self.support_z(every, trace.sup_x.ravel()), trace.ram.ravel(), trace.ram_force.ravel(),
-                           trace.leg.ravel(), trace.leg_force.ravel(), np.isin(every, lowered))
+        self._support_rows(np.repeat(t0 + trace.t_s, sups.size), every, trace.sup_x.ravel(), state.sup_y[every],
+                           self.support_z(trace.sup_x.ravel(), state.sup_y[every]), trace.ram.ravel(),
+                           trace.ram_force.ravel(), trace.leg.ravel(), trace.leg_force.ravel(), np.isin(every, lowered))
 
     def record_legs(self, t: float, state: FaceState) -> None:
         """Rows at t (between events) for the supports whose legs' pressure or canopy has moved since their last
@@ -123,14 +124,14 @@ class _FaceRecorder:
                  | (np.abs(state.sup_leg - self.last_canopy) >= LEG_ROW_M))
         sups = np.flatnonzero(moved)
         if sups.size:
-            self._support_rows(np.full(sups.size, t), sups, state.sup_x[sups], state.sup_z[sups], state.ram[sups],
-                               state.ram_force[sups], state.sup_leg[sups], state.leg_force[sups],
+            self._support_rows(np.full(sups.size, t), sups, state.sup_x[sups], state.sup_y[sups], state.sup_z[sups],
+                               state.ram[sups], state.ram_force[sups], state.sup_leg[sups], state.leg_force[sups],
                                np.zeros(sups.size, bool))
 
-    def _support_rows(self, t: np.ndarray, sups: np.ndarray, sup_x: np.ndarray, sup_z: np.ndarray, ram: np.ndarray,
-                      ram_force: np.ndarray, leg: np.ndarray, leg_force: np.ndarray, is_lowered: np.ndarray) -> None:
-        y = self.scn.face.pan_length_m * (support_stations(self.scn)[sups] + 0.5)
-        p_f = np.column_stack([sup_x, y, sup_z])
+    def _support_rows(self, t: np.ndarray, sups: np.ndarray, sup_x: np.ndarray, sup_y: np.ndarray, sup_z: np.ndarray,
+                      ram: np.ndarray, ram_force: np.ndarray, leg: np.ndarray, leg_force: np.ndarray,
+                      is_lowered: np.ndarray) -> None:
+        p_f = np.column_stack([sup_x, sup_y, sup_z])
         leg_mpa = self.hydraulics.legs.pressure_mpa(leg_force)
         self.sup_rows.append({
             "t": t, "support": sups, **_split(p_f @ self.frame.mat_tf.T, "p_t", "enu"),
@@ -222,17 +223,19 @@ def cycles_table(timeline: Timeline) -> dict[str, np.ndarray]:
                for key in ("t_cut_end", "t_sump_end", "t_push_end", "t_end", "s_sump")}}
 
 
-def simulate(scn: Scenario, progress: Progress | None = None) -> SimResult:
+def simulate(scn: Scenario, progress: Progress | None = None, offsets: OffsetSource | None = None) -> SimResult:
     """Run the twin for a scenario: the face events, the shearer ride and the truth, all tables in memory."""
     pieces: list[dict[str, np.ndarray]] = []
-    result = simulate_stream(scn, pieces.append, progress)
+    result = simulate_stream(scn, pieces.append, progress, offsets)
     result.tables[lf.TRUTH_SHEARER.name] = {key: np.concatenate([p[key] for p in pieces]) for key in pieces[0]}
     return result
 
 
-def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress | None = None) -> SimResult:
+def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress | None = None,
+                    offsets: OffsetSource | None = None) -> SimResult:
     """Run the twin for a scenario, handing the shearer truth to `shearer_sink` a ride chunk (a cycle) at a time as
-    it is made; the result holds the other truth tables. At most two chunks of the shearer's truth exist at once."""
+    it is made; the result holds the other truth tables. At most two chunks of the shearer's truth exist at once.
+    `offsets` is the roof support system's per-cycle input (twin.face.drift.OffsetSource), added to the scenario's."""
     report = progress or (lambda stage, frac: None)
     rng = np.random.default_rng(scn.seed)
     frame = FaceFrame(np.radians(scn.face.azimuth_deg))
@@ -243,6 +246,8 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     state = sim.initial_supports(initial_pans(scn, floor, rng), ctrl.support_lag_m())
     sim.settle(state)
     pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
+    strokes = StrokeControl(scn, state.ram) if scn.supports.push.control == "stroke" else None
+    applied: list[np.ndarray] = []
     recorder = _FaceRecorder(scn, frame, state, sim)
     length = scn.face.pan_length_m
     events = 0
@@ -307,30 +312,40 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
 
         Returns whether any ram moved."""
         nonlocal events, last_target, last_moved
+        sup_before = ctrl.sup_target.copy()
         pan_target, advancing = ctrl.update(s_trail)
-        region = (pan_target != last_target) | advancing | (last_moved & repush)
+        new_target = pan_target != last_target
+        region = new_target | advancing | (last_moved & repush)
         last_target = pan_target
         # A push shortfall (a fault of the face, not of the sensors): the pans stop short while it lasts,
         # and their supports, which follow them, with them.
         short = shortfall_at(t)
         pan_target = pan_target - short
         sup_goal = ctrl.sup_target - short
+        if strokes is not None:
+            # By stroke from where each support stands (twin.face.drift): the errors stay in the face.
+            push, advance, behind = strokes.goals(state.ram, pan_target, sup_before, sup_goal, new_target)
+        else:
+            # Strokes that take each pan from where it is to its absolute target, from where its support stands;
+            # an advancing support then pulls itself up to its own target.
+            shift = pan_target - (state.pans[sim.stations, 0] - pan_x0)
+            push = sim.ram_lengths(state, shift, state.sup_x)
+            advance = sim.ram_lengths(state, shift, sup_x0 + sup_goal)
+            behind = sup_goal - (state.sup_x - sup_x0) > SUPPORT_DEADBAND_M
         if region.any():
             # A support near the action that is short of its advance (it stuck, or its pan was pulled
             # back) advances again.
             near = np.zeros_like(region)
             near[np.flatnonzero(region).min():np.flatnonzero(region).max() + 1] = True
-            advancing |= near & (sup_goal - (state.sup_x - sup_x0) > SUPPORT_DEADBAND_M)
-        # Strokes that take each pan from where it is to its target, from where its support stands; an
-        # advancing support then pulls itself up to its own target.
-        shift = pan_target - (state.pans[sim.stations, 0] - pan_x0)
-        push = sim.ram_lengths(state, shift, state.sup_x)
-        target = np.where(advancing, sim.ram_lengths(state, shift, sup_x0 + sup_goal), push)
+            advancing |= near & behind
+        target = np.where(advancing, advance, push)
         moved = (region | advancing) & ((np.abs(push - state.ram) > RAM_DEADBAND_M) | advancing)
         last_moved = moved
         if not moved.any():
             return False
         advancing &= moved
+        if strokes is not None:
+            strokes.commanded(moved, advancing, target)
         t_begin = max(t, hydraulics_free)
         obstruct(t_begin)
         if np.any(advancing & (np.abs(push - state.ram) > RAM_DEADBAND_M)):
@@ -349,6 +364,9 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
         legs_until(t_begin)
         lowered = np.flatnonzero(advancing)
         if lowered.size:
+            # Lowered, the supports come up behind their pans along the face as their rams pull them.
+            stand_supports(scn, sim.ram_site_local, state, lowered)
+            state.sup_z[lowered] = sim.support_z(state.sup_x[lowered], state.sup_y[lowered])
             recorder.record(t_begin, state, np.zeros(0, int), lowered, lowered)
         pans, sups, trace = sim.step_event(state, moved, target, advancing, t_begin, t_limit - t_begin)
         recorder.record_trace(t_begin, trace, state, lowered)
@@ -373,7 +391,8 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     half = scn.shearer.length_m / 2
     with ThreadPoolExecutor(max_workers=1) as pool:
         for plan in timeline.cycles:
-            ctrl.begin_cycle(plan.direction)
+            applied.append(cycle_offsets(scn, plan.cycle, state.pans, offsets))
+            ctrl.begin_cycle(plan.direction, applied[-1])
             step = length * scn.pattern.push_step_pans
             times, marks = timeline.crossings(plan.cycle, -plan.direction * half, step)
             for t, mark in zip(times, marks):
@@ -400,4 +419,4 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     recorder.record_legs(timeline.duration, state)
     pans_tab, sups_tab = recorder.tables()
     tables = {lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab, lf.TRUTH_CYCLES.name: cycles_table(timeline)}
-    return SimResult(tables, FloorGrid.from_scenario(scn, floor), frame, timeline.duration, events)
+    return SimResult(tables, FloorGrid.from_scenario(scn, floor), frame, timeline.duration, events, np.array(applied))

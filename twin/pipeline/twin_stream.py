@@ -17,6 +17,7 @@ import numpy as np
 
 from estimators.io.logformat import STREAMS, StreamAppender, write_stream
 from twin.config.scenario import Scenario
+from twin.face.drift import OffsetSource
 from twin.face.haulage import Timeline
 from twin.pipeline.simulate import Progress, SimResult, cycles_table, last_truth_time, simulate_stream
 from twin.sensors.chunks import ChunkAssembler, TruthChunk, halo_rows
@@ -30,10 +31,11 @@ SUPPORT_TRUTH = ("t", "s")
 
 
 def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Progress | None = None,
-                chunk_rows: int | None = None) -> tuple[SimResult, ShearerStats]:
+                chunk_rows: int | None = None, offsets: OffsetSource | None = None) -> tuple[SimResult, ShearerStats]:
     """Simulate `scn` into `run_dir`: the truth streams and, with `sensors`, sensor trial 0's streams, written as the
     run goes. `chunk_rows` cuts the shearer's truth into chunks of at most that many rows (default: a ride chunk, a
-    cycle); the files are the same whatever it is. Returns the simulation's result without the shearer's truth
+    cycle); the files are the same whatever it is. `offsets`: the per-cycle offsets of the supports' pushes
+    (twin.face.drift.OffsetSource). Returns the simulation's result without the shearer's truth
     (which is on disk) and the shearer's statistics."""
     report = progress or (lambda stage, frac: None)
     timeline = Timeline(scn)
@@ -62,7 +64,7 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
                 take(chunk)
 
     try:
-        result = simulate_stream(scn, sink, progress)
+        result = simulate_stream(scn, sink, progress, offsets)
         for chunk in assembler.finish():
             take(chunk)
     finally:

@@ -147,9 +147,9 @@ def test_an_obstruction_keeps_the_connectors_within_their_limits(monkeypatch):
     _assert_within_limits(scn, _worst_connectors(monkeypatch, scn))
 
 
-@pytest.mark.xfail(strict=True, reason="twin.face.simulator stands support j at y = (j + 0.5) pan lengths, its pan "
-                   "on a dip at (j + 0.5) pan lengths x cos(dip): at 19 deg the rams pull 30+ deg askew and bend the "
-                   "connectors past their limits; with the supports at their pans' y the face holds (roll 0.4 deg)")
 def test_the_face_holds_on_the_steepest_seam_the_validator_accepts(monkeypatch):
+    """The supports stand behind their pans along the face (twin.face.drift.stand_supports); at fixed stations (j +
+    0.5 pan lengths, their pans at that times cos(dip)) the rams pulled 30+ deg askew at 19 deg and bent the
+    connectors past their limits."""
     scn = capped("default", cycles=1, face={"seam_dip_deg": float(np.floor(MAX_FLOOR_TILT_DEG * 10) / 10)})
     _assert_within_limits(scn, _worst_connectors(monkeypatch, scn))

@@ -108,7 +108,9 @@ def test_the_pans_slide_on_the_floor_with_their_own_friction():
 
 def test_an_obstruction_stalls_the_ram_at_its_relief_pressure():
     """An obstacle 0.1 m in front of support 20's pan from 250 s to 700 s: the pan stops at it (within the slide
-    limit's give), its ram stands at its relief pressure; once the obstacle is cleared the pan catches up."""
+    limit's give), its ram stands at its relief pressure; its support follows it short, and with the pushes by stroke
+    from the support (twin.face.drift) the pan stays behind its neighbours once the obstacle is cleared (a dent in
+    the face line that face alignment must take out: 0.47 m short after the next cycle)."""
     obstacle = {"kind": "obstruction", "t_start_s": 250.0, "t_end_s": 700.0, "target": 20, "value": 0.1}
     scn = capped("default", faults=[obstacle])
     result = simulate(scn)
@@ -122,4 +124,4 @@ def test_an_obstruction_stalls_the_ram_at_its_relief_pressure():
     s20 = (sup["support"] == 20) & (sup["t"] > 250.0) & (sup["t"] < 700.0)
     assert sup["ram_pressure"][s20].max() == pytest.approx(scn.supports.hydraulics.pump_pressure_mpa, rel=0.02)
     at_end = pans["advance"][mine & (t > 1000.0)]
-    assert at_end[-1] == pytest.approx(2 * scn.face.web_depth_m, abs=0.01)  # caught up by the end of the run
+    assert 0.3 < 2 * scn.face.web_depth_m - at_end[-1] < scn.face.web_depth_m - 0.1  # pushed a web, pulled along
