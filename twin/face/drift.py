@@ -28,7 +28,7 @@ from twin.config.scenario import Scenario, support_count
 from twin.face.layout import pan_axes, support_stations
 
 if TYPE_CHECKING:
-    from twin.face.simulator import FaceState
+    from twin.face.window import FaceState
 
 STOP_NOISE_STREAM = 25
 """Random stream of the push stop errors, apart from the floor's and the face's so that they change nothing else."""

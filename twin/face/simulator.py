@@ -9,12 +9,11 @@ legs' valves open), drives the rams to their new targets as the hydraulics would
 to its force limit), sets the advanced supports against the roof to their set load, each phase in real time scaled
 to a quasi-static speed and sampled as it goes (EventTrace), lets the window settle, and writes the result back.
 Between events the set supports' legs are held closed while the roof converges on them (`hold_legs`, the same
-hydraulics in closed form, which a test checks against MuJoCo).
+hydraulics in closed form, which a test checks against MuJoCo). The window, the state and the trace are
+twin.face.window's; the legs' lowering and setting twin.face.leg_phases'.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -24,16 +23,25 @@ from twin.face.connectors import connect_window
 from twin.face.drift import stand_supports
 from twin.face.hydraulics import CANOPY_CENTRE_X_M, CANOPY_TOP_M, VALVE_RAMP_S, SupportHydraulics
 from twin.face.layout import FaceFrame, Floor, Roof, joint_ends, pan_axes, support_stations
+from twin.face.leg_phases import drive_legs, leak, leg_valves
 from twin.face.model import (
     RAM_DAMPING_N_S_M,
     RAM_GAIN_N_M,
     SUPPORT_FRICTION_LOWERED_N,
     SUPPORT_GRIP,
-    FaceIndex,
-    FloorBand,
-    build_face_spec,
-    index_face_model,
     place_floor,
+)
+from twin.face.window import (
+    ARRIVED_M,
+    RAM_SAMPLE_S,
+    RAMP_FLOOR,
+    STALL_S,
+    VALVE_TIMEOUT_FACTOR,
+    EventTrace,
+    FaceState,
+    RoofLimits,
+    TraceBuilder,
+    Window,
 )
 
 QS_RAM_SPEED_M_S = 1.2
@@ -42,30 +50,11 @@ neither drags nor overshoots the pans); the event's real time is its simulated t
 k^2 times the real one: accelerating a pan shows in its ram's force, so the pressure truth carries transients at the
 start of a push (up to relief for a drive frame). At 0.6 m/s the default run's 99th percentile pressure was 9.8 MPa
 against 31.5 here, but seed004's twin ran at 321x real time against 479x here (issue 2's target: 400x)."""
-QS_LEG_SPEED_M_S = 0.3
-"""Speed at which MuJoCo moves the legs' oil columns while supports lower and set (the canopy follows within 12 mm)."""
-RAM_SAMPLE_S = 0.25
-"""Real time between the samples of an event's trace (the supports' truth rows while the rams and legs move)."""
-ROOF_CONTACT_M = 1e-5
-"""A canopy at the roof is loaded this far into its slide's limit, so that the limit holds from the first step (a
-limit at exactly zero distance is not active yet): 1.3 kN of the legs' 7.9 MN."""
-ROOF_APPROACH_M = 0.05
-"""A setting canopy this close under the roof slows down (to RAMP_FLOOR of its flow at the roof)."""
-LEG_SETTLE_STEPS = 10
-"""Steps for a canopy to come to its legs' oil column after they lowered (the servo's time constant is 4 steps)."""
-RAMP_FLOOR = 0.2
-"""Least fraction of its metered speed a ram moves at while its valve ramps."""
-ARRIVED_M = 1e-6
-"""A ram's metered stroke this close to its goal has arrived."""
 RELIEF_FRACTION = 0.99
 """A ram whose force is this fraction of its limit stands at its relief valve."""
-STALL_S = 1.0
-"""A ram standing at its relief valve this long has stalled: its valve closes where it stands (the push falls short)."""
 STALL_SPEED_FRACTION = 0.1
 """A ram at its force limit moving slower than this fraction of its metered speed stands (faster, it is accelerating
 its load: in the quasi-static time scale, inertia is k^2 times the real one)."""
-VALVE_TIMEOUT_FACTOR = 1.5
-"""A valve closes after this many times its ram's travel time (plus STALL_S) whatever the ram has reached."""
 SETTLE_STEPS = 20
 """Steps after the supports are set again, for the window to come to rest."""
 WINDOW_MARGIN_PANS = 2
@@ -81,109 +70,6 @@ SKID_OFFSET_X_M = -1.5
 """Where the support base rests on the floor, behind the ram connection (support.xml)."""
 
 
-@dataclass
-class FaceState:
-    """The whole face in F: pan states (N, 6); per support its base x and z, canopy height (the leg joint), ram
-    length and force [N] (positive pushing), legs' oil column [m] and load [N], and the times its legs' state holds
-    at and it was last set [s]; the faults of the face in force."""
-
-    pans: np.ndarray
-    sup_x: np.ndarray
-    sup_z: np.ndarray
-    sup_leg: np.ndarray
-    ram: np.ndarray
-    ram_force: np.ndarray
-    leg_oil: np.ndarray
-    leg_force: np.ndarray
-    leg_t: np.ndarray
-    t_set: np.ndarray
-    pan_wall_x: np.ndarray
-    """Per pan, the x of an obstacle in front of it (an obstruction fault), or inf."""
-    ram_speed_factor: np.ndarray
-    """Per support, the fraction of its metered speed its ram's valve passes (below 1: a sticking valve)."""
-    leg_leak_m_s: np.ndarray
-    """Per support, the oil its legs lose [m of the column per s] (a leaking leg)."""
-    set_force_n: np.ndarray
-    """Per support, the load at which its setting valve closes (below the set load: a failed set)."""
-    sup_y: np.ndarray
-    """Per support, the y of its base: behind its pan, following it along the face (twin.face.drift)."""
-
-
-@dataclass
-class EventTrace:
-    """The moved supports of an event through it, sampled in real time while their rams and legs move: one row per
-    sample (t_s since the event began), one column per support of `supports` (global indices)."""
-
-    supports: np.ndarray
-    t_s: np.ndarray
-    ram: np.ndarray
-    sup_x: np.ndarray
-    ram_force: np.ndarray
-    """Ram force [N], positive pushing the pan (twin.face.hydraulics.RamHydraulics.pressure_mpa)."""
-    leg: np.ndarray
-    """Canopy height above the base [m]."""
-    leg_force: np.ndarray
-    """The legs' load [N] (twin.face.hydraulics.LegHydraulics.pressure_mpa)."""
-    duration_s: float
-    """From the event's beginning to its supports set again."""
-
-    FIELDS = ("ram", "sup_x", "ram_force", "leg", "leg_force")
-
-
-class _TraceBuilder:
-    """Collects an event's samples of the moved supports of a window (window order; `sups` their global indices)."""
-
-    def __init__(self, win: _Window, sups: np.ndarray, moved: np.ndarray):
-        self.win, self.sups, self.moved = win, sups, moved
-        self.t: list[float] = []
-        self.rows: list[np.ndarray] = []
-
-    def sample(self, t: float) -> None:
-        d, ix, mv = self.win.data, self.win.index, self.moved
-        self.t.append(t)
-        self.rows.append(np.stack([d.ten_length[ix.ram_tendon[mv]], d.qpos[ix.sup_qpos[mv, 0]],
-                                   d.actuator_force[ix.ram_act[mv]], d.qpos[ix.sup_qpos[mv, 1]],
-                                   self.win.leg_load()[mv]]))
-
-    def build(self, duration_s: float) -> EventTrace:
-        cols = np.array(self.rows, float).reshape(len(self.t), len(EventTrace.FIELDS), int(self.moved.sum()))
-        return EventTrace(self.sups[self.moved], np.array(self.t, float),
-                          *(cols[:, i] for i in range(len(EventTrace.FIELDS))), duration_s)
-
-
-@dataclass
-class _Window:
-    """One compiled window model of `count` pans, its index and data, moved along the face."""
-
-    count: int
-    band: FloorBand
-    model: mujoco.MjModel
-    data: mujoco.MjData
-    index: FaceIndex
-    pan_body: np.ndarray
-    pan_mass: np.ndarray
-    pan_inertia: np.ndarray
-    sup_body: np.ndarray
-
-    def leg_load(self) -> np.ndarray:
-        """The legs' load [N] per support: their oil column's squeeze (its pressure; the servo's damping, a numerical
-        aid of the time scaling, left out) within the actuator's range."""
-        m, d, ix = self.model, self.data, self.index
-        squeeze = d.act[m.actuator_actadr[ix.leg_act]] - d.qpos[ix.sup_qpos[:, 1]]
-        rng = m.actuator_forcerange[ix.leg_act]
-        return np.clip(m.actuator_gainprm[ix.leg_act, 0] * squeeze, rng[:, 0], rng[:, 1])
-
-    @classmethod
-    def compile(cls, scn: Scenario, floor: Floor, count: int) -> "_Window":
-        band = FloorBand.for_window(scn, floor, count)
-        model = build_face_spec(scn, band, 0, count, anchors=True).compile()
-        index = index_face_model(model, scn, 0, count)
-        pan_body = np.array([model.body(f"pan{i}_pan").id for i in index.pans], int)
-        sup_body = np.array([model.body(f"sup{j}_support").id for j in index.supports], int)
-        return cls(count, band, model, mujoco.MjData(model), index, pan_body, model.body_mass[pan_body].copy(),
-                   model.body_inertia[pan_body].copy(), sup_body)
-
-
 class FaceSimulator:
     """Steps windows of the face model: compiled once per window size, moved along the face."""
 
@@ -197,7 +83,7 @@ class FaceSimulator:
         k, n = scn.supports.pans_per_support, scn.face.pan_count
         counts = sorted({min(n, int(np.ceil(c / k)) * k) for c in window_sizes})
         self.hydraulics = SupportHydraulics.from_scenario(scn.supports, scn.roof)
-        self.windows = [_Window.compile(scn, floor, c) for c in counts]
+        self.windows = [Window.compile(scn, floor, c) for c in counts]
         model = self.windows[0].model
         self.ram_site_local = np.array(model.site("pan0_ram").pos)
         self.sup_site_local = np.array(model.site(f"sup{self.windows[0].index.supports[0]}_ram").pos)
@@ -266,7 +152,7 @@ class FaceSimulator:
         return np.linalg.norm(pan_site - sup_site, axis=1)
 
     # -- window stepping --------------------------------------------------------------------------------
-    def _window_for(self, lo: int, hi: int) -> tuple[_Window, int]:
+    def _window_for(self, lo: int, hi: int) -> tuple[Window, int]:
         """The smallest window covering pans lo..hi (inclusive) with margins, and its first pan."""
         n, k = self.scn.face.pan_count, self.scn.supports.pans_per_support
         need = hi - lo + 1 + 2 * WINDOW_MARGIN_PANS
@@ -277,7 +163,7 @@ class FaceSimulator:
         first = int(np.clip((lo + hi) // 2 - win.count // 2, 0, n - win.count))
         return win, first - first % k
 
-    def _load(self, win: _Window, state: FaceState, first: int) -> tuple[np.ndarray, np.ndarray]:
+    def _load(self, win: Window, state: FaceState, first: int) -> tuple[np.ndarray, np.ndarray]:
         m, d, ix = win.model, win.data, win.index
         n, length = self.scn.face.pan_count, self.scn.face.pan_length_m
         pans = np.arange(first, first + win.count)
@@ -311,7 +197,7 @@ class FaceSimulator:
         mujoco.mj_forward(m, d)  # the rams' and legs' lengths and forces of the loaded state
         return pans, sups
 
-    def _store(self, win: _Window, state: FaceState, pans: np.ndarray, sups: np.ndarray, t: float) -> None:
+    def _store(self, win: Window, state: FaceState, pans: np.ndarray, sups: np.ndarray, t: float) -> None:
         m, d, ix = win.model, win.data, win.index
         state.pans[pans] = d.qpos[ix.pan_qpos]
         state.sup_x[sups] = d.qpos[ix.sup_qpos[:, 0]]
@@ -343,16 +229,16 @@ class FaceSimulator:
         win, first = self._window_for(int(moved_pans.min()), int(moved_pans.max()))
         m, d, ix = win.model, win.data, win.index
         pans, sups = self._load(win, state, first)
-        roof = _RoofLimits(self, win, state, sups, t_begin_s)
+        roof = RoofLimits(self, win, state, sups, t_begin_s)
         adv = advancing[sups]
         act = d.act[m.actuator_actadr[ix.ram_act]]
         goal = np.where(moved[sups], target[sups], act)
         self._set_supports(win, adv, ~adv & (goal > act + ARRIVED_M))
-        trace = _TraceBuilder(win, sups, moved[sups])
+        trace = TraceBuilder(win, sups, moved[sups])
         lower_m = self.scn.supports.lower_m
         legs = self.hydraulics.legs
         if adv.any():
-            t = self._drive_legs(win, state, sups, adv, roof, -lower_m, 0.0, trace)
+            t = drive_legs(win, legs, state, sups, adv, roof, lower_m, False, 0.0, trace)
             set_s = legs.set_s(lower_m)
         else:
             t, set_s = 0.0, VALVE_RAMP_S  # the valves closed and the window at rest
@@ -362,7 +248,7 @@ class FaceSimulator:
             # Setting closes the ram valves: each ram holds the stroke it has, pulling no further.
             d.act[m.actuator_actadr[ix.ram_act]] = d.ten_length[ix.ram_tendon]
             roof.advance(adv, t_begin_s + t)  # on the floor and under fresh roof where they stand now
-            t = self._drive_legs(win, state, sups, adv, roof, None, t, trace)
+            t = drive_legs(win, legs, state, sups, adv, roof, lower_m, True, t, trace)
             state.t_set[sups[adv]] = t_begin_s + t
             self._set_supports(win, np.zeros_like(adv))
             t_legs = t
@@ -373,63 +259,8 @@ class FaceSimulator:
         self._store(win, state, pans, sups, t_begin_s + t_legs)
         return pans, sups, trace.build(t)
 
-    def _leak(self, win: _Window, state: FaceState, sups: np.ndarray, dt_s: float) -> None:
-        """The oil the leaking legs lose over `dt_s` of real time."""
-        adr = win.model.actuator_actadr[win.index.leg_act]
-        win.data.act[adr] -= state.leg_leak_m_s[sups] * dt_s
-
-    def _leg_valves(self, win: _Window, state: FaceState, sups: np.ndarray, cap_n: np.ndarray) -> None:
-        """After a step: the legs' oil no more than the load `cap_n` needs (the yield valve, or a setting valve
-        closing at the set load), so the column never winds up past its relief."""
-        m, d, ix = win.model, win.data, win.index
-        adr = m.actuator_actadr[ix.leg_act]
-        d.act[adr] = np.minimum(d.act[adr], d.qpos[ix.sup_qpos[:, 1]] + cap_n / self.hydraulics.legs.stiffness_n_m)
-
-    def _drive_legs(self, win: _Window, state: FaceState, sups: np.ndarray, which: np.ndarray,
-                    roof: _RoofLimits, lower_m: float | None, t0: float, trace: _TraceBuilder) -> float:
-        """Lower the legs of supports `which` (window order) `lower_m` below the roof (their load released first), or
-        with lower_m None set them against the roof to their set load (state.set_force_n); returns the real time
-        when all are done. The oil columns move at the valve's flow, MuJoCo at the quasi-static QS_LEG_SPEED_M_S."""
-        m, d, ix, legs = win.model, win.data, win.index, self.hydraulics.legs
-        adr = m.actuator_actadr[ix.leg_act]
-        k = QS_LEG_SPEED_M_S / legs.speed_m_s
-        nstep = max(1, round(RAM_SAMPLE_S / (k * m.opt.timestep)))
-        seg_sim = nstep * m.opt.timestep
-        set_force = state.set_force_n[sups]
-        yield_cap = np.full(sups.size, legs.force_yield_n)
-        deadline = t0 + VALVE_TIMEOUT_FACTOR * legs.lower_s(abs(lower_m or self.scn.supports.lower_m)) + STALL_S
-        t, moving = t0, which.copy()
-        while moving.any() and t < deadline:
-            roof.place(t + seg_sim * k)  # the roof where it is at the end of the step
-            if lower_m is None:
-                goal = d.qpos[ix.sup_qpos[:, 1]] + set_force / legs.stiffness_n_m
-            else:
-                goal = roof.clearance + lower_m
-            reach = legs.speed_m_s * k * seg_sim
-            if lower_m is None:
-                # The canopy meets the roof at the valve's least flow: in the quasi-static time scale its inertia is
-                # k^2 times the real one, and it would bounce off the roof.
-                gap = roof.clearance - d.qpos[ix.sup_qpos[:, 1]]
-                reach = reach * np.where(gap > ROOF_CONTACT_M, np.clip(gap / ROOF_APPROACH_M, RAMP_FLOOR, 1.0), 1.0)
-            flow = np.where(moving, np.clip(goal - d.act[adr], -reach, reach) / seg_sim, 0.0)
-            d.ctrl[ix.leg_act] = flow
-            mujoco.mj_step(m, d, nstep=nstep)
-            t += seg_sim * k
-            self._leak(win, state, sups, seg_sim * k)
-            self._leg_valves(win, state, sups, np.where(which & (lower_m is None), set_force, yield_cap))
-            if lower_m is None:
-                moving &= win.leg_load() < (1.0 - 1e-3) * set_force
-            else:
-                moving &= d.act[adr] > goal + ARRIVED_M
-            trace.sample(t)
-        d.ctrl[ix.leg_act] = 0.0
-        mujoco.mj_step(m, d, nstep=LEG_SETTLE_STEPS)  # the canopies come to rest on their oil columns
-        if lower_m is None:
-            self._leg_valves(win, state, sups, np.where(which, set_force, yield_cap))  # closed at the set load
-        return t
-
-    def _drive_rams(self, win: _Window, state: FaceState, sups: np.ndarray, goal: np.ndarray, roof: _RoofLimits,
-                    t0: float, t_limit: float, trace: _TraceBuilder) -> float:
+    def _drive_rams(self, win: Window, state: FaceState, sups: np.ndarray, goal: np.ndarray, roof: RoofLimits,
+                    t0: float, t_limit: float, trace: TraceBuilder) -> float:
         """Meter every ram (window order) towards its `goal` length from real time t0; returns the real time
         when the last ram has arrived, stalled or timed out, or t_limit.
 
@@ -473,8 +304,8 @@ class FaceSimulator:
             d.ctrl[ix.ram_act] = np.where(moving, np.clip(goal - d.act[adr], -reach, reach), 0.0) / seg_sim
             mujoco.mj_step(m, d, nstep=nstep)
             t += seg_real
-            self._leak(win, state, sups, seg_real)
-            self._leg_valves(win, state, sups, yield_cap)
+            leak(win, state, sups, seg_real)
+            leg_valves(win, self.hydraulics.legs, yield_cap)
             rod, rod_v = d.ten_length[ix.ram_tendon], d.ten_velocity[ix.ram_tendon]
             force = d.actuator_force[ix.ram_act]
             at_limit = (force >= RELIEF_FRACTION * hyd.force_push_n) | (force <= -RELIEF_FRACTION * hyd.force_pull_n)
@@ -494,7 +325,7 @@ class FaceSimulator:
         d.act[adr[short]] = d.ten_length[ix.ram_tendon[short]]  # valves closed where the rams stand
         return t
 
-    def _set_supports(self, win: _Window, lowered: np.ndarray, pushing: np.ndarray | None = None) -> None:
+    def _set_supports(self, win: Window, lowered: np.ndarray, pushing: np.ndarray | None = None) -> None:
         """Grip every support of the window by its legs' load (SUPPORT_GRIP), those `lowered` (window order) free;
         hold the AFC at their pans and their neighbours, but for the pans of the `pushing` supports (their rams
         move them)."""
@@ -516,42 +347,9 @@ class FaceSimulator:
         starts = list(range(0, max(1, n - win.count + 1), max(1, win.count // 2))) + [n - win.count]
         for first in starts:
             pans, sups = self._load(win, state, first)
-            _RoofLimits(self, win, state, sups, 0.0)
+            RoofLimits(self, win, state, sups, 0.0)
             self._set_supports(win, np.zeros(win.index.supports.size, bool))
             mujoco.mj_step(win.model, win.data, nstep=2 * SETTLE_STEPS)
             self._store(win, state, pans, sups, 0.0)
 
 
-class _RoofLimits:
-    """The roof over a window's canopies through an event: the upper limits of their leg slides, converging from the
-    event's beginning t_begin (real time t since it began); `advance` puts advanced supports on the floor and under
-    fresh roof where they stand."""
-
-    def __init__(self, sim: FaceSimulator, win: _Window, state: FaceState, sups: np.ndarray, t_begin: float):
-        self.sim, self.win, self.state, self.sups, self.t_begin = sim, win, state, sups, t_begin
-        self.t_set = state.t_set[sups].copy()
-        self.sup_z = state.sup_z[sups].copy()
-        self.leg_jnt = win.model.dof_jntid[win.index.sup_dof[:, 1]]
-        self.clearance = np.zeros(sups.size)
-        self.place(0.0)
-        q_leg = win.data.qpos[win.index.sup_qpos[:, 1]]
-        at_roof = q_leg >= self.clearance - ROOF_CONTACT_M
-        q_leg[at_roof] = np.maximum(q_leg[at_roof], self.clearance[at_roof] + ROOF_CONTACT_M)
-        win.data.qpos[win.index.sup_qpos[:, 1]] = q_leg
-
-    def advance(self, which: np.ndarray, t_abs: float) -> None:
-        """Supports `which` (lowered) set from t_abs where they stand: their bases lifted onto the floor there."""
-        m, d, ix = self.win.model, self.win.data, self.win.index
-        x = d.qpos[ix.sup_qpos[which, 0]]
-        self.sup_z[which] = self.sim.support_z(x, self.state.sup_y[self.sups[which]])
-        pos_t = m.body_pos[self.win.sup_body[which]]
-        pos_t += np.outer(self.sup_z[which] - self.state.sup_z[self.sups[which]], self.sim.frame.mat_tf[:, 2])
-        m.body_pos[self.win.sup_body[which]] = pos_t
-        self.t_set[which] = t_abs
-        mujoco.mj_forward(m, d)
-
-    def place(self, t: float) -> None:
-        d, ix = self.win.data, self.win.index
-        self.clearance = self.sim.roof_clearance(self.state, self.sups, self.t_begin + t, d.qpos[ix.sup_qpos[:, 0]],
-                                                 self.sup_z, self.t_set)
-        self.win.model.jnt_range[self.leg_jnt, 1] = self.clearance

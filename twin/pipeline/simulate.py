@@ -15,21 +15,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.io import logformat as lf
-from estimators.nav.rotations import euler_to_quat, mat_to_quat, quat_mul
+from estimators.nav.rotations import mat_to_quat
 from twin.config.scenario import Scenario
 from twin.face.drift import SUPPORT_DEADBAND_M, OffsetSource, StrokeControl, cycle_offsets, stand_supports
 from twin.face.haulage import Timeline
-from twin.face.layout import (
-    FaceFrame,
-    Floor,
-    bend_angles,
-    initial_pans,
-)
+from twin.face.layout import FaceFrame, Floor, initial_pans
 from twin.face.model import FloorGrid
 from twin.face.pushadvance import PushAdvanceController
 from twin.face.ride import PanVersion, ride_targets_t, shoe_pans, simulate_ride
-from twin.face.simulator import WINDOW_MARGIN_PANS, EventTrace, FaceSimulator, FaceState
+from twin.face.simulator import WINDOW_MARGIN_PANS, FaceSimulator
 from twin.face.truth import shearer_truth
+from twin.pipeline.face_recorder import FaceRecorder, split_columns
 from twin.sensors.clock import sample_times
 from twin.sensors.faults import faults_of, shortfall_profile
 
@@ -38,10 +34,6 @@ MIN_EVENT_S = 2.0
 
 LEG_TICK_S = 10.0
 """Between events the set supports' legs are brought forward (the roof converging, a leak) every this many seconds."""
-LEG_ROW_MPA = 0.1
-"""A support gets a truth row between events when its legs' pressure has moved this much since its last row (a
-pressure transducer's step), or its canopy a millimetre (LEG_ROW_M)."""
-LEG_ROW_M = 1e-3
 
 RAM_DEADBAND_M = 1e-3
 """A ram whose target moves less than this is left alone in an event."""
@@ -67,99 +59,6 @@ class SimResult:
     duration_s: float
     events: int
     offsets: np.ndarray
-
-
-class _FaceRecorder:
-    """Collects pan and support rows whenever they change, and the pan-line versions for the ride."""
-
-    def __init__(self, scn: Scenario, frame: FaceFrame, state: FaceState, sim: FaceSimulator):
-        self.scn, self.frame = scn, frame
-        self.hydraulics, self.support_z = sim.hydraulics, sim.support_z
-        self.pans0 = state.pans.copy()
-        self.sup_x0 = state.sup_x.copy()
-        self.last_leg_mpa = np.full(state.sup_x.size, np.nan)  # each support's latest row's leg pressure and canopy
-        self.last_canopy = np.full(state.sup_x.size, np.nan)
-        self.pan_rows: list[dict[str, np.ndarray]] = []
-        self.sup_rows: list[dict[str, np.ndarray]] = []
-        self.versions: list[PanVersion] = []
-        self.record(0.0, state, np.arange(state.pans.shape[0]), np.arange(state.sup_x.size))
-
-    def record(self, t: float, state: FaceState, pans: np.ndarray, sups: np.ndarray,
-               lowered: np.ndarray | None = None, t_begin: float | None = None) -> None:
-        """Rows for `pans` and `sups` at time t; supports in `lowered` are logged lowered (canopy down).
-
-        Pans that moved started moving at `t_begin` (default t)."""
-        mat_tf = self.frame.mat_tf
-        st = state.pans[pans]
-        bend_h, bend_v = bend_angles(state.pans)
-        pad = np.append(bend_h, np.nan), np.append(bend_v, np.nan)
-        q_fp = euler_to_quat(st[:, 4], st[:, 5], st[:, 3])
-        q_tp = quat_mul(np.broadcast_to(mat_to_quat(mat_tf), q_fp.shape), q_fp)
-        p_t = st[:, :3] @ mat_tf.T
-        self.pan_rows.append({
-            "t": np.full(pans.size, t), "pan": pans, **_split(p_t, "p_t", "enu"), **_split(q_tp, "q_tp", "wxyz"),
-            "bend_h": pad[0][pans], "bend_v": pad[1][pans], "advance": st[:, 0] - self.pans0[pans, 0]})
-        is_lowered = np.zeros(sups.size, bool) if lowered is None else np.isin(sups, lowered)
-        self._support_rows(np.full(sups.size, t), sups, state.sup_x[sups], state.sup_y[sups], state.sup_z[sups],
-                           state.ram[sups], state.ram_force[sups], state.sup_leg[sups], state.leg_force[sups],
-                           is_lowered)
-        if pans.size:
-            self.versions.append(PanVersion(t if t_begin is None else t_begin, t, state.pans.copy()))
-
-    def record_trace(self, t0: float, trace: EventTrace, state: FaceState, lowered: np.ndarray) -> None:
-        """Rows of the supports an event moved at every sample of its trace (the event began at t0); supports in
-        `lowered` are logged lowered."""
-        m, sups = trace.t_s.size, trace.supports
-        if not m:
-            return
-        every = np.tile(sups, m)
-        self._support_rows(np.repeat(t0 + trace.t_s, sups.size), every, trace.sup_x.ravel(), state.sup_y[every],
-                           self.support_z(trace.sup_x.ravel(), state.sup_y[every]), trace.ram.ravel(),
-                           trace.ram_force.ravel(), trace.leg.ravel(), trace.leg_force.ravel(), np.isin(every, lowered))
-
-    def record_legs(self, t: float, state: FaceState) -> None:
-        """Rows at t (between events) for the supports whose legs' pressure or canopy has moved since their last
-        row (LEG_ROW_MPA, LEG_ROW_M): the roof converging on them, a leak."""
-        moved = ((np.abs(self.hydraulics.legs.pressure_mpa(state.leg_force) - self.last_leg_mpa) >= LEG_ROW_MPA)
-                 | (np.abs(state.sup_leg - self.last_canopy) >= LEG_ROW_M))
-        sups = np.flatnonzero(moved)
-        if sups.size:
-            self._support_rows(np.full(sups.size, t), sups, state.sup_x[sups], state.sup_y[sups], state.sup_z[sups],
-                               state.ram[sups], state.ram_force[sups], state.sup_leg[sups], state.leg_force[sups],
-                               np.zeros(sups.size, bool))
-
-    def _support_rows(self, t: np.ndarray, sups: np.ndarray, sup_x: np.ndarray, sup_y: np.ndarray, sup_z: np.ndarray,
-                      ram: np.ndarray, ram_force: np.ndarray, leg: np.ndarray, leg_force: np.ndarray,
-                      is_lowered: np.ndarray) -> None:
-        p_f = np.column_stack([sup_x, sup_y, sup_z])
-        leg_mpa = self.hydraulics.legs.pressure_mpa(leg_force)
-        self.sup_rows.append({
-            "t": t, "support": sups, **_split(p_f @ self.frame.mat_tf.T, "p_t", "enu"),
-            "advance": sup_x - self.sup_x0[sups], "ram": ram,
-            "ram_pressure": self.hydraulics.ram.pressure_mpa(ram_force), "canopy": leg, "leg_pressure": leg_mpa,
-            "set": (~is_lowered).astype(np.int8)})
-        self.last_leg_mpa[sups] = leg_mpa  # rows come in time order: the last of a support's is its latest
-        self.last_canopy[sups] = leg
-
-    def forget_before(self, t: float) -> None:
-        """Drop the pan-line versions no ride from time t on needs (the one in force at t and its predecessor,
-        which a ride blends from while an event moves the pans, stay)."""
-        begins = np.array([v.t_begin for v in self.versions])
-        keep = max(0, int(np.searchsorted(begins, t, side="right")) - 2)
-        del self.versions[:keep]
-
-    def tables(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-        return _concat(self.pan_rows), _concat(self.sup_rows)
-
-
-def _split(arr: np.ndarray, prefix: str, axes: str) -> dict[str, np.ndarray]:
-    return {f"{prefix}_{a}": arr[:, i] for i, a in enumerate(axes)}
-
-
-def _concat(rows: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
-    out = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
-    order = np.lexsort((out[next(k for k in out if k in ("pan", "support"))], out["t"]))
-    return {k: v[order] for k, v in out.items()}
 
 
 def window_sizes(scn: Scenario) -> list[int]:
@@ -207,10 +106,10 @@ def shearer_chunk(scn: Scenario, timeline: Timeline, versions: list[PanVersion],
                           np.radians(site.lon_deg), site.height_m)
     rear, front = shoe_pans(haul["s"], scn)
     return {
-        "t": t, "lat": truth.lat, "lon": truth.lon, "h": truth.h, **_split(truth.p_t, "p_t", "enu"),
-        **_split(truth.v_n, "v_n", "enu"), **_split(truth.q_nb, "q_nb", "wxyz"),
-        **_split(truth.w_ib_b, "w_ib_b", "xyz"), **_split(truth.w_nb_b, "w_nb_b", "xyz"),
-        **_split(truth.f_b, "f_b", "xyz"), "s": haul["s"], "pan_rear": rear, "pan_front": front,
+        "t": t, "lat": truth.lat, "lon": truth.lon, "h": truth.h, **split_columns(truth.p_t, "p_t", "enu"),
+        **split_columns(truth.v_n, "v_n", "enu"), **split_columns(truth.q_nb, "q_nb", "wxyz"),
+        **split_columns(truth.w_ib_b, "w_ib_b", "xyz"), **split_columns(truth.w_nb_b, "w_nb_b", "xyz"),
+        **split_columns(truth.f_b, "f_b", "xyz"), "s": haul["s"], "pan_rear": rear, "pan_front": front,
         "cycle": haul["cycle"], "phase": haul["phase"]}
 
 
@@ -248,7 +147,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
     strokes = StrokeControl(scn, state.ram) if scn.supports.push.control == "stroke" else None
     applied: list[np.ndarray] = []
-    recorder = _FaceRecorder(scn, frame, state, sim)
+    recorder = FaceRecorder(scn, frame, state, sim)
     length = scn.face.pan_length_m
     events = 0
     hydraulics_free = 0.0  # when the last event's rams are done and its supports set
