@@ -10,7 +10,6 @@ from twin.face.hydraulics import LegHydraulics
 from twin.face.window import (
     ARRIVED_M,
     RAM_SAMPLE_S,
-    RAMP_FLOOR,
     ROOF_CONTACT_M,
     STALL_S,
     VALVE_TIMEOUT_FACTOR,
@@ -20,10 +19,13 @@ from twin.face.window import (
     Window,
 )
 
-QS_LEG_SPEED_M_S = 0.3
-"""Speed at which MuJoCo moves the legs' oil columns while supports lower and set (the canopy follows within 12 mm)."""
+QS_LEG_SPEED_M_S = 0.6
+"""Speed at which MuJoCo moves the legs' oil columns while supports lower and set (a free canopy follows 14 mm behind)."""
 ROOF_APPROACH_M = 0.05
-"""A setting canopy this close under the roof slows down (to RAMP_FLOOR of its flow at the roof)."""
+"""A setting canopy this close under the roof slows down, to ROOF_APPROACH_FLOOR of its flow at the roof."""
+ROOF_APPROACH_FLOOR = 0.1
+"""Share of its flow a setting canopy meets the roof at: 6 cm/s in MuJoCo, so that the roof limit gives under a
+millimetre and the set pressure holds within 1 % once the canopy has come to rest."""
 LEG_SETTLE_STEPS = 10
 """Steps for a canopy to come to its legs' oil column after they lowered (the servo's time constant is 4 steps)."""
 
@@ -45,8 +47,8 @@ def leg_valves(win: Window, legs: LegHydraulics, cap_n: np.ndarray) -> None:
 def drive_legs(win: Window, legs: LegHydraulics, state: FaceState, sups: np.ndarray, which: np.ndarray,
                roof: RoofLimits, lower_m: float, setting: bool, t0: float, trace: TraceBuilder) -> float:
     """Lower the legs of supports `which` (window order) `lower_m` below the roof (their load released first), or,
-    `setting`, set them against the roof to their set load (state.set_force_n); returns the real time when all are
-    done. The oil columns move at the valve's flow, MuJoCo at the quasi-static QS_LEG_SPEED_M_S."""
+    `setting`, set them against the roof to their set load (state.set_force_n; the caller closes the setting valves
+    once the window has come to rest); returns the real time when all are done. The oil columns move at the valve's flow, MuJoCo at the quasi-static QS_LEG_SPEED_M_S."""
     m, d, ix = win.model, win.data, win.index
     adr = m.actuator_actadr[ix.leg_act]
     k = QS_LEG_SPEED_M_S / legs.speed_m_s
@@ -64,7 +66,7 @@ def drive_legs(win: Window, legs: LegHydraulics, state: FaceState, sups: np.ndar
             # The canopy meets the roof at the valve's least flow: in the quasi-static time scale its inertia is
             # k^2 times the real one, and it would bounce off the roof.
             gap = roof.clearance - d.qpos[ix.sup_qpos[:, 1]]
-            reach = reach * np.where(gap > ROOF_CONTACT_M, np.clip(gap / ROOF_APPROACH_M, RAMP_FLOOR, 1.0), 1.0)
+            reach = reach * np.where(gap > ROOF_CONTACT_M, np.clip(gap / ROOF_APPROACH_M, ROOF_APPROACH_FLOOR, 1.0), 1.0)
         else:
             goal = roof.clearance - lower_m
         d.ctrl[ix.leg_act] = np.where(moving, np.clip(goal - d.act[adr], -reach, reach) / seg_sim, 0.0)
@@ -79,6 +81,4 @@ def drive_legs(win: Window, legs: LegHydraulics, state: FaceState, sups: np.ndar
         trace.sample(t)
     d.ctrl[ix.leg_act] = 0.0
     mujoco.mj_step(m, d, nstep=LEG_SETTLE_STEPS)  # the canopies come to rest on their oil columns
-    if setting:
-        leg_valves(win, legs, np.where(which, set_force, yield_cap))  # closed at the set load
     return t

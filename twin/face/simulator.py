@@ -256,6 +256,8 @@ class FaceSimulator:
             t_legs = t
             t += set_s  # the valves closing: the legs' state holds at t_legs (hold_legs brings it on)
         mujoco.mj_step(m, d, nstep=SETTLE_STEPS)
+        if adv.any():  # the setting valves close at the set load once the canopies have come to rest on the roof
+            leg_valves(win, legs, np.where(adv, state.set_force_n[sups], legs.force_yield_n))
         self._store(win, state, pans, sups, t_begin_s + t_legs)
         return pans, sups, trace.build(t)
 

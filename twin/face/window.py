@@ -120,12 +120,13 @@ class Window:
     sup_body: np.ndarray
 
     def leg_load(self) -> np.ndarray:
-        """The legs' load [N] per support: their oil column's squeeze (its pressure; the servo's damping, a numerical
-        aid of the time scaling, left out) within the actuator's range."""
+        """The legs' load [N] per support: their oil column's squeeze less the flow's resistance while the canopy moves
+        (the servo's damping: a canopy rising freely carries next to nothing), within the actuator's range."""
         m, d, ix = self.model, self.data, self.index
         squeeze = d.act[m.actuator_actadr[ix.leg_act]] - d.qpos[ix.sup_qpos[:, 1]]
+        force = m.actuator_gainprm[ix.leg_act, 0] * squeeze + m.actuator_biasprm[ix.leg_act, 2] * d.qvel[ix.sup_dof[:, 1]]
         rng = m.actuator_forcerange[ix.leg_act]
-        return np.clip(m.actuator_gainprm[ix.leg_act, 0] * squeeze, rng[:, 0], rng[:, 1])
+        return np.clip(force, rng[:, 0], rng[:, 1])
 
     @classmethod
     def compile(cls, scn: Scenario, floor: Floor, count: int) -> "Window":
