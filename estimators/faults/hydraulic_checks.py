@@ -45,7 +45,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.faults.ram_findings import Finding
-from estimators.faults.ram_grid import _grid, _runs
+from estimators.faults.ram_grid import _grid, _runs, table_columns
 
 RELIEF_SHARE = 0.95
 """A ram reading at least this share of the relief pressure stands at its relief valve."""
@@ -234,16 +234,8 @@ def check_hydraulics(pushram, pressure, layout: HydraulicLayout,
                      ram_findings: Sequence[Finding] = ()) -> list[Attribution]:
     """The faults of the supports' hydraulics in the logs (PUSHRAM and PRESSURE tables: mappings of column arrays or
     pyarrow tables), and the ram checks' `ram_findings` attributed: sorted by time then support."""
-    def cols(table, names, stream):
-        try:
-            return [np.asarray(table[c]) if not hasattr(table[c], "to_numpy") else table[c].to_numpy()
-                    for c in names]
-        except (KeyError, TypeError):
-            raise ValueError(f"{stream}: the table needs the columns {', '.join(names)} "
-                             f"(estimators.io.logformat.{stream.upper()})") from None
-
-    t, sup, ext, valid = cols(pushram, ("t", "support", "extension", "valid"), "pushram")
-    tp, sp, leg, ram, v_leg, v_ram = cols(pressure, ("t", "support", "leg", "ram", "valid_leg", "valid_ram"),
+    t, sup, ext, valid = table_columns(pushram, ("t", "support", "extension", "valid"), "pushram")
+    tp, sp, leg, ram, v_leg, v_ram = table_columns(pressure, ("t", "support", "leg", "ram", "valid_leg", "valid_ram"),
                                           "pressure")
     tg, x = _grid(t, sup, ext, valid, layout.n_supports)
     tpg, leg_g = _grid(tp, sp, leg, v_leg, layout.n_supports, "pressure")

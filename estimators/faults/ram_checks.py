@@ -55,7 +55,7 @@ from estimators.faults.ram_findings import (
     format_finding,
     format_findings,
 )
-from estimators.faults.ram_grid import _grid
+from estimators.faults.ram_grid import _grid, table_columns
 from estimators.faults.ram_layout import RamLayout
 from estimators.faults.ram_self_checks import _self_checks
 
@@ -115,10 +115,4 @@ def check_rams(t, support, extension, valid, layout: RamLayout) -> list[Finding]
 
 def check_log(pushram, layout: RamLayout) -> list[Finding]:
     """check_rams on a PUSHRAM table (a mapping of column arrays or a pyarrow table)."""
-    try:
-        cols = [pushram[c] for c in ("t", "support", "extension", "valid")]
-    except (KeyError, TypeError):
-        raise ValueError("pushram: the table needs the columns t, support, extension, valid "
-                         "(estimators.io.logformat.PUSHRAM)") from None
-    cols = [c.to_numpy() if hasattr(c, "to_numpy") else np.asarray(c) for c in cols]
-    return check_rams(*cols, layout)
+    return check_rams(*table_columns(pushram, ("t", "support", "extension", "valid"), "pushram"), layout)

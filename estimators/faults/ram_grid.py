@@ -7,6 +7,17 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 
+def table_columns(table, names: tuple[str, ...], stream: str) -> list[np.ndarray]:
+    """The columns `names` of a log table (a mapping of column arrays or a pyarrow table) as numpy arrays; ValueError
+    naming the stream and its columns when one is missing."""
+    try:
+        cols = [table[c] for c in names]
+    except (KeyError, TypeError):
+        raise ValueError(f"{stream}: the table needs the columns {', '.join(names)} "
+                         f"(estimators.io.logformat.{stream.upper()})") from None
+    return [c.to_numpy() if hasattr(c, "to_numpy") else np.asarray(c) for c in cols]
+
+
 def _grid(t, support, extension, valid, n_sup: int, stream: str = "pushram") -> tuple[np.ndarray, np.ndarray]:
     """(times (T,), readings (T, S) with NaN where invalid or missing) on the log's sample grid (`stream` names the
     log in the errors)."""

@@ -304,6 +304,9 @@ def _check_fault_target(scn: Scenario, k: int, fault: Fault, n_supports: int) ->
                          f"supports {units} of sensors.support_imu.supports; no target: the shearer's magnetometer)")
     if fault.kind not in (*TARGETED, "mag_interference") and fault.target is not None:
         raise ValueError(f"faults[{k}]: {fault.kind} takes no target (got {fault.target}); remove the key")
+    if fault.kind == "failed_set" and fault.value >= scn.supports.legs.set_pressure_mpa:
+        raise ValueError(f"faults[{k}]: failed_set value {fault.value:g} MPa is not below supports.legs.set_pressure_mpa "
+                         f"= {scn.supports.legs.set_pressure_mpa:g} MPa (a set that fails stops short of it)")
     if fault.kind == "push_shortfall" and fault.value > scn.face.web_depth_m:
         raise ValueError(f"faults[{k}]: push_shortfall value {fault.value:g} m exceeds face.web_depth_m = "
                          f"{scn.face.web_depth_m} m (a pan cannot fall short by more than its push)")

@@ -1,7 +1,7 @@
 """Pressure transducers of the supports' legs and push rams (the PRESSURE stream) and their faults.
 
 Every support is sampled at scn.sensors.pressure.rate_hz at t = k / rate for 0 <= t <= t_end, each transducer reading
-the latest truth_supports row of its support at or before the sample (twin.sensors.pushram.true_at): the legs'
+the latest truth_supports row of its support at or before the sample (twin.sensors.clock.true_at): the legs'
 pressure `leg_pressure` and the ram's loaded side `ram_pressure` (MPa). Each reading is
 
     reading = quantize(true_with_faults + noise_mpa N(0, 1) [+ burst noise]),   quantize = round to resolution_mpa,
@@ -18,9 +18,8 @@ import numpy as np
 from twin.config.scenario import Scenario
 from twin.config.sensors import Fault
 from twin.face.layout import support_stations
-from twin.sensors.clock import sample_times
+from twin.sensors.clock import sample_times, true_at
 from twin.sensors.faults import apply_gain_faults, apply_reading_faults
-from twin.sensors.pushram import true_at
 
 CHANNELS = (("leg", "leg_pressure"), ("ram", "ram_pressure"))
 """The stream's columns and the truth_supports column (and fault prefix) each reads."""

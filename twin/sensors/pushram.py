@@ -57,7 +57,7 @@ import numpy as np
 from twin.config.scenario import Scenario
 from twin.config.sensors import Fault
 from twin.face.layout import support_stations
-from twin.sensors.clock import sample_times
+from twin.sensors.clock import sample_times, true_at
 from twin.sensors.faults import apply_gain_faults, apply_reading_faults, faults_of, window_mask
 
 
@@ -70,36 +70,6 @@ def rail_deviation_m(n_chutes: np.ndarray, value_deg: float, chute_length_m: flo
     seg = chute_length_m + np.pi * chute_length_m * abs(value_deg) / 180.0
     e = np.concatenate(([0.0], np.cumsum(seg * np.sin(phi))))
     return e[np.clip(n, 0, n_max)]
-
-
-def true_at(supports: dict[str, np.ndarray], column: str, t_grid: np.ndarray, n_supports: int) -> np.ndarray:
-    """(len(t_grid), n_supports) true values of a truth_supports `column`: the latest row of each support at or
-    before each time."""
-    t_row = np.asarray(supports["t"], dtype=float)
-    sup = np.asarray(supports["support"], dtype=np.int64)
-    ram = np.asarray(supports[column], dtype=float)
-    if sup.size and (sup.min() < 0 or sup.max() >= n_supports):
-        raise ValueError(f"truth_supports: support index {sup.max() if sup.max() >= n_supports else sup.min()} "
-                         f"outside 0..{n_supports - 1}")
-    missing = np.setdiff1d(np.arange(n_supports), sup)
-    if missing.size:
-        raise ValueError(f"truth_supports: no row for support {missing[0]}")
-    order = np.lexsort((np.arange(sup.size), t_row, sup))  # by support, then time, then row order
-    sup, t_row, ram = sup[order], t_row[order], ram[order]
-    n_t = t_grid.size
-    first_k = np.searchsorted(t_grid, t_row, side="left")  # first grid sample at or after each row
-    keep = first_k < n_t
-    pos = np.arange(sup.size)
-    flat = sup[keep] * n_t + first_k[keep]  # nondecreasing; the last of equal entries is the latest row
-    pos_k = pos[keep]
-    last = np.ones(flat.size, dtype=bool)
-    last[:-1] = flat[1:] != flat[:-1]
-    index = np.full(n_supports * n_t, -1, dtype=np.int64)
-    index[flat[last]] = pos_k[last]
-    index = np.maximum.accumulate(index.reshape(n_supports, n_t), axis=1)  # forward fill within a support
-    first_row = np.searchsorted(sup, np.arange(n_supports), side="left")
-    index = np.where(index < 0, first_row[:, None], index)
-    return ram[index].T
 
 
 def _rail_deviation(x: np.ndarray, t_grid: np.ndarray, fault: Fault, scn: Scenario, stations: np.ndarray,

@@ -306,21 +306,13 @@ def _log_pressures(rec: rr.RecordingStream, pressure: pa.Table, rate_hz: float |
     times, inverse = np.unique(t, return_inverse=True)
     keep = decimate(times, FULL if rate_hz is FULL else min(rate_hz, PRESSURE_BAR_HZ))
     extremes = []
-    for column, reduce in (("leg", np.nanmin), ("ram", np.nanmax)):
+    for column, reduce in (("leg", np.fmin), ("ram", np.fmax)):
         grid = np.full((times.size, int(support.max()) + 1), np.nan)
         grid[inverse, support] = col(pressure, column)
         send_bar_chart(rec, f"sensors/pressure/{column}_bars", times[keep], grid[keep])
-        extremes.append(_nan_reduce(reduce, grid))
+        extremes.append(reduce.reduce(grid, axis=1))  # NaN-ignoring, NaN where a sample has no reading
     series(rec, "sensors/pressure/extremes", times, np.column_stack(extremes),
            ["lowest leg [MPa]", "highest ram [MPa]"], rate_hz=rate_hz)
-
-
-def _nan_reduce(reduce, grid: np.ndarray) -> np.ndarray:
-    """Row-wise nanmin/nanmax, NaN where a row has no reading."""
-    any_valid = np.isfinite(grid).any(axis=1)
-    out = np.full(grid.shape[0], np.nan)
-    out[any_valid] = reduce(grid[any_valid], axis=1)
-    return out
 
 
 def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:

@@ -191,3 +191,12 @@ def test_a_sticking_valve_slows_its_ram(faulty):
 
     assert pull_speed(32) == pytest.approx(v, rel=0.05)
     assert pull_speed(33) == pytest.approx(0.3 * v, rel=0.05)
+
+
+def test_a_failed_set_at_or_above_the_set_pressure_is_refused():
+    """It would change nothing: the setting valve closes at the lower of the two."""
+    data = capped("default").model_dump()
+    data["faults"] = [{"kind": "failed_set", "t_start_s": 0.0, "t_end_s": 10.0, "target": 3, "value": 40.0}]
+    with pytest.raises(ScenarioError, match="failed_set value 40 MPa is not below") as err:
+        parse_scenario(data, "legs.toml")
+    assert "\n" not in str(err.value)
