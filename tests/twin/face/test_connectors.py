@@ -141,7 +141,7 @@ def test_a_push_shortfall_keeps_the_connectors_within_their_limits(monkeypatch):
 def test_an_obstruction_keeps_the_connectors_within_their_limits(monkeypatch):
     """An obstacle 0.3 m short of a web in front of support 20's pan: its ram stalls at its relief pressure, the
     neighbours' rams push their pans on against the connectors at 334 kN until they stall too (the pans' yaw and roll
-    armature, models/pan.xml: 1.03 and 2.05 deg against limits of 1 and 2; 1.35 and 3.0 without)."""
+    armature, models/pan.xml: 1.02 and 2.04 deg against limits of 1 and 2; 1.35 and 3.0 without)."""
     obstacle = {"kind": "obstruction", "t_start_s": 0.0, "t_end_s": 1e6, "target": 20, "value": 0.5}
     scn = capped("default", cycles=1, faults=[obstacle])
     _assert_within_limits(scn, _worst_connectors(monkeypatch, scn))
