@@ -24,6 +24,7 @@ from estimators.shearer.rail_kinematics import (
     ARM_FIXES,
     DETECTORS,
     detector_chi2,
+    fsprt_alarms,
     run_rail,
 )
 from estimators.shearer.solution import Solution, estimate_columns
@@ -57,15 +58,6 @@ def _windows(t: np.ndarray, flag: np.ndarray) -> list[tuple[float, float]]:
     """(start, end) of the runs of True in flag at times t."""
     edges = np.diff(np.concatenate([[0], flag.astype(np.int8), [0]]))
     return [(float(t[a]), float(t[b - 1])) for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1))]
-
-
-def fsprt_alarms(detectors: dict[str, np.ndarray], t_on: float) -> np.ndarray:
-    """Times of the tested fixes at which the FSPRT statistic crosses T1 from below and raises the isolation (the
-    first fixes, before the detectors are armed, show the statistic but raise nothing: ARM_FIXES)."""
-    tested = np.isfinite(detectors["fsprt"])
-    above = detectors["fsprt"][tested] > t_on
-    raised = above & ~np.concatenate([[False], above[:-1]]) & (detectors["isolated"][tested] > 0)
-    return detectors["t"][tested][raised]
 
 
 def armed_fsprt(detectors: dict[str, np.ndarray], prep: Prepared) -> np.ndarray:

@@ -148,3 +148,11 @@ def detector_columns(prep: Prepared, run: FederatedRun) -> dict[str, np.ndarray]
             **{f"{name}": stats[:, i] for i, name in enumerate(DETECTORS)}, "applied": applied.astype(np.int32),
             "isolated": ((run.out.flags[epoch] & FLAG_ISOLATED) > 0).astype(np.int32)}
 
+
+def fsprt_alarms(detectors: dict[str, np.ndarray], t_on: float) -> np.ndarray:
+    """Times of the tested fixes at which the FSPRT statistic crosses T1 from below and raises the isolation (the
+    first fixes, before the detectors are armed, show the statistic but raise nothing: ARM_FIXES)."""
+    tested = np.isfinite(detectors["fsprt"])
+    above = detectors["fsprt"][tested] > t_on
+    raised = above & ~np.concatenate([[False], above[:-1]]) & (detectors["isolated"][tested] > 0)
+    return detectors["t"][tested][raised]

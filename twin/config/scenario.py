@@ -19,6 +19,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, Field, model_validator
 
+from twin.config.alignment import Alignment
 from twin.config.experiments import EXPERIMENT_KIND, Experiment, parse_experiment
 from twin.config.imu_grades import GRADES
 from twin.config.push import check_scenario_offsets
@@ -212,6 +213,7 @@ class Scenario(Section):
     sensors: Sensors = Sensors()
     faults: list[Fault] = []
     estimators: Estimators = Estimators()
+    alignment: Alignment = Alignment()
 
     @model_validator(mode="after")
     def _consistent(self) -> Scenario:
@@ -286,6 +288,9 @@ class Scenario(Section):
             if stop.at_m > travel_length_m(self):
                 raise ValueError(f"haulage.stops: stop at {stop.at_m} m is beyond the "
                                  f"{travel_length_m(self):.1f} m of travel")
+        if self.alignment.mode != "none" and self.haulage.reversal_stop_s < 1.0:
+            raise ValueError(f"alignment.mode: {self.alignment.mode} needs each shear's path as the shear ends, which "
+                             f"the twin hands over at the reversal stops; set haulage.reversal_stop_s to at least 1 s")
         return self
 
 

@@ -41,17 +41,18 @@ the pans' states (N, 6: x, y, z, yaw, pitch, roll in the face frame F, as pushed
 support [m, positive towards the coal wall] added to that cycle's push (None: none)."""
 
 
-def cycle_offsets(scn: Scenario, cycle: int, pans: np.ndarray, source: OffsetSource | None) -> np.ndarray:
-    """The offsets of a cycle: the scenario's (supports.push.offsets) plus the API source's, checked
-    (ValueError, one line) as the scenario's are."""
+def cycle_offsets(scn: Scenario, cycle: int, pans: np.ndarray, *sources: OffsetSource | None) -> np.ndarray:
+    """The offsets of a cycle: the scenario's (supports.push.offsets) plus each source's (the API's, the face
+    alignment loop's), checked (ValueError, one line) as the scenario's are."""
     n, limits = support_count(scn), offset_limits(scn)
     offsets = sum((np.asarray(e.offsets_m, float) for e in scn.supports.push.offsets if e.cycle == cycle),
                   np.zeros(n))
-    extra = None if source is None else source(cycle, pans.copy())
-    if extra is not None:
-        check_offsets(extra, n, **limits)
-        offsets = offsets + np.asarray(extra, float)
-        check_offsets(offsets, n, **limits)
+    for source in sources:
+        extra = None if source is None else source(cycle, pans.copy())
+        if extra is not None:
+            check_offsets(extra, n, **limits)
+            offsets = offsets + np.asarray(extra, float)
+            check_offsets(offsets, n, **limits)
     return offsets
 
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimators.face.alignment import ShearOffsets
 from estimators.io import logformat as lf
 from estimators.nav.rotations import mat_to_quat
 from twin.config.scenario import Scenario
@@ -25,6 +26,7 @@ from twin.face.pushadvance import PushAdvanceController
 from twin.face.ride import PanVersion, ride_targets_t, shoe_pans, simulate_ride
 from twin.face.simulator import WINDOW_MARGIN_PANS, FaceSimulator
 from twin.face.truth import shearer_truth
+from twin.pipeline.alignment_loop import AlignmentLoop
 from twin.pipeline.face_recorder import FaceRecorder, split_columns
 from twin.sensors.clock import sample_times
 from twin.sensors.faults import faults_of, shortfall_profile
@@ -51,7 +53,8 @@ ShearerSink = Callable[[dict[str, np.ndarray]], None]
 class SimResult:
     """The truth tables (logformat stream name -> columns; truth_shearer only from `simulate`, a streaming run's
     sink takes it), the floor, the face frame, the simulated time, the number of push-advance events and the
-    per-support offsets [m] each cycle's shear applied (cycles, supports)."""
+    per-support offsets [m] each cycle's shear applied (cycles, supports), and what the face alignment system
+    published after each shear (twin.pipeline.alignment_loop; none in open loop)."""
 
     tables: dict[str, dict[str, np.ndarray]]
     floor_grid: FloorGrid
@@ -59,6 +62,7 @@ class SimResult:
     duration_s: float
     events: int
     offsets: np.ndarray
+    alignment: list[ShearOffsets]
 
 
 def window_sizes(scn: Scenario) -> list[int]:
@@ -147,6 +151,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
     strokes = StrokeControl(scn, state.ram) if scn.supports.push.control == "stroke" else None
     applied: list[np.ndarray] = []
+    loop = AlignmentLoop(scn, [(c.t_start, c.t_cut_end) for c in timeline.cycles]) if scn.alignment.mode != "none" else None
     recorder = FaceRecorder(scn, frame, state, sim)
     length = scn.face.pan_length_m
     events = 0
@@ -283,14 +288,19 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     def hand_over(keep: int) -> None:
         """Hand the finished chunks, oldest first, to the sink until at most `keep` are pending."""
         while len(pending) > keep:
-            shearer_sink(pending.pop(0).result())
+            chunk = pending.pop(0).result()
+            if loop is not None:
+                loop.observe(chunk)
+            shearer_sink(chunk)
             handed[0] += 1
             report("shearer", handed[0] / (len(bounds) - 1))
 
     half = scn.shearer.length_m / 2
     with ThreadPoolExecutor(max_workers=1) as pool:
         for plan in timeline.cycles:
-            applied.append(cycle_offsets(scn, plan.cycle, state.pans, offsets))
+            if loop is not None:  # the shears whose paths this cycle's offsets come from, handed over
+                hand_over(keep=max(0, len(pending) - max(0, loop.shears_needed(plan.cycle) - handed[0])))
+            applied.append(cycle_offsets(scn, plan.cycle, state.pans, offsets, None if loop is None else loop.offsets))
             ctrl.begin_cycle(plan.direction, applied[-1])
             step = length * scn.pattern.push_step_pans
             times, marks = timeline.crossings(plan.cycle, -plan.direction * half, step)
@@ -318,4 +328,5 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     recorder.record_legs(timeline.duration, state)
     pans_tab, sups_tab = recorder.tables()
     tables = {lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab, lf.TRUTH_CYCLES.name: cycles_table(timeline)}
-    return SimResult(tables, FloorGrid.from_scenario(scn, floor), frame, timeline.duration, events, np.array(applied))
+    return SimResult(tables, FloorGrid.from_scenario(scn, floor), frame, timeline.duration, events, np.array(applied),
+                     [] if loop is None else loop.published)
