@@ -26,9 +26,10 @@ benchmarks/bench_rail.py (simulating them again here would only repeat seed004).
 SCENARIOS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")
                    if not (is_experiment(p) or is_turntable(p) or p.stem in SEED004_VARIANTS))
 """The shipped face scenarios; the SINS experiment files (kind = "sins_experiment") are tests/twin/papers/test_sins_experiments.py's."""
-DRIFTING = ("drift_200",)
-"""Scenarios whose faces drift by design (stroke-controlled pushes with stop errors, a shortfall kept): their pans do
-not advance one web each, so the `run` fixture's checks leave them out; benchmarks/bench_drift.py runs them."""
+DRIFTING = ("drift_200", "face_alignment")
+"""Scenarios whose faces drift by design (stroke-controlled pushes with stop errors, a shortfall kept; face_alignment
+steers them back by offsets): their pans do not advance one web each, so the `run` fixture's checks leave them out;
+benchmarks/bench_drift.py and bench_face_alignment.py run them."""
 EXPERIMENTS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml") if is_experiment(p))
 TEST_CYCLES = 2
 VARIANTS = {"default-before-push": ("default", {"supports": {"sequence": "before_push"}})}

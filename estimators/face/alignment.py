@@ -89,7 +89,7 @@ class AlignmentConfig:
     curvature_limit_rad: float
     """Largest bend an offset profile may put in the face line: its second difference over the spacing [rad]."""
     gain: float = 0.7
-    smoothing_shields: float = 3.0
+    smoothing_shields: float = 1.0
     planned_slope: float | None = None
     max_turn_rad: float = float(np.radians(0.05))
     min_coverage: float = 0.8

@@ -220,6 +220,22 @@ FAULTS = Stream(
     time_order="none",
 )
 
+ALIGNMENT = Stream(
+    "alignment",
+    "The roof support system's log of face alignment (OPC 40561 use case 4.2.6): the offset each support's push "
+    "applied in each cycle (the scenario's, the API's and the face alignment system's together), the sequence number "
+    "of the alignment system's set among them (0: none) and that set's one-sigma.",
+    (
+        T,
+        Column("cycle", "1", "i4", "cutting cycle whose push applied the offset (t: its start)"),
+        Column("support", "1", "i4", "support index"),
+        Column("offset", "m", "f8", "offset added to the push, positive towards the coal wall"),
+        Column("sd", "m", "f8", "one-sigma of the alignment system's offset (NaN: none or unknown)", nan_ok=True),
+        Column("sequence", "1", "i4", "SequenceNumber of the alignment system's set applied (0: none)"),
+    ),
+    time_order="nondecreasing",
+)
+
 SURVEY = Stream(
     "survey",
     "Surveyed fixes of the shearer body reference point (the truth's point): the start pose before the first "
@@ -369,7 +385,7 @@ ESTIMATE_SUPPORT_ATTITUDE = Stream(
 )
 
 TRUTH_STREAMS = (TRUTH_SHEARER, TRUTH_PANS, TRUTH_SUPPORTS, TRUTH_CYCLES)
-SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, PRESSURE, MAG, SUPPORT_IMU, FAULTS, SURVEY, FACE_SURVEY)
+SENSOR_STREAMS = (IMU, ODOMETER, PUSHRAM, PRESSURE, MAG, SUPPORT_IMU, FAULTS, ALIGNMENT, SURVEY, FACE_SURVEY)
 ESTIMATE_STREAMS = (ESTIMATE, ESTIMATE_STATES, ESTIMATE_FUSION, ESTIMATE_DETECTORS, ESTIMATE_SUPPORT_ATTITUDE)
 STREAMS = {s.name: s for s in TRUTH_STREAMS + SENSOR_STREAMS}
 

@@ -78,3 +78,22 @@ class AlignmentLoop:
         if k >= len(self.published):
             raise RuntimeError(f"face alignment: shear {k}'s path was not handed over before cycle {cycle}")
         return self.published[k].offsets_m
+
+
+def alignment_table(scn: Scenario, cycle_start_s: np.ndarray, offsets_m: np.ndarray,
+                    published: list[ShearOffsets]) -> dict[str, np.ndarray]:
+    """The alignment stream's columns (estimators.io.logformat.ALIGNMENT) of a run: per cycle (starting at
+    `cycle_start_s`) and support, the offset applied (`offsets_m`, cycles x supports) and the alignment system's set
+    among it (published[k - 1 - delay] for cycle k: its sequence number and one-sigma)."""
+    n_cyc, n_sup = offsets_m.shape
+    delay = scn.alignment.delay_shears
+    seq = np.zeros((n_cyc, n_sup), np.int32)
+    sd = np.full((n_cyc, n_sup), np.nan)
+    for k in range(n_cyc):
+        if published and 0 <= k - 1 - delay < len(published):
+            shear = published[k - 1 - delay]
+            seq[k], sd[k] = shear.sequence, shear.sd_m
+    cycle = np.repeat(np.arange(n_cyc, dtype=np.int32), n_sup)
+    return {"t": np.asarray(cycle_start_s, float)[cycle], "cycle": cycle,
+            "support": np.tile(np.arange(n_sup, dtype=np.int32), n_cyc), "offset": offsets_m.ravel(),
+            "sd": sd.ravel(), "sequence": seq.ravel()}

@@ -15,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from estimators.io.logformat import STREAMS, StreamAppender, write_stream
+from estimators.io.logformat import ALIGNMENT, STREAMS, StreamAppender, write_stream
 from twin.config.scenario import Scenario
 from twin.face.drift import OffsetSource
 from twin.face.haulage import Timeline
+from twin.pipeline.alignment_loop import alignment_table
 from twin.pipeline.simulate import Progress, SimResult, cycles_table, last_truth_time, simulate_stream
 from twin.sensors.chunks import ChunkAssembler, TruthChunk, halo_rows
 from twin.sensors.streams import ShearerSensors, support_streams
@@ -72,6 +73,7 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
             appender.close()
     for name, cols in result.tables.items():
         write_stream(run_dir, STREAMS[name], cols)
+    write_stream(run_dir, ALIGNMENT, alignment_table(scn, cycles["t"], result.offsets, result.alignment))
     if sensors:
         truth = {**result.tables, "truth_shearer": {k: np.concatenate(v) for k, v in held.items()}}
         for name, cols in support_streams(scn, truth, 0).items():

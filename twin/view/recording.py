@@ -287,12 +287,26 @@ def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz:
         send_bar_chart(rec, "sensors/pushram", times[keep], grid[keep])
     if "pressure" in sensors:
         _log_pressures(rec, sensors["pressure"], rate_hz)
+    if "alignment" in sensors and sensors["alignment"].num_rows:
+        _log_alignment(rec, sensors["alignment"])
     if "faults" in sensors and sensors["faults"].num_rows:
         faults = sensors["faults"]
         for kind, target, t0, t1 in zip(faults.column("kind").to_pylist(), col(faults, "target"),
                                        col(faults, "t_start"), col(faults, "t_end")):
             name = f"faults/{kind}" + (f"_{target}" if target >= 0 else "")
             series(rec, name, np.array([0.0, t0, t1]), np.array([[0.0], [1.0], [0.0]]), [f"{name} active"])
+
+
+def _log_alignment(rec: rr.RecordingStream, alignment: pa.Table) -> None:
+    """The offsets each cycle's push applied as a bar chart per support (mm), at the cycle's start, and the face
+    alignment system's sequence number of the set applied."""
+    t, cycle, support = col(alignment, "t"), col(alignment, "cycle"), col(alignment, "support")
+    grid = np.zeros((int(cycle.max()) + 1, int(support.max()) + 1))
+    grid[cycle, support] = col(alignment, "offset") * 1e3
+    starts, sequence = np.zeros((2, grid.shape[0]))
+    starts[cycle], sequence[cycle] = t, col(alignment, "sequence")
+    send_bar_chart(rec, "alignment/offsets_mm", starts, grid)
+    series(rec, "alignment/sequence", starts, sequence[:, None], ["SequenceNumber applied"], band=False)
 
 
 PRESSURE_BAR_HZ = 0.2
@@ -326,6 +340,7 @@ def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
         rrb.BarChartView(name="Ram length [m]", origin="plots/ram_length"),
         rrb.BarChartView(name="Leg pressure per support [MPa]", origin="sensors/pressure/leg_bars"),
         rrb.BarChartView(name="Ram pressure per support [MPa]", origin="sensors/pressure/ram_bars"),
+        rrb.BarChartView(name="Push offsets per support [mm]", origin="alignment/offsets_mm"),
         rrb.TimeSeriesView(name="Sensors", origin="sensors",
                            contents=["sensors/**", "- sensors/pressure/leg_bars", "- sensors/pressure/ram_bars"]),
         rrb.TimeSeriesView(name="Fault windows", origin="faults"),

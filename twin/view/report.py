@@ -40,6 +40,7 @@ from twin.view.report_figures import (
     detector_plot,
     error_plot,
     error_series,
+    face_line_plot,
     method_stats,
     pan_line,
     pan_line_plot,
@@ -148,6 +149,13 @@ def build_report(run_dir: Path) -> Path:
                                                 legs and legs.yield_pressure_mpa), "Support pressures",
                  "Pressure transducers of the legs and the push rams (the PRESSURE stream, readings with their faults); "
                  "dashed: the set and yield pressures of the scenario.")
+    if {"truth_pans", "truth_cycles"} <= run.truth.keys() and run.scenario is not None:
+        azimuth = np.radians(run.scenario.face.azimuth_deg)
+        figs.add("face_line.png", face_line_plot(run.truth["truth_pans"], cycles, azimuth, run.alignment),
+                 "Face line per cycle",
+                 "Straightness (RMS and largest deviation of the pans from their best-fit line) and creep (the pans' "
+                 "mean shift along the face) at the end of each cycle; below, the offset each support's push applied "
+                 "(the scenario's and the face alignment system's).")
     pan_html = ""
     if {"truth_pans", "truth_cycles"} <= run.truth.keys():
         labels, along_m, lateral_m = pan_line(run.truth["truth_pans"], cycles)

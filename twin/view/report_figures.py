@@ -1,5 +1,5 @@
 """The report's figures (`longwall report`): top view, errors against time, errors per cycle, fault detectors, pan
-line straightness, as matplotlib Figures without pyplot (Agg canvas, nothing global to close).
+line straightness, the face line per cycle and the push offsets, as matplotlib Figures without pyplot (Agg canvas, nothing global to close).
 
 Errors are estimate - truth in metres East/North/Up at the truth point (estimators.io.metrics). Long series are
 decimated to about MAX_POINTS samples for plotting.
@@ -12,6 +12,7 @@ import pyarrow as pa
 from matplotlib import colormaps
 from matplotlib.figure import Figure
 
+from estimators.face.straightness import face_drift
 from estimators.io.metrics import column, cycle_metrics, position_errors
 from estimators.nav import earth
 from twin.view.estimate_recording import plot_rows
@@ -232,4 +233,37 @@ def pressure_plot(pressure: pa.Table, cycles: pa.Table | None, set_mpa: float | 
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="upper right")
     axes[-1].set_xlabel("t [min]")
+    return fig
+
+
+def face_line_plot(truth_pans: pa.Table, truth_cycles: pa.Table, azimuth_rad: float,
+                   alignment: pa.Table | None) -> Figure:
+    """The face line at the end of each cycle (estimators.face.straightness): straightness RMS and max, creep; and,
+    when the log has them, the offsets each cycle's push applied per support (mm, towards the coal wall)."""
+    pans = {name: column(truth_pans, name) for name in ("t", "pan", "p_t_e", "p_t_n", "p_t_u")}
+    n_pans = int(pans["pan"].max()) + 1
+    drift = face_drift(pans, column(truth_cycles, "t_end"), n_pans, azimuth_rad)
+    cycle = np.arange(1, drift.t.size + 1)
+    fig = Figure(figsize=(13, 7 if alignment is not None else 4), layout="constrained")
+    axes = fig.subplots(2 if alignment is not None else 1, 1, squeeze=False)[:, 0]
+    ax = axes[0]
+    ax.plot(cycle, drift.straightness_rms * 1e3, "o-", color="C0", markersize=3, label="straightness RMS")
+    ax.plot(cycle, drift.straightness_max * 1e3, "s--", color="C0", markersize=3, alpha=0.6, label="straightness max")
+    ax.set_xlabel("cutting cycle (at its end)")
+    ax.set_ylabel("deviation from the best-fit line [mm]")
+    creep = ax.twinx()
+    creep.plot(cycle, drift.creep * 1e3, "^-", color="C3", markersize=3, label="creep (mean pan)")
+    creep.set_ylabel("creep, + towards the tailgate [mm]", color="C3")
+    ax.grid(alpha=0.3)
+    fig.legend(fontsize=8, loc="outside upper right", ncols=3)
+    if alignment is not None:
+        grid = np.zeros((int(column(alignment, "cycle").max()) + 1, int(column(alignment, "support").max()) + 1))
+        grid[column(alignment, "cycle").astype(int), column(alignment, "support").astype(int)] = (
+            column(alignment, "offset") * 1e3)
+        lim = max(float(np.abs(grid).max()), 1.0)
+        image = axes[1].imshow(grid, aspect="auto", cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest",
+                               extent=(-0.5, grid.shape[1] - 0.5, grid.shape[0] + 0.5, 0.5))
+        axes[1].set_xlabel("support (from the headgate)")
+        axes[1].set_ylabel("cutting cycle")
+        fig.colorbar(image, ax=axes[1], label="push offset [mm]")
     return fig

@@ -9,6 +9,7 @@ from pathlib import Path
 import pyarrow as pa
 
 from estimators.io.logformat import (
+    ALIGNMENT,
     ESTIMATE,
     ESTIMATE_DETECTORS,
     ESTIMATES_DIR,
@@ -39,6 +40,8 @@ class RunData:
     detectors: dict[str, pa.Table]
     pressure: pa.Table | None = None
     """The supports' pressure readings (PRESSURE), when the log has them."""
+    alignment: pa.Table | None = None
+    """The offsets the supports' pushes applied (ALIGNMENT), when the log has them."""
     notes: list[str] = field(default_factory=list)
     """What the report leaves out and why."""
 
@@ -68,7 +71,8 @@ def load_run(run_dir: Path) -> RunData:
     data = RunData(run_dir, load_face_scenario(scenario) if scenario.is_file() else None,
                    read_metrics(run_dir), truth, estimates,
                    {m: read_estimate(run_dir, m, ESTIMATE_DETECTORS) for m in _methods(run_dir, ESTIMATE_DETECTORS)},
-                   read_stream(run_dir, PRESSURE) if (run_dir / PRESSURE.filename).is_file() else None)
+                   read_stream(run_dir, PRESSURE) if (run_dir / PRESSURE.filename).is_file() else None,
+                   read_stream(run_dir, ALIGNMENT) if (run_dir / ALIGNMENT.filename).is_file() else None)
     missing = [STREAMS[name].filename for name in TRUTH_NAMES if name not in truth]
     if missing:
         data.notes.append(f"no {', '.join(missing)} (a run without truth, e.g. imported): left out "

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimators.face.straightness import face_drift
 from twin.config.scenario import Scenario
 
 
@@ -31,12 +32,17 @@ class ShearerStats:
         self.max_speed_m_s = max(self.max_speed_m_s, float(np.hypot(rows["v_n_e"], rows["v_n_n"]).max()))
 
 
-def twin_summary(scn: Scenario, tables: dict[str, dict[str, np.ndarray]], shearer: ShearerStats) -> dict:
-    """The run's summary (metrics.json "twin") from the face's truth tables and the shearer's statistics."""
+def twin_summary(scn: Scenario, tables: dict[str, dict[str, np.ndarray]], shearer: ShearerStats,
+                 offsets_m: np.ndarray | None = None, sequences: list[int] | None = None) -> dict:
+    """The run's summary (metrics.json "twin") from the face's truth tables and the shearer's statistics: per cycle
+    the pans' and supports' advance errors, the face line's straightness (RMS and max deviation from its best-fit
+    line) and creep (estimators.face.straightness), the offsets its push applied (`offsets_m`, cycles x supports) and
+    the face alignment system's sequence number after its shear (`sequences`, in a closed loop)."""
     pans, sups, cycles = tables["truth_pans"], tables["truth_supports"], tables["truth_cycles"]
     n_pan = scn.face.pan_count
     n_sup = int(sups["support"].max()) + 1
     duration = shearer.t_last
+    line = face_drift(pans, cycles["t_end"], n_pan, np.radians(scn.face.azimuth_deg))
     per_cycle = []
     for k, t_end in enumerate(cycles["t_end"]):
         pan_adv = pans["advance"][latest_per_id(pans["t"], pans["pan"], n_pan, t_end)]
@@ -45,13 +51,17 @@ def twin_summary(scn: Scenario, tables: dict[str, dict[str, np.ndarray]], sheare
         per_cycle.append({
             "cycle": k, "t_start_s": float(cycles["t"][k]), "t_end_s": float(t_end),
             "pan_advance_error_max_mm": float(np.abs(pan_adv - want).max() * 1e3),
-            "support_advance_error_max_mm": float(np.abs(sup_adv - want).max() * 1e3)})
+            "support_advance_error_max_mm": float(np.abs(sup_adv - want).max() * 1e3),
+            "straightness_rms_mm": float(line.straightness_rms[k] * 1e3),
+            "straightness_max_mm": float(line.straightness_max[k] * 1e3), "creep_mm": float(line.creep[k] * 1e3),
+            "offsets_rms_mm": float(np.sqrt(np.mean(offsets_m[k] ** 2)) * 1e3) if offsets_m is not None else 0.0,
+            **({"alignment_sequence": int(sequences[k])} if sequences else {})})
     return {
         "scenario": scn.name, "seed": scn.seed, "simulated_s": duration,
         "shearer_samples": shearer.samples, "pan_updates": int(pans["t"].size),
         "max_bend_horizontal_deg": float(np.degrees(np.nanmax(np.abs(pans["bend_h"])))),
         "max_bend_vertical_deg": float(np.degrees(np.nanmax(np.abs(pans["bend_v"])))),
-        "max_speed_m_min": shearer.max_speed_m_s * 60, "cycles": per_cycle}
+        "max_speed_m_min": shearer.max_speed_m_s * 60, "alignment": scn.alignment.mode, "cycles": per_cycle}
 
 
 def format_summary(summary: dict, wall_s: float) -> str:
@@ -64,9 +74,14 @@ def format_summary(summary: dict, wall_s: float) -> str:
         f"max bend: horizontal {summary['max_bend_horizontal_deg']:.3f} deg, "
         f"vertical {summary['max_bend_vertical_deg']:.3f} deg",
         "",
-        f"{'cycle':>5} {'start [s]':>10} {'end [s]':>10} {'pan adv err [mm]':>17} {'support adv err [mm]':>21}",
+        f"{'cycle':>5} {'start [s]':>10} {'end [s]':>10} {'pan adv err [mm]':>17} {'support adv err [mm]':>21}"
+        f" {'straightness rms':>17} {'max':>6} {'creep':>7} {'offsets rms':>12}   [mm]",
     ]
     for c in summary["cycles"]:
         lines.append(f"{c['cycle']:>5} {c['t_start_s']:>10.1f} {c['t_end_s']:>10.1f} "
-                     f"{c['pan_advance_error_max_mm']:>17.1f} {c['support_advance_error_max_mm']:>21.1f}")
+                     f"{c['pan_advance_error_max_mm']:>17.1f} {c['support_advance_error_max_mm']:>21.1f}"
+                     f" {c['straightness_rms_mm']:>17.1f} {c['straightness_max_mm']:>6.1f} {c['creep_mm']:>7.1f}"
+                     f" {c['offsets_rms_mm']:>12.1f}")
+    if summary.get("alignment", "none") != "none":
+        lines.append(f"face alignment: {summary['alignment']} path, offsets applied on the next shear")
     return "\n".join(lines)

@@ -10,6 +10,7 @@ from tests.conftest import capped
 from twin.config.scenario import ScenarioError
 from twin.pipeline.alignment_loop import AlignmentLoop
 from twin.pipeline.simulate import simulate
+from twin.view.summary import ShearerStats, format_summary, twin_summary
 
 
 def test_the_loop_applies_the_offsets_a_saved_run_gives():
@@ -25,6 +26,12 @@ def test_the_loop_applies_the_offsets_a_saved_run_gives():
     np.testing.assert_array_equal(res.offsets[0], 0.0)
     np.testing.assert_array_equal(res.offsets[1], replay.published[0].offsets_m)
     assert np.abs(res.offsets[1]).max() > 0.002
+    stats = ShearerStats()
+    stats.update(res.tables["truth_shearer"])
+    summary = twin_summary(scn, res.tables, stats, res.offsets, [a.sequence for a in res.alignment])
+    assert [c["alignment_sequence"] for c in summary["cycles"]] == [1, 2]
+    assert summary["cycles"][1]["offsets_rms_mm"] == np.sqrt(np.mean(res.offsets[1] ** 2)) * 1e3 > 0.0
+    assert "face alignment: truth path" in format_summary(summary, 1.0)
 
 
 def test_a_loop_needs_the_reversal_stops():
