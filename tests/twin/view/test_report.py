@@ -24,7 +24,7 @@ from twin.view.report_figures import pan_line
 
 CHROMIUM = Path("/usr/bin/chromium")
 FIGURES = ("top_view.png", "errors.png", "cycle_errors.png", "detectors_fkf_rail.png", "pan_line.png",
-           "pressures.png")
+           "pressures.png", "face_line.png")
 
 
 @pytest.fixture(scope="module")
