@@ -11,6 +11,7 @@ import numpy as np
 import pyarrow as pa
 from matplotlib import colormaps
 from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from estimators.face.straightness import face_drift
 from estimators.io.metrics import column, cycle_metrics, position_errors
@@ -255,6 +256,7 @@ def face_line_plot(truth_pans: pa.Table, truth_cycles: pa.Table, azimuth_rad: fl
     creep.plot(cycle, drift.creep * 1e3, "^-", color="C3", markersize=3, label="creep (mean pan)")
     creep.set_ylabel("creep, + towards the tailgate [mm]", color="C3")
     ax.grid(alpha=0.3)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     fig.legend(fontsize=8, loc="outside upper right", ncols=3)
     if alignment is not None:
         grid = np.zeros((int(column(alignment, "cycle").max()) + 1, int(column(alignment, "support").max()) + 1))
@@ -265,5 +267,6 @@ def face_line_plot(truth_pans: pa.Table, truth_cycles: pa.Table, azimuth_rad: fl
                                extent=(-0.5, grid.shape[1] - 0.5, grid.shape[0] + 0.5, 0.5))
         axes[1].set_xlabel("support (from the headgate)")
         axes[1].set_ylabel("cutting cycle")
+        axes[1].yaxis.set_major_locator(MaxNLocator(integer=True))
         fig.colorbar(image, ax=axes[1], label="push offset [mm]")
     return fig
