@@ -38,6 +38,7 @@ def alignment_config(scn: Scenario) -> AlignmentConfig:
         min_coverage=a.min_coverage,
         end_zone_m=scn.shearer.length_m + (p.push_lag_pans + p.snake_length_pans + 2) * f.pan_length_m,
         shoe_spacing_m=scn.shearer.shoe_spacing_m,
+        path_ends_m=(scn.shearer.length_m / 2, f.pan_count * f.pan_length_m - scn.shearer.length_m / 2),
     )
 
 

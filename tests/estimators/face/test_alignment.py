@@ -154,3 +154,19 @@ def test_a_lost_estimator_or_a_partial_shear_does_not_steer():
     part = _path(wave, y1=N_SHIELDS * SPACING_M / 3)
     held = system.shear(part, np.zeros(part.shape[0]))
     assert held.held and held.sequence == 1 and "not a full shear" in held.note
+
+
+def test_the_shields_are_found_where_the_face_has_crept_to():
+    """The face and its shields have crept 2 spacings towards the headgate, and the path's ends with them (a cut
+    runs between the reversal points the drive frames carry): the creep is measured at the gates and a bump in the
+    line at shield 40 is corrected at shield 40, not at the shield that stood there when the face was installed."""
+    y_end = N_SHIELDS * SPACING_M
+    cfg = _cfg(path_ends_m=(-5.0, y_end + 5.0))
+    creep = -2 * SPACING_M
+    bump_y = cfg.station_y_m[40] + creep
+    p_f = _path(lambda y: 0.02 * np.exp(-(((y - bump_y) / 1.0) ** 2)), y0=-5.0 + creep, y1=y_end + 5.0 + creep)
+    out = FaceAlignmentSystem(cfg).shear(p_f, np.zeros(p_f.shape[0]))
+    assert out.creep_m == pytest.approx(creep, abs=0.02)
+    assert int(np.argmin(out.offsets_m)) == 40
+    unregistered = FaceAlignmentSystem(_cfg()).shear(p_f, np.zeros(p_f.shape[0]))
+    assert int(np.argmin(unregistered.offsets_m)) == 38
