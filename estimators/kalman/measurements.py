@@ -42,6 +42,12 @@ def odometer_velocity(nav, cal, disp, w_sum, lever, t_span, d_odo, nominal, r_ve
     mean velocity over the epoch (its displacement disp / t_span) and v_od the odometer distance d_odo over the
     epoch / t_span corrected by the estimated scale; R = r_vel (3, 3). Advances the running odometer speed.
 
+    A mean velocity belongs to the middle of its epoch, so C_n^b is the attitude there: the epoch's end attitude
+    turned back by half the epoch's angle increment, C_b^n(mid) = C_b^n(end) exp(-[w_sum / 2 x]). Resolved at the
+    end, the velocity leaned by half the epoch's turn, on a pitching machine a share of it into the vertical, which
+    the filters took for odometer scale (the exact-survey north-south trajectory of
+    tests/estimators/shearer/test_independent_trajectories.py: 1.16e-4, at mid-epoch 2.6e-5).
+
     d_odo is the travel of the body reference point, disp the IMU's, so the IMU's turn about the lever arm,
     w_eb x l (w_sum the angle increment in b), is taken out of its velocity first (in the snake's bends it is
     0.3 w_z along the face for a lever arm of 0.3 m across). 001 eq. 20 evaluates
@@ -52,7 +58,7 @@ def odometer_velocity(nav, cal, disp, w_sum, lever, t_span, d_odo, nominal, r_ve
     averaged up to two epochs back (the quantization error of the last reading, nominal[NOM_SPEED_LAST], is also
     in this one's, with the opposite sign); that mean then takes the last reading, with the time constant
     tau_fwd, and this one becomes the last."""
-    c_nb = quat_mat(nav[QUAT])
+    c_nb = quat_mat(nav[QUAT]) @ rotvec_mat(-0.5 * w_sum)  # at mid-epoch
     c_bn = c_nb.T
     c_mb = rotvec_mat(cal[CAL_MOUNT]).T
     w_ie, _w_en = nav_rates(nav[LAT], nav[HGT], nav[VEL])

@@ -22,6 +22,13 @@ the least expected squared error by Mallows' C_p (Stein's unbiased risk estimate
 survey's stated sigmas, so a 5 cm survey is smoothed over +-14.5 m and a 5 mm survey of a floor undulating 0.3 m
 over 30 m over +-9 m, where +-14.5 m flattened the undulation by 4 mm, which the rail-model filter took for the
 line and walked 1.7 cm along the face (tests/estimators/shearer/test_independent_trajectories.py, az45_eq).
+
+A survey's stated sigma is what its points may scatter; where they scatter far less (`scatter_ratio`: the residuals
+of the fit over +-SCATTER_WINDOW_M, which follows any undulation of the seam, against the stated sigma), the window is
+chosen for the scatter seen. Stated at 5 mm, an error-free survey of a 0.3 m, 40 m undulation was smoothed over
++-11.5 m as a 5 mm one would be, leaving it 2.7 mm rms off the floor, whose slope the rail-model filter took for
+1.2e-4 of odometer scale before the first face end; chosen for the scatter, +-6.5 m: 0.5 mm and 2.6e-5. The
+points' variances stay the stated ones.
 """
 
 from __future__ import annotations
@@ -38,6 +45,15 @@ HALF_WINDOWS_M = (2.0, 3.0, 4.5, 6.5, 9.0, 11.5, 14.5)
 """The half-windows tried, narrowest first: from three chutes of 1.75-2 m (the narrowest a quadratic fits) to the
 +-14.5 m that takes a 5 cm survey to 2 cm (the widest: the shearer rides the pans on shoes a few metres apart,
 and the seam undulates over tens of metres)."""
+SCATTER_WINDOW_M = 4.5
+"""Half-window of the fit whose residuals show the survey's scatter: two to three chutes each side, over which a
+quadratic follows the seam's undulation (0.2 mm rms off a 0.3 m, 40 m wave) and leaves about a third of the points'
+degrees of freedom to the residuals."""
+SCATTER_RATIO = 0.5
+"""A component whose points scatter less than this share of their stated sigma is smoothed as if stated at its scatter.
+A survey that scatters as stated falls under it by chance with a probability (chi-square) of 0.7 % in height for the
+35 points of a 60 m face, 4e-4 for 60 points, 1e-10 for 200; it is then smoothed over a narrower window, not a
+wider one."""
 SD_FLOOR_M = 1e-3
 """The survey sigma below which a point is taken as 1 mm (a survey stated exact is smoothed no more than one of
 1 mm would be)."""
@@ -96,17 +112,32 @@ def fit_risk(enu: np.ndarray, sd: np.ndarray, value_w: np.ndarray) -> float:
     return float(np.sum((m @ enu / sig) ** 2) + 3 * (2.0 * np.trace(value_w) - value_w.shape[0]))
 
 
+def scatter_ratio(enu: np.ndarray, sd: np.ndarray, value_w: np.ndarray) -> np.ndarray:
+    """(horizontal, vertical) rms of the points' residuals from a fit (value_w) in their stated sigmas sd (K, 2),
+    each residual's expected square taken out (the residual degrees of freedom tr((I - W)^T (I - W)) per component);
+    1 where the fit leaves fewer than two degrees of freedom."""
+    m = np.eye(value_w.shape[0]) - value_w
+    dof = float(np.sum(m ** 2))
+    if dof < 2.0:
+        return np.ones(2)
+    z = m @ enu / np.column_stack([sd[:, 0], sd[:, 0], sd[:, 1]])
+    return np.sqrt(np.array([np.sum(z[:, :2] ** 2) / 2.0, np.sum(z[:, 2] ** 2)]) / dof)
+
+
 def fit_face_line(llh: np.ndarray, u: np.ndarray, sd: np.ndarray) -> FaceLine:
     """Local quadratic fit of a surveyed face line: llh (K, 3) points in order along the line, u (K,) their
     face coordinates (increasing), sd (K, 2) their horizontal and vertical one-sigma [m] (floored at SD_FLOOR_M).
 
-    The half-window is the one of HALF_WINDOWS_M of least `fit_risk`."""
+    The half-window is the one of HALF_WINDOWS_M of least `fit_risk` at the stated sigmas, or at the scatter seen
+    where it is under SCATTER_RATIO of them (`scatter_ratio`)."""
     llh = np.asarray(llh, float)
     u = np.asarray(u, float)
     sd = np.maximum(np.asarray(sd, float).reshape(-1, 2), SD_FLOOR_M)
     origin = llh[0].copy()
     enu = earth.lla_to_enu(llh[:, 0], llh[:, 1], llh[:, 2], *origin)
+    ratio = scatter_ratio(enu, sd, local_fit_weights(u, SCATTER_WINDOW_M)[0])
+    sd_seen = np.maximum(sd * np.where(ratio < SCATTER_RATIO, ratio, 1.0), SD_FLOOR_M)
     fits = [(h, *local_fit_weights(u, h)) for h in HALF_WINDOWS_M]
-    half_window_m, value_w, slope_w, degree = min(fits, key=lambda f: fit_risk(enu, sd, f[1]))
+    half_window_m, value_w, slope_w, degree = min(fits, key=lambda f: fit_risk(enu, sd_seen, f[1]))
     direction = slope_w @ enu if degree >= 1 else np.full((u.size, 3), np.nan)
     return FaceLine(value_w @ enu, direction, np.sum(value_w ** 2, axis=1), origin, half_window_m)

@@ -41,17 +41,28 @@ def test_the_direction_follows_the_line_through_its_undulation():
     assert rms[0] < 0.007 and rms[1] > 0.015, rms
 
 
-def test_an_error_free_survey_keeps_its_line_and_the_noise_gain_is_the_smoothed_error(monkeypatch):
-    """Error-free (stated at 0.05 m), the fit bends with the undulation to within 6 mm. With 0.05 m noise, over 400
-    surveys, each smoothed point's error variance is 0.05^2 times its noise gain to within 15 % (the gain is 0.18 mid-face, more
-    at the ends, where the window is one-sided), the smoothed points are 2.3 times closer to the line than the
-    survey's, and neighbouring points' errors differ by 8 mm rms (an unweighted fit over +-9 m, with gain 0.21:
-    12 mm; the tricube weights let a point enter the window gradually)."""
+def test_an_error_free_survey_stated_coarse_is_smoothed_for_its_scatter():
+    """Error-free but stated at 0.05 m, the points scatter about nothing around the fit over +-4.5 m: the window is
+    chosen for that scatter (+-9 m, where 0.05 m of scatter takes +-14.5 m) and the fit stays within 2 mm of the
+    line (6 mm at +-14.5 m); its variances stay the stated sigma's (gain times 0.05^2)."""
+    u, enu, _ = _undulating_line()
+    exact = fit_face_line(_llh(enu), u, _sd(u, 0.05))
+    assert exact.half_window_m == 9.0
+    assert np.abs(exact.enu - (enu - enu[0])).max() < 0.002
+    assert np.all(exact.gain > 0.2)
+
+
+def test_the_noise_gain_is_the_smoothed_error(monkeypatch):
+    """Error-free (stated at 0.05 m) over +-14.5 m, as a 0.05 m survey chooses, the fit bends with the undulation to
+    within 6 mm. With 0.05 m noise, over 400 surveys, each smoothed point's error variance is 0.05^2 times its noise
+    gain to within 15 % (the gain is 0.18 mid-face, more at the ends, where the window is one-sided), the smoothed
+    points are 2.3 times closer to the line than the survey's, and neighbouring points' errors differ by 8 mm rms
+    (an unweighted fit over +-9 m, with gain 0.21: 12 mm; the tricube weights let a point enter the window
+    gradually)."""
     u, enu, _ = _undulating_line()
     origin = _llh(enu[:1])[0]
-    exact = fit_face_line(_llh(enu), u, _sd(u, 0.05))
-    assert exact.half_window_m == 14.5
     monkeypatch.setattr(face_line, "HALF_WINDOWS_M", (14.5,))  # the draws' window, as a 0.05 m survey chooses
+    exact = fit_face_line(_llh(enu), u, _sd(u, 0.05))
     assert np.abs(exact.enu - (enu - enu[0])).max() < 0.006
     assert np.allclose(exact.origin, origin)
     rng = np.random.default_rng(7)

@@ -6,8 +6,6 @@ bent, undulating passes with stops at any azimuth and latitude, exact increments
   after motion beyond 3 sigma of the prior (the change of the error at that epoch against the one-sigma before it);
 * with sensor errors: the ANEES of the position (median over epochs of the NEES averaged over trials) inside its
   95 % band.
-
-What fails today is marked xfail(strict=True) with the figure measured, so the marks go as the filters are fixed.
 """
 
 from __future__ import annotations
@@ -47,15 +45,6 @@ pulses, a survey with 2 cm and 0.5 deg errors, magnetometer noise."""
 NEES_FACE, NEES_TRIALS = "ns_n55", 3
 FILTERS = tuple(m for m in METHODS if m not in ("dr", "dr_compensated"))
 """The methods with a covariance and an odometer calibration (dead reckoning has neither)."""
-
-RAIL_SCALE_MAX = {"ns_n55": 2.03e-4, "az250_s30": 2.29e-4, "ns_n55_exact_survey": 1.16e-4}
-"""Measured largest |odometer scale| of fkf_rail (truth 0) where it exceeds 1e-4. The rail model's first cut has
-the face survey's fixes across the face and vertically only; on the faces that dip or undulate the vertical fixes
-make the scale observable through the slope, and with the pitch and the odometer's mounting it takes up
-1-2e-4 before the first face end's survey (0.5-1.05 cm along the face, within 2 dr + 1 cm)."""
-MEASURED = {("scale", f, "fkf_rail"): f"largest |odometer scale| {s:.3g}" for f, s in RAIL_SCALE_MAX.items()}
-"""(check, case, method) -> what was measured where the check fails today (the xfail reason)."""
-
 
 @cache
 def trajectory(name: str) -> Trajectory:
@@ -114,18 +103,12 @@ def anees(name: str, method: str) -> float:
     return float(np.median(np.mean(runs, axis=0)[1:]))
 
 
-def cases(check: str, methods: tuple[str, ...], faces=tuple(FACES)) -> list:
-    """pytest params (face, method), marked xfail where MEASURED has the check failing."""
-    out = []
-    for name in faces:
-        for m in methods:
-            why = MEASURED.get((check, name, m))
-            marks = [pytest.mark.xfail(strict=True, reason=f"measured: {why}")] if why else []
-            out.append(pytest.param(name, m, marks=marks, id=f"{name}-{m}"))
-    return out
+def cases(methods: tuple[str, ...], faces=tuple(FACES)) -> list:
+    """pytest params (face, method)."""
+    return [pytest.param(name, m, id=f"{name}-{m}") for name in faces for m in methods]
 
 
-@pytest.mark.parametrize("name, method", cases("error", METHODS[1:]))
+@pytest.mark.parametrize("name, method", cases(METHODS[1:]))
 def test_error_free_filters_stay_within_twice_dead_reckoning(name, method):
     traj = trajectory(name)
     dr = horizontal(position_error(traj, solve(name, "dr")))
@@ -133,20 +116,20 @@ def test_error_free_filters_stay_within_twice_dead_reckoning(name, method):
     assert final <= 2 * dr[0] + 0.01 and largest <= 2 * dr[1] + 0.01, (final, largest, dr)
 
 
-@pytest.mark.parametrize("name, method", cases("scale", FILTERS))
+@pytest.mark.parametrize("name, method", cases(FILTERS))
 def test_error_free_odometer_scale_stays_at_the_truth(name, method):
     scale = solve(name, method).cal[:, es.CAL_SCALE]
     assert np.abs(scale).max() <= 1e-4, (scale[-1], np.abs(scale).max())
 
 
-@pytest.mark.parametrize("name, method", cases("zupt", FILTERS))
+@pytest.mark.parametrize("name, method", cases(FILTERS))
 def test_error_free_zero_velocity_update_does_not_jump(name, method):
     sol = solve(name, method)
     metres, ratio = zupt_jumps(sol, position_error(trajectory(name), sol))
     assert ratio <= 3.0, (metres, ratio)
 
 
-@pytest.mark.parametrize("name, method", cases("health", METHODS))
+@pytest.mark.parametrize("name, method", cases(METHODS))
 def test_error_free_filters_do_not_report_a_lost_track(name, method):
     """The health monitor (estimators.shearer.health) stays quiet where every filter holds; on the exact survey it
     is what would have said so of fkf_rail's runaway (13 m at a sigma of 2 mm, before the fix sigma floor)."""
@@ -154,7 +137,7 @@ def test_error_free_filters_do_not_report_a_lost_track(name, method):
     assert not np.any(sol.flags & FLAG_UNHEALTHY), [n for n in sol.notes if n.startswith("health")]
 
 
-@pytest.mark.parametrize("name, method", cases("nees", FILTERS, (NEES_FACE,)))
+@pytest.mark.parametrize("name, method", cases(FILTERS, (NEES_FACE,)))
 def test_position_nees_with_sensor_errors_is_in_its_band(name, method):
     lo, hi = metrics.nees_band(3, NEES_TRIALS)
     assert lo <= anees(name, method) <= hi, (anees(name, method), lo, hi)
