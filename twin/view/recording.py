@@ -19,6 +19,10 @@ Entities (fixed names, checked by tests):
 * `plots/cycle`             Scalars, cycle index
 * `plots/bend_horizontal_deg`, `plots/bend_vertical_deg`   BarChart per chute at every pan-update time
 * `plots/ram_length`        BarChart per support at every support-update time
+* `face/pan_line_mm`        BarChart per pan at the run's start and each cycle's end: the pan line's deviation from
+                            its best-fit straight line [mm, + towards the coal wall] (estimators.face.straightness)
+* `face/straightness_mm`, `face/creep_mm`   Scalars at the same times: straightness RMS and max; creep of the pans'
+                            mean and of the tailgate drive frame since the start [mm, + towards the tailgate]
 * `sensors/...`, `faults/...`   the sensor channels and the fault windows as time series
 
 Time series are cut to what a person can see at the record rate (twin.view.rerun_columns.visible_rows; every sample
@@ -37,6 +41,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
+from estimators.face.straightness import face_drift, line_deviation, pan_lines
 from estimators.nav.earth import mat_en
 from estimators.nav.rotations import mat_to_quat, quat_mul, quat_rotate
 from twin.config.scenario import Scenario
@@ -297,6 +302,22 @@ def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz:
             series(rec, name, np.array([0.0, t0, t1]), np.array([[0.0], [1.0], [0.0]]), [f"{name} active"])
 
 
+def _log_face_line(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table, cycles: pa.Table) -> None:
+    """The pan line at the start and at each cycle's end (truth_cycles' t_end) as its deviation per pan from its
+    best-fit straight line (the straightness metric's reference, and the face alignment's straight target), with
+    straightness and creep at those times (estimators.face.straightness)."""
+    columns = {name: col(pans, name) for name in ("t", "pan", "p_t_e", "p_t_n", "p_t_u")}
+    times = np.concatenate([[float(columns["t"].min())], col(cycles, "t_end")])
+    n_pans, azimuth = int(columns["pan"].max()) + 1, np.radians(scn.face.azimuth_deg)
+    lines = pan_lines(columns, times, n_pans, azimuth)
+    send_bar_chart(rec, "face/pan_line_mm", times, line_deviation(lines[..., 0], lines[..., 1]) * 1e3)
+    drift = face_drift(columns, times, n_pans, azimuth)
+    series(rec, "face/straightness_mm", times, np.column_stack([drift.straightness_rms, drift.straightness_max]) * 1e3,
+           ["straightness RMS", "straightness max"])
+    series(rec, "face/creep_mm", times, np.column_stack([drift.creep, drift.creep_tailgate]) * 1e3,
+           ["creep, mean pan", "creep, tailgate drive frame"])
+
+
 def _log_alignment(rec: rr.RecordingStream, alignment: pa.Table) -> None:
     """The offsets each cycle's push applied as a bar chart per support (mm), at the cycle's start, and the face
     alignment system's sequence number of the set applied."""
@@ -340,6 +361,9 @@ def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
         rrb.BarChartView(name="Ram length [m]", origin="plots/ram_length"),
         rrb.BarChartView(name="Leg pressure per support [MPa]", origin="sensors/pressure/leg_bars"),
         rrb.BarChartView(name="Ram pressure per support [MPa]", origin="sensors/pressure/ram_bars"),
+        rrb.BarChartView(name="Pan line from its best-fit line per pan [mm], at cycle ends", origin="face/pan_line_mm"),
+        rrb.TimeSeriesView(name="Straightness and creep [mm]", origin="face",
+                           contents=["face/straightness_mm", "face/creep_mm"]),
         rrb.BarChartView(name="Push offsets per support [mm]", origin="alignment/offsets_mm"),
         rrb.TimeSeriesView(name="Sensors", origin="sensors",
                            contents=["sensors/**", "- sensors/pressure/leg_bars", "- sensors/pressure/ram_bars"]),
@@ -367,8 +391,8 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
     """Write the truth streams of a run as a Rerun recording (.rrd) with its blueprint, reproducibly
     (twin.view.rrd_stream: the recording id from the scenario and seed).
 
-    `truth` maps "truth_shearer", "truth_pans", "truth_supports" (required) and "truth_cycles" (optional,
-    not drawn) to tables with the columns of `estimators.io.logformat`. `floor_mesh` is (vertices (V, 3) in t,
+    `truth` maps "truth_shearer", "truth_pans", "truth_supports" (required) and "truth_cycles" (optional: the
+    face line at each cycle's end) to tables with the columns of `estimators.io.logformat`. `floor_mesh` is (vertices (V, 3) in t,
     triangle indices (T, 3)). `rate_hz` is the record rate (twin.view.rerun_columns: Hz, or FULL for every
     sample) of the shearer and the time series.
     """
@@ -383,6 +407,8 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
         _log_pans(rec, scn, truth["truth_pans"])
         _log_supports(rec, scn, truth["truth_supports"], rate_hz)
         _log_shearer(rec, scn, truth["truth_shearer"], rate_hz)
+        if truth.get("truth_cycles") is not None and truth["truth_cycles"].num_rows:
+            _log_face_line(rec, scn, truth["truth_pans"], truth["truth_cycles"])
         _log_sensors(rec, sensors or {}, rate_hz)
 
 

@@ -189,3 +189,40 @@ def test_latest_rows_forward_fill():
     np.testing.assert_array_equal(times, [0.0, 5.0, 9.0])
     np.testing.assert_array_equal(ids, [0, 1, 2, 3])
     np.testing.assert_array_equal(rows, [[0, 1, 2, 6], [0, 3, 2, 6], [5, 3, 4, 6]])
+
+
+def _bars(chunks, entity: str) -> np.ndarray:
+    """(times, values) of an entity's BarChart rows, values (T, N) in time order."""
+    times, rows = [], []
+    for chunk in chunks:
+        if chunk.entity_path == entity and not chunk.is_static:
+            batch = chunk.to_record_batch()
+            times += list(batch.column(TIMELINE).cast(pa.int64()).to_numpy() / 1e9)
+            rows += [np.asarray(row[0]["buffer"], float) for row in batch.column("BarChart:values").to_pylist()]
+    order = np.argsort(times)
+    return np.asarray(times)[order], np.asarray(rows)[order]
+
+
+def test_the_face_line_at_each_cycle_end(tmp_path):
+    """The pan line's deviation from its best-fit straight line per pan [mm] at the start and at each cycle's end,
+    against np.polyfit on the latest row of every pan in the face frame (azimuth 30 deg: x = e cos a - n sin a,
+    y = e sin a + n cos a); straightness and creep beside it."""
+    truth = synthetic_truth(n_pans=6)  # every pan at t = 0, then every other pan at 10 and 20 s
+    truth["truth_cycles"] = make_table(TRUTH_CYCLES, {
+        "cycle": np.array([0, 1]), "direction": np.array([1, -1]), "t": np.array([0.0, 12.0]),
+        "t_cut_end": np.array([5.0, 17.0]), "t_sump_end": np.array([6.0, 18.0]), "t_push_end": np.array([7.0, 19.0]),
+        "t_end": np.array([12.0, 22.0]), "s_sump": np.array([10.0, 10.0])})
+    path = tmp_path / "run.rrd"
+    write_recording(path, Scenario.model_construct(name="test", face=Face(azimuth_deg=30.0)), truth, flat_floor(6))
+    chunks = RrdReader(path).stream().to_chunks()
+    times, bars = _bars(chunks, "/face/pan_line_mm")
+    np.testing.assert_allclose(times, [0.0, 12.0, 22.0])
+    pans = {k: truth["truth_pans"].column(k).to_numpy() for k in ("t", "pan", "p_t_e", "p_t_n")}
+    a = np.radians(30.0)
+    for t_k, row in zip(times, bars):
+        latest = [np.flatnonzero((pans["pan"] == i) & (pans["t"] <= t_k))[-1] for i in range(6)]
+        e, n = pans["p_t_e"][latest], pans["p_t_n"][latest]
+        x, y = e * np.cos(a) - n * np.sin(a), e * np.sin(a) + n * np.cos(a)
+        np.testing.assert_allclose(row, (x - np.polyval(np.polyfit(y, x, 1), y)) * 1e3, atol=1e-6)
+    assert np.abs(bars[0]).max() < 1e-6 < np.abs(bars[1]).max()  # installed straight, kinked by the pushes
+    assert {"/face/straightness_mm", "/face/creep_mm"} <= {c.entity_path for c in chunks}
