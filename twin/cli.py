@@ -12,6 +12,7 @@ import signal
 import sys
 from collections.abc import Iterator
 from contextlib import contextmanager
+from importlib import metadata
 from pathlib import Path
 
 from estimators.io.csv_import import import_csv
@@ -70,8 +71,17 @@ def sigterm_as_interrupt() -> Iterator[None]:
         signal.signal(signal.SIGTERM, previous)
 
 
+def _version() -> str:
+    """The installed distribution's version (pyproject.toml's), or that it is not installed (run from a clone)."""
+    try:
+        return metadata.version("longwall-twin")
+    except metadata.PackageNotFoundError:
+        return "(not installed: pip install -e .)"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = Parser(prog="longwall", description="Longwall face digital twin")
+    parser.add_argument("--version", action="version", version=f"longwall-twin {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
     p_run = sub.add_parser("run", help="simulate a scenario and write a run directory")
     p_run.add_argument("scenario", nargs="?", type=Path, help="scenario TOML (default: the shipped default.toml)")

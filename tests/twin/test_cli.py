@@ -211,3 +211,11 @@ def test_a_bad_record_rate_is_one_line_exit_2(tmp_path, capsys, command, value):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--record-rate" in err and f"'{value}'" in err and "full" in err
     assert not out.exists()
+
+
+def test_version_is_the_installed_distributions(capsys):
+    """`longwall --version` prints pyproject.toml's version (the installed distribution's) and exits 0."""
+    from importlib import metadata
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == f"longwall-twin {metadata.version('longwall-twin')}\n"
