@@ -43,7 +43,8 @@ def odometer_velocity(nav, cal, disp, w_sum, lever, t_span, d_odo, nominal, r_ve
     epoch / t_span corrected by the estimated scale; R = r_vel (3, 3). Advances the running odometer speed.
 
     A mean velocity belongs to the middle of its epoch, so C_n^b is the attitude there: the epoch's end attitude
-    turned back by half the epoch's angle increment, C_b^n(mid) = C_b^n(end) exp(-[w_sum / 2 x]). Resolved at the
+    turned back by half the body's turn relative to n over the epoch, C_b^n(mid) = C_b^n(end) exp(-[a / 2 x]) with
+    a = w_sum - C_n^b (w_ie + w_en) t_span. Resolved at the
     end, the velocity leaned by half the epoch's turn, on a pitching machine a share of it into the vertical, which
     the filters took for odometer scale (the exact-survey north-south trajectory of
     tests/estimators/shearer/test_independent_trajectories.py: 1.16e-4, at mid-epoch 2.6e-5).
@@ -58,10 +59,12 @@ def odometer_velocity(nav, cal, disp, w_sum, lever, t_span, d_odo, nominal, r_ve
     averaged up to two epochs back (the quantization error of the last reading, nominal[NOM_SPEED_LAST], is also
     in this one's, with the opposite sign); that mean then takes the last reading, with the time constant
     tau_fwd, and this one becomes the last."""
-    c_nb = quat_mat(nav[QUAT]) @ rotvec_mat(-0.5 * w_sum)  # at mid-epoch
+    c_nb_end = quat_mat(nav[QUAT])
+    w_ie, w_en = nav_rates(nav[LAT], nav[HGT], nav[VEL])
+    turn_nb = w_sum - c_nb_end.T @ (w_ie + w_en) * t_span  # the body's turn relative to n over the epoch
+    c_nb = c_nb_end @ rotvec_mat(-0.5 * turn_nb)  # at mid-epoch
     c_bn = c_nb.T
     c_mb = rotvec_mat(cal[CAL_MOUNT]).T
-    w_ie, _w_en = nav_rates(nav[LAT], nav[HGT], nav[VEL])
     v_b = c_bn @ (disp / t_span) - cross3(w_sum / t_span - c_bn @ w_ie, lever)
     v_od = d_odo / t_span / (1 + cal[CAL_SCALE])
     v_b_nom = np.array([0.0, nominal[NOM_SPEED], 0.0])

@@ -23,7 +23,7 @@ Entities (fixed names, checked by tests):
                             its best-fit straight line [mm, + towards the coal wall] (estimators.face.straightness)
 * `face/straightness_mm`, `face/creep_mm`   Scalars at the same times: straightness RMS and max; creep of the pans'
                             mean and of the tailgate drive frame since the start [mm, + towards the tailgate]
-* `sensors/...`, `faults/...`   the sensor channels and the fault windows as time series
+* `sensors/...`, `alignment/...`, `faults/...`   the sensor streams (twin.view.sensor_recording)
 
 Time series are cut to what a person can see at the record rate (twin.view.rerun_columns.visible_rows; every sample
 at FULL rate).
@@ -36,7 +36,6 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
-import pyarrow.compute  # noqa: F401  (pa.compute)
 import rerun as rr
 import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
@@ -54,7 +53,6 @@ from twin.view.rerun_columns import (
     latest_rows,
     line_rows,
     marker_rows,
-    mean_rate,
     send_bar_chart,
     series,
     time_column,
@@ -62,6 +60,7 @@ from twin.view.rerun_columns import (
     xyzw,
 )
 from twin.view.rrd_stream import recording_id, recording_stream
+from twin.view.sensor_recording import log_sensors
 
 RUN_RRD = "run.rrd"
 ESTIMATES_RRD = "estimates.rrd"
@@ -257,51 +256,6 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate
     series(rec, "plots/cycle", t, col(sub, "cycle").astype(float)[:, None], ["cycle"], rate_hz=rate_hz, band=False)
 
 
-def _log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz: float | None) -> None:
-    """Every sensor channel as time series (fast streams averaged to about rate_hz), fault windows as
-    0/1 steps, the ram readings as a bar chart per support."""
-    if "imu" in sensors:
-        imu = sensors["imu"]
-        t = col(imu, "t")
-        for name, prefix, label in (("gyro", "dtheta", "rad/s"), ("accel", "dv", "m/s^2")):
-            tt, rate = mean_rate(t, vec(imu, prefix, "xyz"), rate_hz)
-            series(rec, f"sensors/imu/{name}", tt, rate, [f"{a} [{label}]" for a in "xyz"], rate_hz=rate_hz)
-    if "odometer" in sensors:
-        odo = sensors["odometer"]
-        series(rec, "sensors/odometer/distance", col(odo, "t"), col(odo, "distance")[:, None], ["distance [m]"],
-               rate_hz=rate_hz)
-    if "mag" in sensors:
-        mag = sensors["mag"]
-        series(rec, "sensors/mag", col(mag, "t"), vec(mag, "b", "xyz") * 1e6, [f"{a} [uT]" for a in "xyz"],
-               rate_hz=rate_hz)
-    if "support_imu" in sensors:
-        units = sensors["support_imu"]
-        for j in np.unique(col(units, "support")):
-            rows = units.filter(pa.compute.equal(units.column("support"), int(j)))
-            series(rec, f"sensors/support_imu/{j}/accel", col(rows, "t"), vec(rows, "accel", "xyz"),
-                   [f"{a} [m/s^2]" for a in "xyz"], rate_hz=rate_hz)
-            series(rec, f"sensors/support_imu/{j}/gyro", col(rows, "t"), vec(rows, "gyro", "xyz"),
-                   [f"{a} [rad/s]" for a in "xyz"], rate_hz=rate_hz)
-    if "pushram" in sensors:
-        ram = sensors["pushram"]
-        t, support = col(ram, "t"), col(ram, "support")
-        times, inverse = np.unique(t, return_inverse=True)
-        grid = np.full((times.size, int(support.max()) + 1), np.nan)
-        grid[inverse, support] = col(ram, "extension")
-        keep = decimate(times, FULL if rate_hz is FULL else min(rate_hz, 0.2))
-        send_bar_chart(rec, "sensors/pushram", times[keep], grid[keep])
-    if "pressure" in sensors:
-        _log_pressures(rec, sensors["pressure"], rate_hz)
-    if "alignment" in sensors and sensors["alignment"].num_rows:
-        _log_alignment(rec, sensors["alignment"])
-    if "faults" in sensors and sensors["faults"].num_rows:
-        faults = sensors["faults"]
-        for kind, target, t0, t1 in zip(faults.column("kind").to_pylist(), col(faults, "target"),
-                                       col(faults, "t_start"), col(faults, "t_end")):
-            name = f"faults/{kind}" + (f"_{target}" if target >= 0 else "")
-            series(rec, name, np.array([0.0, t0, t1]), np.array([[0.0], [1.0], [0.0]]), [f"{name} active"])
-
-
 def _log_face_line(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table, cycles: pa.Table) -> None:
     """The pan line at the start and at each cycle's end (truth_cycles' t_end) as its deviation per pan from its
     best-fit straight line (the straightness metric's reference, and the face alignment's straight target), with
@@ -316,38 +270,6 @@ def _log_face_line(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table, cycle
            ["straightness RMS", "straightness max"])
     series(rec, "face/creep_mm", times, np.column_stack([drift.creep, drift.creep_tailgate]) * 1e3,
            ["creep, mean pan", "creep, tailgate drive frame"])
-
-
-def _log_alignment(rec: rr.RecordingStream, alignment: pa.Table) -> None:
-    """The offsets each cycle's push applied as a bar chart per support (mm), at the cycle's start, and the face
-    alignment system's sequence number of the set applied."""
-    t, cycle, support = col(alignment, "t"), col(alignment, "cycle"), col(alignment, "support")
-    grid = np.zeros((int(cycle.max()) + 1, int(support.max()) + 1))
-    grid[cycle, support] = col(alignment, "offset") * 1e3
-    starts, sequence = np.zeros((2, grid.shape[0]))
-    starts[cycle], sequence[cycle] = t, col(alignment, "sequence")
-    send_bar_chart(rec, "alignment/offsets_mm", starts, grid)
-    series(rec, "alignment/sequence", starts, sequence[:, None], ["SequenceNumber applied"], band=False)
-
-
-PRESSURE_BAR_HZ = 0.2
-"""Rate of the pressure bar charts (one bar per support) at the default record rate."""
-
-
-def _log_pressures(rec: rr.RecordingStream, pressure: pa.Table, rate_hz: float | None) -> None:
-    """The legs' and rams' pressure readings as a bar chart per support each, and the face's lowest leg pressure and
-    highest ram pressure as time series (a support that failed to set, a leaking leg, a stalled ram stand out)."""
-    t, support = col(pressure, "t"), col(pressure, "support")
-    times, inverse = np.unique(t, return_inverse=True)
-    keep = decimate(times, FULL if rate_hz is FULL else min(rate_hz, PRESSURE_BAR_HZ))
-    extremes = []
-    for column, reduce in (("leg", np.fmin), ("ram", np.fmax)):
-        grid = np.full((times.size, int(support.max()) + 1), np.nan)
-        grid[inverse, support] = col(pressure, column)
-        send_bar_chart(rec, f"sensors/pressure/{column}_bars", times[keep], grid[keep])
-        extremes.append(reduce.reduce(grid, axis=1))  # NaN-ignoring, NaN where a sample has no reading
-    series(rec, "sensors/pressure/extremes", times, np.column_stack(extremes),
-           ["lowest leg [MPa]", "highest ram [MPa]"], rate_hz=rate_hz)
 
 
 def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
@@ -409,7 +331,7 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
         _log_shearer(rec, scn, truth["truth_shearer"], rate_hz)
         if truth.get("truth_cycles") is not None and truth["truth_cycles"].num_rows:
             _log_face_line(rec, scn, truth["truth_pans"], truth["truth_cycles"])
-        _log_sensors(rec, sensors or {}, rate_hz)
+        log_sensors(rec, sensors or {}, rate_hz)
 
 
 def run_recording_id(run_dir: Path) -> str | None:

@@ -1,0 +1,95 @@
+"""The sensor streams of a run in its Rerun recording (twin.view.recording): every channel as time series (fast
+streams averaged to the record rate), the push-ram readings, pressures and face alignment offsets as bar charts
+per support, the fault windows as 0/1 steps.
+
+Entities: `sensors/imu/{gyro,accel}`, `sensors/odometer/distance`, `sensors/mag`, `sensors/support_imu/J/...`,
+`sensors/pushram`, `sensors/pressure/{leg_bars,ram_bars,extremes}`, `alignment/{offsets_mm,sequence}`,
+`faults/KIND[_TARGET]`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.compute  # noqa: F401  (pa.compute)
+import rerun as rr
+
+from twin.view.record_rate import FULL
+from twin.view.rerun_columns import col, decimate, mean_rate, send_bar_chart, series, vec
+
+
+def log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz: float | None) -> None:
+    """Every sensor channel as time series (fast streams averaged to about rate_hz), fault windows as
+    0/1 steps, the ram readings as a bar chart per support."""
+    if "imu" in sensors:
+        imu = sensors["imu"]
+        t = col(imu, "t")
+        for name, prefix, label in (("gyro", "dtheta", "rad/s"), ("accel", "dv", "m/s^2")):
+            tt, rate = mean_rate(t, vec(imu, prefix, "xyz"), rate_hz)
+            series(rec, f"sensors/imu/{name}", tt, rate, [f"{a} [{label}]" for a in "xyz"], rate_hz=rate_hz)
+    if "odometer" in sensors:
+        odo = sensors["odometer"]
+        series(rec, "sensors/odometer/distance", col(odo, "t"), col(odo, "distance")[:, None], ["distance [m]"],
+               rate_hz=rate_hz)
+    if "mag" in sensors:
+        mag = sensors["mag"]
+        series(rec, "sensors/mag", col(mag, "t"), vec(mag, "b", "xyz") * 1e6, [f"{a} [uT]" for a in "xyz"],
+               rate_hz=rate_hz)
+    if "support_imu" in sensors:
+        units = sensors["support_imu"]
+        for j in np.unique(col(units, "support")):
+            rows = units.filter(pa.compute.equal(units.column("support"), int(j)))
+            series(rec, f"sensors/support_imu/{j}/accel", col(rows, "t"), vec(rows, "accel", "xyz"),
+                   [f"{a} [m/s^2]" for a in "xyz"], rate_hz=rate_hz)
+            series(rec, f"sensors/support_imu/{j}/gyro", col(rows, "t"), vec(rows, "gyro", "xyz"),
+                   [f"{a} [rad/s]" for a in "xyz"], rate_hz=rate_hz)
+    if "pushram" in sensors:
+        ram = sensors["pushram"]
+        t, support = col(ram, "t"), col(ram, "support")
+        times, inverse = np.unique(t, return_inverse=True)
+        grid = np.full((times.size, int(support.max()) + 1), np.nan)
+        grid[inverse, support] = col(ram, "extension")
+        keep = decimate(times, FULL if rate_hz is FULL else min(rate_hz, 0.2))
+        send_bar_chart(rec, "sensors/pushram", times[keep], grid[keep])
+    if "pressure" in sensors:
+        _log_pressures(rec, sensors["pressure"], rate_hz)
+    if "alignment" in sensors and sensors["alignment"].num_rows:
+        _log_alignment(rec, sensors["alignment"])
+    if "faults" in sensors and sensors["faults"].num_rows:
+        faults = sensors["faults"]
+        for kind, target, t0, t1 in zip(faults.column("kind").to_pylist(), col(faults, "target"),
+                                       col(faults, "t_start"), col(faults, "t_end")):
+            name = f"faults/{kind}" + (f"_{target}" if target >= 0 else "")
+            series(rec, name, np.array([0.0, t0, t1]), np.array([[0.0], [1.0], [0.0]]), [f"{name} active"])
+
+
+def _log_alignment(rec: rr.RecordingStream, alignment: pa.Table) -> None:
+    """The offsets each cycle's push applied as a bar chart per support (mm), at the cycle's start, and the face
+    alignment system's sequence number of the set applied."""
+    t, cycle, support = col(alignment, "t"), col(alignment, "cycle"), col(alignment, "support")
+    grid = np.zeros((int(cycle.max()) + 1, int(support.max()) + 1))
+    grid[cycle, support] = col(alignment, "offset") * 1e3
+    starts, sequence = np.zeros((2, grid.shape[0]))
+    starts[cycle], sequence[cycle] = t, col(alignment, "sequence")
+    send_bar_chart(rec, "alignment/offsets_mm", starts, grid)
+    series(rec, "alignment/sequence", starts, sequence[:, None], ["SequenceNumber applied"], band=False)
+
+
+PRESSURE_BAR_HZ = 0.2
+"""Rate of the pressure bar charts (one bar per support) at the default record rate."""
+
+
+def _log_pressures(rec: rr.RecordingStream, pressure: pa.Table, rate_hz: float | None) -> None:
+    """The legs' and rams' pressure readings as a bar chart per support each, and the face's lowest leg pressure and
+    highest ram pressure as time series (a support that failed to set, a leaking leg, a stalled ram stand out)."""
+    t, support = col(pressure, "t"), col(pressure, "support")
+    times, inverse = np.unique(t, return_inverse=True)
+    keep = decimate(times, FULL if rate_hz is FULL else min(rate_hz, PRESSURE_BAR_HZ))
+    extremes = []
+    for column, reduce in (("leg", np.fmin), ("ram", np.fmax)):
+        grid = np.full((times.size, int(support.max()) + 1), np.nan)
+        grid[inverse, support] = col(pressure, column)
+        send_bar_chart(rec, f"sensors/pressure/{column}_bars", times[keep], grid[keep])
+        extremes.append(reduce.reduce(grid, axis=1))  # NaN-ignoring, NaN where a sample has no reading
+    series(rec, "sensors/pressure/extremes", times, np.column_stack(extremes),
+           ["lowest leg [MPa]", "highest ram [MPa]"], rate_hz=rate_hz)
