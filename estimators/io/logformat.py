@@ -294,6 +294,10 @@ ESTIMATE = Stream(
         Column("lat", "rad", "f8", "geodetic latitude (WGS-84)"),
         Column("lon", "rad", "f8", "geodetic longitude"),
         Column("h", "m", "f8", "ellipsoidal height"),
+        *(Column(f"p_t_{a}", "m", "f8", f"position in the tangent plane t (as truth_shearer's p_t), {a}; NaN where "
+                 "the run's reference point is unknown", nan_ok=True) for a in "enu"),
+        *(Column(f"p_f_{a}", "m", "f8", f"position in the face frame F (x towards the coal wall, y along the face "
+                 f"towards the tailgate, z up), {a}; NaN where the run's face is unknown", nan_ok=True) for a in "xyz"),
         *_xyz("v_n", "m/s", "ground velocity in n", "enu"),
         *_quat("q_nb", "attitude, rotates b vectors into n"),
         *(Column(f"sd_pos_{a}", "m", "f8", f"one-sigma position error, {a}", nan_ok=True) for a in "enu"),

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimators.face.straightness import mat_ft
 from estimators.io.logformat import NONORTH_AXES
 from estimators.kalman import error_state as es
 from estimators.nav import earth
@@ -54,9 +55,20 @@ def make_solution(t_kf: np.ndarray, cfg: Config, nav: np.ndarray, sd_all: np.nda
                     nav[:, es.QUAT].copy(), sd, flags.copy(), cal.copy(), sd_cal, list(notes))
 
 
-def estimate_columns(sol: Solution) -> dict[str, np.ndarray]:
-    """A Solution as ESTIMATE columns (estimators.io.logformat)."""
+def estimate_columns(sol: Solution, origin_llh: np.ndarray | None = None,
+                     azimuth_rad: float | None = None) -> dict[str, np.ndarray]:
+    """A Solution as ESTIMATE columns (estimators.io.logformat). With the run's reference point `origin_llh` (lat,
+    lon [rad], h [m]: the tangent plane t's origin) and face azimuth [rad], the position in t and in the face frame F
+    (estimators.face.straightness.mat_ft) as well, NaN without them."""
     out = {"t": sol.t, "lat": sol.llh[:, 0], "lon": sol.llh[:, 1], "h": sol.llh[:, 2], "flags": sol.flags}
+    p_t = np.full(sol.llh.shape, np.nan)
+    p_f = np.full(sol.llh.shape, np.nan)
+    if origin_llh is not None:
+        p_t = earth.lla_to_enu(sol.llh[:, 0], sol.llh[:, 1], sol.llh[:, 2], *origin_llh)
+        if azimuth_rad is not None:
+            p_f = p_t @ mat_ft(azimuth_rad).T
+    for i, (a, x) in enumerate(zip("enu", "xyz")):
+        out[f"p_t_{a}"], out[f"p_f_{x}"] = p_t[:, i], p_f[:, i]
     for i, a in enumerate("enu"):
         out[f"v_n_{a}"] = sol.v_n[:, i]
         out[f"sd_pos_{a}"] = sol.sd[:, SD_POS.start + i]

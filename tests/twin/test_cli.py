@@ -13,6 +13,8 @@ from estimators.io.logformat import STREAMS, read_stream
 from tests.conftest import SCENARIO_DIR
 from twin.cli import main
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 TRUTH_FILES = ("truth_shearer.parquet", "truth_pans.parquet", "truth_supports.parquet", "truth_cycles.parquet")
 
 

@@ -133,6 +133,13 @@ def _calibration(sol: Solution, states_truth: dict[str, float] | None) -> dict:
             "odo_mount_deg": {a: state(CAL_MOUNT.start + i, f"odo_mount_{a}", True) for i, a in enumerate("xyz")}}
 
 
+def solution_columns(sol: Solution, scn: Scenario) -> dict[str, np.ndarray]:
+    """A shearer estimate's ESTIMATE columns in the scenario's frames: the tangent plane at its site (the truth's t)
+    and its face frame F."""
+    origin = np.array([np.radians(scn.site.lat_deg), np.radians(scn.site.lon_deg), scn.site.height_m])
+    return estimate_columns(sol, origin, np.radians(scn.face.azimuth_deg))
+
+
 def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers: int = 1,
                    record_rate_hz: float | None = RECORD_RATE_HZ) -> dict:
     """Run the scenario's shearer estimators on run_dir; writes estimates/, estimates.rrd (with `recording`, at
@@ -164,7 +171,7 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers
     cycles = _optional(run_dir, "truth_cycles") if truth is not None else None
     states_truth = true_states(scn) if truth is not None else None
     for name, sol in sols.items():
-        write_estimate(run_dir, name, estimate_columns(sol))
+        write_estimate(run_dir, name, solution_columns(sol, scn))
         if sol.cal is not None:
             write_estimate(run_dir, name, state_columns(sol), ESTIMATE_STATES)
         if sol.fusion is not None:

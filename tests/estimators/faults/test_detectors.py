@@ -23,6 +23,8 @@ from estimators.faults.detectors import (
     run_detectors,
 )
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 RATE = 10.0
 """Measurement epochs per second, as the shearer filter's aiding epochs."""
 

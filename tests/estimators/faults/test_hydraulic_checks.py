@@ -14,6 +14,8 @@ from twin.pipeline.estimate import hydraulic_layout, ram_layout
 from twin.pipeline.simulate import simulate
 from twin.sensors.streams import imu_truth, sensor_streams
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 
 def _attributions(faults: list[dict]):
     scn = capped("default", cycles=1, faults=faults)

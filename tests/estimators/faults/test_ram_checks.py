@@ -42,6 +42,8 @@ from twin.config.scenario import parse_scenario
 from twin.pipeline.estimate import ram_layout
 from twin.sensors.streams import imu_truth, sensor_streams
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 SUPPORT = 20
 
 

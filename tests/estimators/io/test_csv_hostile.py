@@ -22,6 +22,8 @@ from estimators.io.time_steps import time_steps
 from twin.cli import main
 from twin.pipeline.rundir import check_target
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 
 @pytest.fixture(scope="module")
 def exported(short_default_run, tmp_path_factory) -> Path:

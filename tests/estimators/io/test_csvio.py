@@ -25,6 +25,8 @@ from estimators.io.logformat import (
     write_stream,
 )
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 SCENARIO_TEXT = 'name = "synthetic"\nseed = 7\n'
 
 

@@ -35,7 +35,9 @@ def estimate_table(t, lat, lon, h, q, sd=np.nan, flags=0):
     """An ESTIMATE table; sd: one-sigma of every position [m], velocity and attitude [rad] axis."""
     k = t.size
     return make_table(ESTIMATE, {
-        "t": t, "lat": lat, "lon": lon, "h": h, **{f"v_n_{a}": np.zeros(k) for a in "enu"},
+        "t": t, "lat": lat, "lon": lon, "h": h, **{f"p_t_{a}": np.full(k, np.nan) for a in "enu"},
+        **{f"p_f_{a}": np.full(k, np.nan) for a in "xyz"},
+        **{f"v_n_{a}": np.zeros(k) for a in "enu"},
         **{f"q_nb_{a}": q[:, i] for i, a in enumerate("wxyz")},
         **{f"sd_{p}_{a}": np.full(k, sd) for p in ("pos", "vel", "att") for a in "enu"},
         "flags": np.broadcast_to(flags, (k,)).astype(np.int32)})

@@ -21,6 +21,8 @@ from estimators.kalman.fusion import (
     spd_inverse,
 )
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 
 def random_spd(rng, n, scales=None):
     a = rng.normal(size=(n, n))

@@ -9,6 +9,8 @@ import pytest
 
 from estimators.kalman import lapack
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 
 @nb.njit
 def _numba_linalg(a, b, v):

@@ -1,11 +1,14 @@
 """Measurement models of the SINS/odometer filters (estimators.kalman.measurements)."""
 
+import pytest
 import numpy as np
 
 from estimators.kalman import error_state as es
 from estimators.kalman.measurements import odometer_velocity
 from estimators.nav.earth import nav_rates
 from estimators.nav.rotations import euler_to_quat, quat_mat, rotvec_mat
+
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 
 def test_odometer_velocity_takes_the_turn_about_the_lever_arm_out_of_the_imu_velocity():

@@ -19,6 +19,8 @@ from tests.conftest import simulated
 from twin.pipeline.estimate import positioning_config
 from twin.sensors.streams import imu_truth, sensor_streams
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 
 @pytest.fixture(scope="module", params=["seed003", "seed003_interference"])
 def face(request):

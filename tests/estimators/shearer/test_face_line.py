@@ -1,10 +1,13 @@
 """The surveyed face line's local quadratic fit (estimators.shearer.face_line)."""
 
+import pytest
 import numpy as np
 
 from estimators.nav import earth
 from estimators.shearer import face_line
 from estimators.shearer.face_line import fit_face_line
+
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 LAT0, LON0, H0 = np.radians(34.0), np.radians(110.0), 40.0
 

@@ -12,6 +12,8 @@ from estimators.shearer.config import Config, ImuNoise
 from estimators.shearer.health import assess, innovations_inconsistent
 from estimators.shearer.solution import N_SD, SD_POS, Solution
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 CFG = Config(imu=ImuNoise(gyro_arw=1e-4, accel_vrw=1e-3, gyro_bias=1e-5, accel_bias=1e-3))
 LAT0 = np.radians(-30.0)
 

@@ -24,6 +24,8 @@ from estimators.shearer.methods import METHODS, estimate
 from estimators.shearer.solution import SD_POS, Solution
 from tests.estimators.shearer.trajectories import Errors, Face, Trajectory
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 DEG = np.pi / 180
 FACES = {
     "ns_n55": Face(azimuth_deg=0.0, lat_deg=55.0, speeds_mps=(0.5, 0.4, 0.5)),

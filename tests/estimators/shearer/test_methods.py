@@ -11,6 +11,8 @@ from estimators.shearer.config import PositioningError
 from estimators.shearer.methods import METHODS, TASKS, estimate
 from tests.estimators.shearer.test_independent_trajectories import NOISY, trajectory
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 FIELDS = ("t", "llh", "v_n", "q_nb", "sd", "flags", "cal", "sd_cal")
 
 

@@ -32,6 +32,8 @@ from twin.config.scenario import parse_scenario
 from twin.pipeline.estimate import positioning_config, true_states
 from twin.sensors.streams import imu_truth, sensor_streams
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 
 def _log(scn, result, trial=0) -> Log:
     s = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), trial)

@@ -19,6 +19,8 @@ from twin.pipeline.estimate import positioning_config
 from twin.pipeline.simulate import simulate
 from twin.sensors.streams import imu_truth, sensor_streams
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 METHODS = ("kf_cpoem", "kf_cpoem_rts", "fkf_rail")
 """The filters with position fixes after the first cut (kf, with none, drifts 5.2 cm across the face here: the
 ideal grade's gyro floor over 1,000 s passes, which the bound is not about)."""

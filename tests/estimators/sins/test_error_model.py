@@ -3,6 +3,7 @@ modes, 24 h stationary with a z-gyro bias (vertical held), and a moving solution
 
 from __future__ import annotations
 
+import pytest
 import numpy as np
 
 from estimators.kalman.error_state import DP, DV, HGT, LAT, LON, N_NAV, PHI, QUAT, VEL
@@ -21,6 +22,8 @@ from estimators.sins.error_model import (
     system_matrix,
 )
 from estimators.sins.strapdown import mechanize
+
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 
 def test_error_model_has_the_schuler_and_earth_rate_modes():

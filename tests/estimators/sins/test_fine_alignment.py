@@ -28,6 +28,8 @@ from estimators.sins.fine_alignment import METHODS, alignment_floors, fine_align
 from twin.config.imu_grades import grade
 from twin.sensors.imu_errors import apply_imu_errors
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 LAT = np.radians(34.27)
 RATE = 200.0
 YAW = np.radians(-90.0)  # 000 section 5.3: heading 270 deg

@@ -4,6 +4,7 @@ kernel's cached copy is optimised once more than the one its compiling process r
 
 from __future__ import annotations
 
+import pytest
 import os
 import subprocess
 import sys
@@ -13,6 +14,8 @@ import numpy as np
 
 from estimators.support.filters_002 import kf
 from tests.estimators.support.conftest import DT, exact_unit, model
+
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 ROOT = Path(__file__).resolve().parents[3]
 

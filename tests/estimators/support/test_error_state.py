@@ -18,6 +18,8 @@ from estimators.support.error_state import (
 from estimators.support.unit_model import euler_errors
 from tests.estimators.support.conftest import DT, exact_unit, model
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 
 def test_ours_flags_disturbed_field_and_keeps_yaw():
     """A field disturbance on the magnetometer for 20 s: flagged, and the yaw holds; the gyro bias is estimated."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import pytest
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
 
@@ -16,6 +17,8 @@ from estimators.support.unit_model import (
     wrap,
 )
 from tests.estimators.support.conftest import DT, exact_unit, model
+
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 
 def test_ukf_tracks_noise_free_truth():

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import pytest
 import numpy as np
 
 from estimators.support.tuning import tune_q
 from tests.estimators.support.conftest import DT, exact_unit, model
+
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 
 def test_gradient_descent_objective_decreases():

@@ -5,6 +5,7 @@ all of them; a sample through `longwall run` (rc 2, one line on stderr, nothing 
 
 from __future__ import annotations
 
+import pytest
 import math
 import subprocess
 import sys
@@ -13,6 +14,8 @@ import tomllib
 from tests.conftest import SCENARIO_DIR
 from twin.config.resources import check_resources, estimate_resources
 from twin.config.scenario import ScenarioError, parse_any, scenario_to_toml
+
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 FILES = ("default", "seed003_interference", "seed004_fault", "seed002_face", "seed000_alignment",
          "seed000_lever_arm", "seed000_coning", "seed000_sculling", "seed002_turntable")

@@ -20,6 +20,8 @@ from twin.face.layout import Floor, initial_pans, joint_ends, pan_axes
 from twin.face.model import FloorBand, build_face_spec, index_face_model, models_dir
 from twin.pipeline.simulate import simulate, window_sizes
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 ANGLE_TOLERANCE_DEG = 0.1
 """Overshoot of a connector's bend and roll limits tolerated at the end of an event (soft limits of a face still
 moving: 0.02-0.04 deg measured on the default face with a 0.05 m shortfall)."""

@@ -17,6 +17,8 @@ from twin.face.pushadvance import PushAdvanceController
 from twin.pipeline.simulate import simulate
 from twin.view.summary import latest_per_id
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 STOP_NOISE_M = 0.01
 OFFSET_TOLERANCE_M = 3e-3
 """A pan's extra advance against its support's offset: the push errors the stroke control keeps (floor, neighbours'

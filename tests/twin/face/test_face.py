@@ -3,6 +3,7 @@ cycle, the closed cutting path of 001 Fig. 3, and self-consistent truth."""
 
 from __future__ import annotations
 
+import pytest
 import mujoco
 import numpy as np
 
@@ -20,6 +21,8 @@ from twin.face.haulage import CUTTING
 from twin.face.layout import FaceFrame, Floor, bend_angles, initial_pans
 from twin.face.model import FloorBand, build_face_spec, index_face_model
 from twin.view.summary import latest_per_id
+
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 SHOE_TOLERANCE_M = 5e-3
 BEND_TOLERANCE_DEG = 0.05

@@ -17,6 +17,8 @@ from twin.face.layout import Floor, initial_pans
 from twin.face.simulator import FaceSimulator
 from twin.pipeline.simulate import simulate, window_sizes
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 SPEED_TOLERANCE = 0.1
 """A rod may run faster than its metered flow by catching up its lag: a drive frame (30 t) lags while it accelerates
 in the time-scaled simulation (twin.face.simulator: inertia k^2 times the real one) and then catches up by the servo's

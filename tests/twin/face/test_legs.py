@@ -16,6 +16,8 @@ from twin.face.layout import Floor, initial_pans
 from twin.face.simulator import FaceSimulator
 from twin.pipeline.simulate import simulate, window_sizes
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 
 def _legs(scn) -> LegHydraulics:
     return LegHydraulics.from_scenario(scn.supports, scn.roof)

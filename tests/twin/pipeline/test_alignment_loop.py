@@ -12,6 +12,8 @@ from twin.pipeline.alignment_loop import AlignmentLoop
 from twin.pipeline.simulate import simulate
 from twin.view.summary import ShearerStats, format_summary, twin_summary
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 
 def test_the_loop_applies_the_offsets_a_saved_run_gives():
     """Truth mode on the default face (its installed line crooked: 0.3 deg random yaw): cycle 0 is pushed as

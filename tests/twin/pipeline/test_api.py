@@ -5,14 +5,18 @@ from __future__ import annotations
 import filecmp
 import shutil
 
+import numpy as np
 import pyarrow as pa
 import pytest
 
 import twin
+from estimators.io import metrics
 from estimators.io.logformat import LogError
 from tests.conftest import SCENARIO_DIR
 from twin.cli import main
 from twin.config.scenario import ScenarioError
+
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 STREAM_FILES = ("truth_shearer.parquet", "truth_pans.parquet", "imu.parquet", "odometer.parquet",
                 "pushram.parquet", "estimates/kf_cpoem_rts.parquet", "estimates/dr.parquet")
@@ -50,6 +54,26 @@ def test_run_reads_its_metrics_streams_and_estimates(api_run):
         api_run.stream("imus")
     with pytest.raises(LogError, match="not found"):
         api_run.estimate("no_such_method")
+
+
+def test_estimates_carry_the_tangent_plane_and_face_frame_positions(api_run):
+    """An estimate's p_t less the truth's p_t (the twin's ride, interpolated) is its position error as
+    metrics.position_errors finds it from latitude, longitude and height (local ENU at the truth point: the two
+    frames differ by 1e-5 rad over the 77 m face); p_f is p_t turned into the face frame, y the distance along the
+    face from the headgate (within the snake and the shoes' offset of the truth's arc length s)."""
+    est, truth = api_run.estimate("kf_cpoem_rts"), api_run.stream("truth_shearer")
+    col = lambda table, name: table.column(name).to_numpy()
+    t = col(est, "t")
+    p_t = np.column_stack([col(est, f"p_t_{a}") for a in "enu"])
+    true_t = np.column_stack([np.interp(t, col(truth, "t"), col(truth, f"p_t_{a}")) for a in "enu"])
+    _, err = metrics.position_errors(est, truth)
+    assert 0.01 < np.abs(err).max() and np.abs(p_t - true_t - err).max() < 1e-4
+    a = np.radians(twin.load_scenario(api_run.dir / "scenario.toml").face.azimuth_deg)
+    p_f = np.column_stack([col(est, f"p_f_{a}") for a in "xyz"])
+    np.testing.assert_allclose(p_f[:, 0], p_t[:, 0] * np.cos(a) - p_t[:, 1] * np.sin(a), atol=1e-9)
+    np.testing.assert_allclose(p_f[:, 1], p_t[:, 0] * np.sin(a) + p_t[:, 1] * np.cos(a), atol=1e-9)
+    np.testing.assert_allclose(p_f[:, 2], p_t[:, 2], atol=1e-9)
+    assert np.abs(p_f[:, 1] - np.interp(t, col(truth, "t"), col(truth, "s"))).max() < 0.5
 
 
 def test_estimate_again_gives_the_same_estimates(api_run, tmp_path):

@@ -22,14 +22,15 @@ from estimators.io.logformat import (
     make_table,
     write_stream,
 )
-from estimators.shearer.solution import estimate_columns
 from tests.conftest import capped, simulated
 from twin.cli import main
 from twin.config.scenario import parse_scenario, scenario_to_toml
-from twin.pipeline.estimate import format_estimators, positioning_config, run_estimators
+from twin.pipeline.estimate import format_estimators, positioning_config, run_estimators, solution_columns
 from twin.pipeline.support_estimate import SUPPORT_ATTITUDE
 from twin.sensors.support_imu import support_imu_stream
 from twin.view.recording import ESTIMATES_RRD
+
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 METHODS = ["dr", "kf", "ckf_mag"]
 """Dead reckoning, a filter with sensor states and a federated one: every kind of estimate file but detectors."""
@@ -139,7 +140,7 @@ def test_python_api_estimates_without_truth(run_dir, tmp_path):
     assert run.estimate("kf").num_rows == run.metrics["estimators"]["kf"]["self"]["samples"]
     sol = estimators.estimate(copy, "dr", positioning_config(short_scenario()))
     table = run.estimate("dr")
-    for key, values in estimate_columns(sol).items():
+    for key, values in solution_columns(sol, short_scenario()).items():
         np.testing.assert_array_equal(values, table.column(key).to_numpy(), err_msg=key)
 
 

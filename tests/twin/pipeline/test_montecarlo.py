@@ -20,6 +20,8 @@ import pytest
 import twin.pipeline.montecarlo
 from twin.cli import default_scenario, main
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 TRIALS = 2
 METHODS = ["kf", "kf_cpoem"]
 """Two methods are enough to compare the runners; the default scenario's six would triple the time."""

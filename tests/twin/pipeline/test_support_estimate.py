@@ -34,6 +34,8 @@ from twin.sensors.support_imu import (
     support_imu_stream,
 )
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 NAME = "seed002_face"
 
 

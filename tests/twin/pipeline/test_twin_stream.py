@@ -13,6 +13,8 @@ from tests.conftest import simulated
 from twin.pipeline.twin_stream import SHEARER_STREAMS, stream_twin
 from twin.sensors.streams import imu_truth, sensor_streams
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 
 @pytest.fixture(scope="module")
 def streamed(tmp_path_factory):

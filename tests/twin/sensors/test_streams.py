@@ -18,6 +18,8 @@ from twin.sensors.faults import SHORTFALL_SPREAD
 from twin.sensors.streams import imu_truth, sensor_streams
 from twin.sensors.survey import survey_stream
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 FAULTS = [
     {"kind": "ram_offset", "t_start_s": 300.0, "t_end_s": 500.0, "target": 10, "value": 0.05},
     {"kind": "ram_dropout", "t_start_s": 600.0, "t_end_s": 650.0, "target": 20},

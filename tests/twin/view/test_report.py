@@ -22,6 +22,8 @@ from twin.cli import default_scenario, main
 from twin.view.report import REPORT_DIR, REPORT_HTML, build_report
 from twin.view.report_figures import pan_line
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 CHROMIUM = Path("/usr/bin/chromium")
 FIGURES = ("top_view.png", "errors.png", "cycle_errors.png", "detectors_fkf_rail.png", "pan_line.png",
            "pressures.png", "face_line.png")
