@@ -219,10 +219,15 @@ class ProcessTrials(TrialRunner):
         if self._pool is None:
             return
         if interrupted:  # the running trials are stopped, not waited for
+            # Python 3.14 has terminate_workers(); before it, the executor's own table of its processes, taken before
+            # shutdown(wait=False) drops it (terminating after it reached none: the workers ran their trials on,
+            # and the interpreter's exit waited for them).
+            processes = list((self._pool._processes or {}).values())
             self._pool.shutdown(wait=False, cancel_futures=True)
-            # Python 3.14 has terminate_workers(); before it, the executor's own table of its processes.
-            for process in list((self._pool._processes or {}).values()):
+            for process in processes:
                 process.terminate()
+            for process in processes:
+                process.join()
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._pool = None
 

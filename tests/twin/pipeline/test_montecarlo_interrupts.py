@@ -25,6 +25,8 @@ def test_workers_ignore_ctrl_c_and_an_interrupted_parent_stops_them_at_once(capf
     futures = [trials._pool.submit(time.sleep, 60) for _ in range(2)]
     while not all(f.running() for f in futures):
         time.sleep(0.05)
+    workers = list(trials._pool._processes.values())
     start = time.monotonic()
     trials.__exit__(KeyboardInterrupt, KeyboardInterrupt(), None)  # leaving `with trial_runner(...)` on Ctrl-C
     assert time.monotonic() - start < 10 and trials._pool is None
+    assert not any(w.is_alive() for w in workers)  # stopped, not left to sleep out their minute
