@@ -101,9 +101,10 @@ def benchmark_module(name: str) -> ModuleType:
 @pytest.fixture
 def viewer_launches(monkeypatch) -> list:
     """`longwall view` with the viewer's launch recorded instead of run (twin.view.layout.open_viewer): the list
-    each launch's argument list is appended to, the viewer found on PATH as /usr/bin/rerun."""
+    each launch's argument list is appended to, the viewer found on PATH as /usr/bin/rerun, a display there."""
     from twin.view import layout
 
+    monkeypatch.setenv("DISPLAY", ":0")
     launched: list = []
     monkeypatch.setattr(layout.subprocess, "Popen", lambda args, **kw: launched.append(args))
     monkeypatch.setattr(layout.shutil, "which", lambda name: "/usr/bin/rerun")

@@ -45,6 +45,17 @@ def record_rate(text: str) -> float | None:
         raise argparse.ArgumentTypeError(str(err)) from None
 
 
+def tcp_port(text: str) -> int:
+    """--port's value: a TCP port, 1..65535; anything else is a usage error (one line)."""
+    try:
+        port = int(text)
+    except ValueError:
+        port = 0
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a port (1..65535)")
+    return port
+
+
 RECORD_RATE_HELP = ("rate of the time series and the replay in the Rerun recording%s [Hz] "
                     f"(default {RECORD_RATE_HZ:g}; '{FULL_SPELLING}': every sample)")
 
@@ -79,6 +90,20 @@ def _version() -> str:
         return "(not installed: pip install -e .)"
 
 
+def _view(run_dir: Path, web: bool, port: int | None) -> None:
+    """`longwall view`: the native viewer, detached; with `web`, the web viewer served until Ctrl-C."""
+    from twin.view.layout import WEB_PORT, open_viewer, serve_web, stop_web
+    if not web:
+        open_viewer(run_dir)
+        return
+    server, url = serve_web(run_dir, WEB_PORT if port is None else port)
+    print(f"Rerun web viewer of {run_dir}: {url}  (Ctrl-C stops it)", flush=True)
+    try:
+        server.wait()
+    finally:
+        stop_web(server)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = Parser(prog="longwall", description="Longwall face digital twin")
     parser.add_argument("--version", action="version", version=f"longwall-twin {_version()}")
@@ -106,6 +131,9 @@ def main(argv: list[str] | None = None) -> int:
                        help=RECORD_RATE_HELP % " estimates.rrd")
     p_view = sub.add_parser("view", help="open a run's recording in the Rerun viewer")
     p_view.add_argument("run_dir", type=Path)
+    p_view.add_argument("--web", action="store_true",
+                        help="serve it to a browser on this machine instead (a machine without a display)")
+    p_view.add_argument("--port", type=tcp_port, default=None, help="the web viewer's port (default 9090)")
     p_imp = sub.add_parser("import", help="turn CSV files (one per stream, name[unit] headers) into a run directory")
     p_imp.add_argument("csv_dir", type=Path)
     p_imp.add_argument("--out", type=Path, required=True, help="run directory to create")
@@ -116,6 +144,8 @@ def main(argv: list[str] | None = None) -> int:
     p_rep.add_argument("run_dir", type=Path)
     try:
         args = parser.parse_args(argv)
+        if args.command == "view" and args.port is not None and not args.web:
+            parser.error("--port is the web viewer's: add --web")
     except SystemExit as done:  # --help, or a usage error (one line)
         return done.code
     try:
@@ -141,8 +171,7 @@ def _command(args: argparse.Namespace) -> int:
     elif args.command == "estimate":
         api.estimate(args.run_dir, args.quiet, record_rate_hz=args.record_rate)
     elif args.command == "view":
-        from twin.view.layout import open_viewer
-        open_viewer(args.run_dir)
+        _view(args.run_dir, args.web, args.port)
     elif args.command == "import":
         report = import_csv(args.csv_dir, args.out)
         print(report.summary())

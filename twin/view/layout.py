@@ -13,10 +13,16 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import shutil
+import signal
+import socket
 import subprocess
 import sys
 import tempfile
+import time
+import urllib.parse
+import urllib.request
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -71,10 +77,9 @@ def blueprint_file(run_dir: Path) -> Path:
     return path
 
 
-def open_viewer(run_dir: Path) -> None:
-    """Open `run_dir/run.rrd` and `estimates.rrd` beside it, whichever it holds (a run without truth, e.g. imported,
-    has estimates.rrd only), in the Rerun viewer (a detached `rerun` process), with the run's layout
-    (run_blueprint)."""
+def _viewer_command(run_dir: Path) -> list[str]:
+    """`rerun` with `run_dir`'s recordings (run.rrd, estimates.rrd: whichever it holds; a run without truth, e.g.
+    imported, has estimates.rrd only) and their layout (run_blueprint, as an .rbl)."""
     files = [str(p) for p in (Path(run_dir) / RUN_RRD, Path(run_dir) / ESTIMATES_RRD) if p.is_file()]
     if not files:
         raise FileNotFoundError(f"{run_dir}: no {RUN_RRD} or {ESTIMATES_RRD}; `longwall run` writes both, and "
@@ -84,5 +89,64 @@ def open_viewer(run_dir: Path) -> None:
     if exe is None:
         raise FileNotFoundError(f"rerun viewer executable not found next to {sys.executable} or on PATH "
                                 "(pip install rerun-sdk)")
-    subprocess.Popen([exe, *files, str(blueprint_file(run_dir))], start_new_session=True,
-                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return [exe, *files, str(blueprint_file(run_dir))]
+
+
+def has_display() -> bool:
+    """Whether a native viewer window can open: on Linux and the BSDs an X11 or Wayland display must be set."""
+    return not sys.platform.startswith(("linux", "freebsd", "openbsd")) or bool(
+        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def open_viewer(run_dir: Path) -> None:
+    """Open `run_dir`'s recordings in the native Rerun viewer (a detached `rerun` process) with the run's layout.
+    Without a display, FileNotFoundError says to use the web viewer (serve_web)."""
+    command = _viewer_command(run_dir)
+    if not has_display():
+        raise FileNotFoundError(f"no display to open the viewer on (DISPLAY and WAYLAND_DISPLAY are unset); "
+                                f"`longwall view {run_dir} --web` serves it to a browser instead")
+    subprocess.Popen(command, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+WEB_PORT = 9090
+"""Default port of the web viewer (Rerun's own default)."""
+WEB_START_S = 30.0
+"""How long the web viewer may take to answer before it is taken as failed."""
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def serve_web(run_dir: Path, port: int = WEB_PORT) -> tuple[subprocess.Popen, str]:
+    """Serve `run_dir`'s recordings and layout to a browser: Rerun's web viewer on http://127.0.0.1:`port` (loopback
+    only) and its data on a free gRPC port. Returns the server process (in a session of its own: stop it with
+    stop_web), once it answers, and the URL that opens the recordings; FileNotFoundError (one line) when it cannot
+    start (the port taken, say)."""
+    grpc = _free_port()
+    command = _viewer_command(run_dir)
+    server = subprocess.Popen([command[0], "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(port),
+                               "--port", str(grpc), *command[1:]],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    url = f"http://127.0.0.1:{port}/?url={urllib.parse.quote(f'rerun+http://127.0.0.1:{grpc}/proxy', safe='')}"
+    deadline = time.monotonic() + WEB_START_S
+    while server.poll() is None and time.monotonic() < deadline:
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=1.0):
+                return server, url
+        except OSError:
+            time.sleep(0.2)
+    stop_web(server)
+    raise FileNotFoundError(f"the Rerun web viewer did not start on 127.0.0.1:{port} (is the port in use? "
+                            f"choose another with --port)")
+
+
+def stop_web(server: subprocess.Popen) -> None:
+    """Stop a serve_web server: its whole process group (the `rerun` launcher runs the viewer as a child)."""
+    try:
+        os.killpg(server.pid, signal.SIGTERM)
+    except ProcessLookupError:
+        pass
+    server.wait()
