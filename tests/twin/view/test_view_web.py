@@ -32,7 +32,9 @@ def test_the_web_viewer_answers_on_localhost_and_stops_on_ctrl_c(run_dir):
     port = _free_port()
     view = subprocess.Popen([sys.executable, "-c", "import sys; from twin.cli import main; sys.exit(main(sys.argv[1:]))",
                              "view", str(run_dir), "--web", "--port", str(port)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as in a terminal:
+    # a suite started in the background (nohup, &) hands its children SIGINT ignored, and Python keeps it so
     try:
         line = view.stdout.readline()  # printed once the viewer answers
         assert f"http://127.0.0.1:{port}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A" in line, (line, view.stderr.read())
