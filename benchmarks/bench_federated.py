@@ -50,7 +50,7 @@ def run_trials(name: str, trials: int) -> tuple[dict[str, np.ndarray], dict[str,
     for trial in range(trials):
         s = sensor_streams(scn, result.tables, ideal, trial)
         log = log_from_columns(s["imu"], s["odometer"], s["survey"], mag=s["mag"])
-        n_imu += log.imu_t.size if trial > 0 or trials == 1 else 0
+        n_imu += log.imu.size if trial > 0 or trials == 1 else 0
         prep = prepare(log, cfg)
         for m in METHODS:
             t0 = time.perf_counter()

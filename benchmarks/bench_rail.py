@@ -135,7 +135,7 @@ def figures(trials: int = 20) -> dict:
         cells = [f"{rmse[m][k, i]:8.3f} ({TABLE2[m][i][k]:5.3f})" if k < 5 else f"{rmse[m][k, i]:8.3f}"
                  for m in ("kf", "fkf_rail") for i in (0, 1)]
         print(f"{k + 1:5d}  {cells[0]:>18s} {cells[1]:>18s}   {cells[2]:>18s} {cells[3]:>18s}")
-    n_imu = log.imu_t.size
+    n_imu = log.imu.size
     print(f"throughput: INS/odometer {n_imu / t_kf:,.0f}, federated rail filter {n_imu / t_rail:,.0f} IMU samples/s")
 
     fault = scn_fault.faults[0]
@@ -218,7 +218,7 @@ def _long_run() -> None:
               f"{bool(np.isfinite(sol.llh).all())}; last 5 cycles' worst RMSE E {r[-5:, 0].max():.2f}, "
               f"N {r[-5:, 1].max():.2f} m against the first 5's E {r[:5, 0].max():.2f}, N {r[:5, 1].max():.2f}")
     alarms = fsprt_alarms(sols["fkf_rail"].detectors, cfg.detector.t_on)
-    print(f"FSPRT alarms (fault-free): {alarms.size}; rail filter {log.imu_t.size / t_rail:,.0f} IMU samples/s; "
+    print(f"FSPRT alarms (fault-free): {alarms.size}; rail filter {log.imu.size / t_rail:,.0f} IMU samples/s; "
           f"total {time.perf_counter() - t_start:.0f} s")
 
 

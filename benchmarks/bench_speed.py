@@ -243,9 +243,13 @@ def imu_arrays(imu: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def head(log, seconds: float):
     """The first `seconds` of a positioning log (every timed stream cut at imu_t[0] + seconds)."""
-    t_end = log.imu_t[0] + seconds
-    cut = {}
-    for stamp, names in (("imu_t", ("imu_t", "dtheta", "dv")), ("odo_t", ("odo_t", "odo_distance", "odo_direction")),
+    from estimators.io.log import ImuArrays
+
+    t, dtheta, dv = log.imu.read(0, log.imu.size)
+    t_end = t[0] + seconds
+    keep = t <= t_end
+    cut = {"imu": ImuArrays(t[keep], dtheta[keep], dv[keep])}
+    for stamp, names in (("odo_t", ("odo_t", "odo_distance", "odo_direction")),
                          ("ram_t", ("ram_t", "ram_support", "ram_extension", "ram_valid")),
                          ("mag_t", ("mag_t", "mag_b"))):
         keep = getattr(log, stamp) <= t_end
@@ -297,7 +301,7 @@ def stage_filter(scn, streams, pyins_seconds: float, have_pyins: bool) -> dict:
 
     log = log_of(streams)
     cfg = positioning_config(scn)
-    out: dict = {"samples": int(log.imu_t.size), "hours": float(log.imu_t[-1] - log.imu_t[0]) / 3600}
+    out: dict = {"samples": int(log.imu.size), "hours": float(log.imu_t[-1] - log.imu_t[0]) / 3600}
     try:  # compile (numba's cache) outside the timing, on the first two minutes
         estimate(head(log, 120.0), cfg, ("kf_cpoem_rts",))
         out["warm"] = True

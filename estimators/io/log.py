@@ -1,5 +1,9 @@
 """The sensor log as the estimators read it: the streams of a run directory (estimators.io.logformat) as arrays,
-loaded and checked, or put together from stream columns."""
+loaded and checked, or put together from stream columns.
+
+The IMU stream, the log's largest (20 times the filter's epochs), is not held whole: the estimators read it a
+window of rows at a time (`ImuRows`), from memory or from the run directory's Parquet file row group by row group,
+so their memory does not grow with the length of the log."""
 
 from __future__ import annotations
 
@@ -7,6 +11,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 from estimators.io.logformat import (
     FACE_SURVEY,
@@ -16,17 +22,113 @@ from estimators.io.logformat import (
     PUSHRAM,
     SURVEY,
     LogError,
+    check_table,
+    read_schema,
     read_stream,
 )
+
+IMU_COLUMNS = ("t", *(f"dtheta_{a}" for a in "xyz"), *(f"dv_{a}" for a in "xyz"))
+"""The IMU stream's columns, in the order ImuRows.read returns them."""
+
+PERIOD_ROWS = 1 << 17
+"""Rows from the start over which ImuRows.period takes the median sample interval."""
+
+
+class ImuRows:
+    """The IMU stream's rows (logformat IMU), read a window at a time: `size` rows, `read(i0, i1)` rows i0..i1-1 as
+    (t (K,), dtheta (K, 3) [rad], dv (K, 3) [m/s]), `period` the median sample interval [s] over the first
+    PERIOD_ROWS rows."""
+
+    size: int
+
+    def read(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def period(self) -> float:
+        return float(np.median(np.diff(self.read(0, min(self.size, PERIOD_ROWS))[0])))
+
+    def times_at(self, rows: np.ndarray) -> np.ndarray:
+        """The times of the given rows (increasing), read a window of PERIOD_ROWS at a time."""
+        out = np.empty(rows.size)
+        for i0 in range(0, self.size, PERIOD_ROWS):
+            k0, k1 = np.searchsorted(rows, [i0, i0 + PERIOD_ROWS])
+            if k1 > k0:
+                out[k0:k1] = self.read(i0, i0 + PERIOD_ROWS)[0][rows[k0:k1] - i0]
+        return out
+
+
+class ImuArrays(ImuRows):
+    """IMU rows held in memory."""
+
+    def __init__(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray):
+        self.t, self.dtheta, self.dv = t, dtheta, dv
+        self.size = t.size
+
+    def read(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return self.t[i0:i1], self.dtheta[i0:i1], self.dv[i0:i1]
+
+
+class ImuFile(ImuRows):
+    """IMU rows read from a stream file row group by row group (the last group read is kept for the next window).
+    `open` checks the whole file a row group at a time (logformat.check_table, each group with the row before it),
+    so a window read later is known good."""
+
+    def __init__(self, path: Path, starts: np.ndarray):
+        self.path, self._starts = Path(path), starts  # first row of each row group, then the row count
+        self.size = int(starts[-1])
+        self._cached: tuple[int, np.ndarray] | None = None
+
+    @classmethod
+    def open(cls, path: Path) -> ImuFile:
+        try:
+            parquet = pq.ParquetFile(path)
+        except (pa.ArrowException, OSError, ValueError) as err:
+            raise LogError(f"{path}: not a readable Parquet file ({' '.join(str(err).split())})") from None
+        counts = [parquet.metadata.row_group(g).num_rows for g in range(parquet.num_row_groups)]
+        starts = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)])
+        before = None
+        for g in range(parquet.num_row_groups):
+            table = parquet.read_row_group(g)
+            check_table(IMU, table, str(path), before, first_row=int(starts[g]))
+            if table.num_rows:
+                before = {c: table.column(c)[-1].as_py() for c in IMU_COLUMNS}
+        if parquet.num_row_groups == 0:
+            check_table(IMU, parquet.schema_arrow.empty_table(), str(path))
+        return cls(path, starts)
+
+    def _group(self, g: int) -> np.ndarray:
+        if self._cached is None or self._cached[0] != g:
+            table = pq.ParquetFile(self.path).read_row_group(g, columns=list(IMU_COLUMNS))
+            self._cached = (g, np.column_stack([table.column(c).to_numpy() for c in IMU_COLUMNS]))
+        return self._cached[1]
+
+    def times_at(self, rows: np.ndarray) -> np.ndarray:
+        """The times of the given rows (increasing), reading only the time column."""
+        out = np.empty(rows.size)
+        parquet = pq.ParquetFile(self.path)
+        for g in range(self._starts.size - 1):
+            k0, k1 = np.searchsorted(rows, self._starts[g:g + 2])
+            if k1 > k0:
+                t = parquet.read_row_group(g, columns=["t"]).column("t").to_numpy()
+                out[k0:k1] = t[rows[k0:k1] - self._starts[g]]
+        return out
+
+    def read(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        i0, i1 = max(i0, 0), min(i1, self.size)
+        if i1 <= i0:
+            return np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))
+        g0 = int(np.searchsorted(self._starts, i0, side="right")) - 1
+        g1 = int(np.searchsorted(self._starts, i1, side="left"))
+        rows = np.concatenate([self._group(g) for g in range(g0, g1)]) if g1 - g0 > 1 else self._group(g0)
+        rows = rows[i0 - self._starts[g0]:i1 - self._starts[g0]]
+        return np.ascontiguousarray(rows[:, 0]), np.ascontiguousarray(rows[:, 1:4]), np.ascontiguousarray(rows[:, 4:7])
 
 
 @dataclass(frozen=True)
 class Log:
-    """The streams the positioning reads (columns as in estimators.io.logformat)."""
+    """The streams the positioning reads (columns as in estimators.io.logformat); the IMU's as ImuRows."""
 
-    imu_t: np.ndarray
-    dtheta: np.ndarray
-    dv: np.ndarray
+    imu: ImuRows
     odo_t: np.ndarray
     odo_distance: np.ndarray
     odo_direction: np.ndarray
@@ -44,9 +146,25 @@ class Log:
     face_llh: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     face_sd: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # horizontal, vertical [m]
 
+    @property
+    def imu_t(self) -> np.ndarray:
+        """The IMU's times, all of them (read whole: for small logs)."""
+        return self.imu.read(0, self.imu.size)[0]
+
+    @property
+    def dtheta(self) -> np.ndarray:
+        """The IMU's angle increments, all of them (read whole: for small logs)."""
+        return self.imu.read(0, self.imu.size)[1]
+
+    @property
+    def dv(self) -> np.ndarray:
+        """The IMU's velocity increments, all of them (read whole: for small logs)."""
+        return self.imu.read(0, self.imu.size)[2]
+
 
 def log_from_columns(imu, odometer, survey, pushram=None, mag=None, face_survey=None) -> Log:
-    """A Log from stream columns (pyarrow tables or mappings of arrays, logformat column names)."""
+    """A Log from stream columns (pyarrow tables or mappings of arrays, logformat column names; the IMU's may be
+    ImuRows)."""
     def col(table, name):
         c = table[name] if isinstance(table, dict) else table.column(name)
         return np.asarray(c if isinstance(c, np.ndarray) else c.to_numpy())
@@ -61,8 +179,10 @@ def log_from_columns(imu, odometer, survey, pushram=None, mag=None, face_survey=
         optional.update(face_u=col(face_survey, "u"),
                         face_llh=np.column_stack([col(face_survey, k) for k in ("lat", "lon", "h")]),
                         face_sd=np.column_stack([col(face_survey, k) for k in ("sd_horizontal", "sd_vertical")]))
-    return Log(imu_t=col(imu, "t"), dtheta=np.column_stack([col(imu, f"dtheta_{a}") for a in "xyz"]),
-               dv=np.column_stack([col(imu, f"dv_{a}") for a in "xyz"]), odo_t=col(odometer, "t"),
+    if not isinstance(imu, ImuRows):
+        imu = ImuArrays(col(imu, "t"), np.column_stack([col(imu, f"dtheta_{a}") for a in "xyz"]),
+                        np.column_stack([col(imu, f"dv_{a}") for a in "xyz"]))
+    return Log(imu=imu, odo_t=col(odometer, "t"),
                odo_distance=col(odometer, "distance"), odo_direction=col(odometer, "direction"),
                survey_t=col(survey, "t"), survey_llh=np.column_stack([col(survey, k) for k in ("lat", "lon", "h")]),
                survey_yaw=col(survey, "yaw"),
@@ -77,18 +197,27 @@ MIN_ROWS = {IMU.name: (2, "two IMU samples give the first sample interval"),
 
 def load_log(run_dir: Path) -> Log:
     """The streams of a run directory the positioning reads (push rams, magnetometer and face survey optional),
-    checked on load."""
+    checked on load; the IMU's stay on disk (ImuFile)."""
     def optional(stream):
         return read_stream(run_dir, stream) if (Path(run_dir) / stream.filename).is_file() else None
 
+    def enough(stream, rows):
+        least, why = MIN_ROWS[stream.name]
+        if rows < least:
+            raise LogError(f"{Path(run_dir) / stream.filename}: {rows} rows, the positioning needs at least "
+                           f"{least} ({why}); import a recording that has them")
+
     def required(stream):
         table = read_stream(run_dir, stream)
-        least, why = MIN_ROWS[stream.name]
-        if table.num_rows < least:
-            raise LogError(f"{Path(run_dir) / stream.filename}: {table.num_rows} rows, the positioning needs at least "
-                           f"{least} ({why}); import a recording that has them")
+        enough(stream, table.num_rows)
         return table
 
-    return log_from_columns(required(IMU), required(ODOMETER), required(SURVEY),
+    path = Path(run_dir) / IMU.filename
+    if not path.is_file():
+        raise LogError(f"{path}: stream file not found")
+    read_schema(path)  # a damaged file: one line with the remedy
+    imu = ImuFile.open(path)
+    enough(IMU, imu.size)
+    return log_from_columns(imu, required(ODOMETER), required(SURVEY),
                             optional(PUSHRAM), optional(MAG), optional(FACE_SURVEY))
 

@@ -474,10 +474,11 @@ def stream_writer(path: Path, schema: pa.Schema) -> pq.ParquetWriter:
                             use_byte_stream_split=floats or False)
 
 
-def check_table(stream: Stream, table: pa.Table, source: str, before: dict[str, float] | None = None) -> None:
+def check_table(stream: Stream, table: pa.Table, source: str, before: dict[str, float] | None = None,
+                first_row: int = 0) -> None:
     """Raise LogError naming the first problem: missing column, wrong unit or type, NaN, time order, a value
     outside the physical limits of estimators.io.plausible. `before` holds the row before the table's first
-    (a log checked in blocks)."""
+    and `first_row` the file's row number of the table's first (a log checked in blocks)."""
     names = set(table.column_names)
     for c in stream.columns:
         if c.name not in names:
@@ -493,20 +494,22 @@ def check_table(stream: Stream, table: pa.Table, source: str, before: dict[str, 
         if values.dtype.kind == "f" and not c.nan_ok:
             bad = np.flatnonzero(~np.isfinite(values))
             if bad.size:
-                raise LogError(f"{source}: column '{c.name}' row {bad[0]}: not a finite number")
+                raise LogError(f"{source}: column '{c.name}' row {first_row + bad[0]}: not a finite number")
     t = table.column("t").to_numpy() if "t" in names and stream.time_order != "none" else None
+    row0 = first_row + 1  # the table row of dt[0]'s later end
     if t is not None and before is not None and "t" in before:
         t = np.concatenate(([before["t"]], t))
+        row0 -= 1
     if t is not None and t.size > 1:
         dt = np.diff(t)
         bad = np.flatnonzero(dt <= 0 if stream.time_order == "increasing" else dt < 0)
         if bad.size:
-            raise LogError(f"{source}: column 't' row {bad[0] + 1}: time goes from {t[bad[0]]!r} to "
+            raise LogError(f"{source}: column 't' row {row0 + bad[0]}: time goes from {t[bad[0]]!r} to "
                            f"{t[bad[0] + 1]!r} (must be {stream.time_order})")
     found = first_implausible(stream.name, table, before)
     if found is not None:
         row, column, what = found
-        raise LogError(f"{source}: column '{column}' row {row}: {what}")
+        raise LogError(f"{source}: column '{column}' row {first_row + row}: {what}")
 
 
 def read_stream(run_dir: Path, stream: Stream, columns: tuple[str, ...] | None = None) -> pa.Table:

@@ -50,7 +50,8 @@ class FederatedRun:
         self.prep, self.cfg = prep, cfg
         n = prep.t_kf.size
         mag_b, params_m = mag if mag is not None else (np.full((n, 3), np.nan), np.zeros(fk.N_MAG_PARAMS))
-        self.sensors = fk.Sensors(prep.steps, prep.t_mech, prep.phi_b, prep.dv_b, prep.odo, prep.mode, mag_b)
+        no_mech = np.zeros((0, 3))  # each pass's increments are given to it (run_pass)
+        self.sensors = fk.Sensors(prep.steps, 0, np.zeros(0), no_mech, no_mech, prep.odo, prep.mode, mag_b)
         self.tuning = fk.Tuning(process_noise_psd(cfg), kf_params(cfg), params_m,
                                 det_params if det_params is not None else np.zeros(rf.N_DET_PARAMS))
         self.out = fk.EpochOutput(np.zeros((n, es.N_NAV)), np.zeros((n, es.N_CAL)), np.zeros((n, es.N_STATES)),
@@ -82,9 +83,12 @@ class FederatedRun:
         if mag:
             fallbacks.append(("without any position fix or the magnetometer", (~everything, False)))
 
+        mech = self.prep.mech(a, b)
+        with_mech = self.sensors._replace(mech_epoch=a, t_mech=mech.t, phi_b=mech.phi_b, dv_b=mech.dv_b)
+
         def run(arg):
             keep, use_mag = arg
-            sensors = self.sensors
+            sensors = with_mech
             if not use_mag:
                 mag_b = sensors.mag_b.copy()
                 mag_b[a + 1:b + 1] = np.nan

@@ -86,11 +86,13 @@ SUB_INVALID = 16  # a sub-filter's covariance was unusable at the fusion (weight
 
 
 class Sensors(NamedTuple):
-    """The log as run_afkf reads it: the mechanization increments (steps per filter epoch), and per epoch j the
-    odometer distance and mode (estimators.shearer.odometer_filter.run_filter) and mag_b (3,) the calibrated mean
-    magnetometer reading over the epoch (NaN where none)."""
+    """The log as run_afkf reads it: the mechanization increments (steps per filter epoch; row 0 of t_mech at epoch
+    mech_epoch, estimators.shearer.prepare.Mech), and per epoch j the odometer distance and mode
+    (estimators.shearer.odometer_filter.run_filter) and mag_b (3,) the calibrated mean magnetometer reading over the
+    epoch (NaN where none)."""
 
     steps: int
+    mech_epoch: int
     t_mech: np.ndarray
     phi_b: np.ndarray
     dv_b: np.ndarray
@@ -221,7 +223,7 @@ def run_afkf(mode, j0, j1, sensors, fixes, results, tuning, state, out):
     (EpochOutput; sub_delta before the reset). The rail kinematics model's fixes (rail_fix_update.RailFixes) go to
     sub-filter 2 (in the centralized mode to the one filter) through the detectors, their statistics and whether
     each was applied into `results` (rail_fix_update.RailResults)."""
-    steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b = sensors
+    steps, mech_epoch, t_mech, phi_b, dv_b, odo_dist, odo_mode, mag_b = sensors
     q_psd, params, mag_params, det_params = tuning
     nav, cal, p_sub, beta, nominal, r_buf, r_count, det = state
     r_vel = np.diag(np.array([params[P_R_LATERAL], params[P_R_ALONG], params[P_R_VERTICAL]]) ** 2)
@@ -244,7 +246,7 @@ def run_afkf(mode, j0, j1, sensors, fixes, results, tuning, state, out):
                 and k_fix > rejected_until):
             take_snapshot(snaps, snap_count % N_BACK, j, k_fix, state)
             snap_count += 1
-        t_span, f_sum, disp, w_sum = mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, (j - 1) * steps, steps)
+        t_span, f_sum, disp, w_sum = mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, (j - 1 - mech_epoch) * steps, steps)
         phi, qd = transition(nav, nominal, f_sum, t_span, q_psd, params[P_TAU_FORCE])
         p_od_pred = phi @ p_od @ phi.T + (_share(qd, beta[SUB_ODOMETER]) if federated else qd)
         p_od[:, :] = p_od_pred

@@ -29,7 +29,7 @@ from estimators.kalman.rts import rts_backward
 from estimators.nav import earth
 from estimators.nav.rotations import quat_rotate, quat_to_mat, rotvec_to_quat
 from estimators.shearer import odometer_filter as kf
-from estimators.shearer.config import Config
+from estimators.shearer.config import Config, PositioningError
 from estimators.shearer.cpoem import Points
 from estimators.shearer.health import (
     filter_lost,
@@ -40,9 +40,9 @@ from estimators.shearer.health import (
     snapshot,
 )
 from estimators.shearer.position_fixes import Fixes, fixes_for, segment_points
-from estimators.shearer.prepare import Prepared, body_increments
+from estimators.shearer.prepare import Mech, Prepared
 from estimators.shearer.solution import N_SD, Solution, make_solution
-from estimators.sins.strapdown import mechanize
+from estimators.sins.strapdown import Mechanization
 
 
 def initial_covariance(cfg: Config, log: Log, q_nb0: np.ndarray) -> np.ndarray:
@@ -145,10 +145,10 @@ class _Segment(NamedTuple):
     nis: np.ndarray
 
 
-def _run_segment(prep: Prepared, a: int, b: int, fixes: Fixes, q_psd: np.ndarray, params: np.ndarray,
+def _run_segment(prep: Prepared, mech: Mech, a: int, b: int, fixes: Fixes, q_psd: np.ndarray, params: np.ndarray,
                  nav: np.ndarray, cal: np.ndarray, p: np.ndarray, nominal: np.ndarray) -> _Segment:
-    """The filter kernel (odometer_filter.run_filter) over epochs (a, b] with `fixes`, from (nav, cal, p,
-    nominal), which it leaves at epoch b."""
+    """The filter kernel (odometer_filter.run_filter) over epochs (a, b] (their increments `mech`) with `fixes`,
+    from (nav, cal, p, nominal), which it leaves at epoch b."""
     m = b - a + 1
     seg = _Segment(np.zeros((m, es.N_STATES)), np.zeros((m, es.N_STATES, es.N_STATES)),
                    np.zeros((m, es.N_STATES, es.N_STATES)), np.zeros((m, es.N_STATES, es.N_STATES)),
@@ -156,8 +156,7 @@ def _run_segment(prep: Prepared, a: int, b: int, fixes: Fixes, q_psd: np.ndarray
                    fixes.gate, np.full(fixes.epoch.size, np.nan))
     seg.p_post[0], seg.p_pred[0], seg.phi[0] = p, p, np.eye(es.N_STATES)
     seg.nav[0], seg.cal[0] = nav, cal
-    kf.run_filter(0, m - 1, prep.steps, prep.t_mech[a * prep.steps:], prep.phi_b[a * prep.steps:],
-                  prep.dv_b[a * prep.steps:], prep.odo[a:b + 1], prep.mode[a:b + 1], seg.fix_row, fixes.llh,
+    kf.run_filter(0, m - 1, prep.steps, mech.t, mech.phi_b, mech.dv_b, prep.odo[a:b + 1], prep.mode[a:b + 1], seg.fix_row, fixes.llh,
                   fixes.r, fixes.gate, q_psd, params, nav, cal, p, nominal, seg.nav, seg.cal, seg.x_post, seg.p_post,
                   seg.p_pred, seg.phi, seg.flags, seg.nis, np.full((m, 3), np.nan))
     return seg
@@ -169,7 +168,8 @@ def _checked_segment(prep: Prepared, cfg: Config, a: int, b: int, fixes: Fixes, 
     loses track runs again from its start with fewer fixes; the epochs of the fixes it left out are flagged
     FLAG_SKIPPED. Returns the segment kept and its fixes."""
     saved = snapshot(state)
-    seg, kept = run_checked(lambda keep: _run_segment(prep, a, b, fixes.take(keep), q_psd, params, *state),
+    mech = prep.mech(a, b)
+    seg, kept = run_checked(lambda keep: _run_segment(prep, mech, a, b, fixes.take(keep), q_psd, params, *state),
                             lambda s: filter_lost(prep.t_kf[a:b + 1], s.nav, _sd(s.p_post), cfg)
                             | innovations_inconsistent(s.nis, s.gate, s.fix_row, b - a + 1),
                             lambda: restore(state, saved),
@@ -255,17 +255,20 @@ def rts_offline(prep: Prepared, cfg: Config, fwd: _Forward, notes: list[str]) ->
 
 def dead_reckoning(log: Log, cfg: Config, prep: Prepared, cal: np.ndarray | None = None) -> Solution:
     """001's traditional method: the free SINS attitude carries the odometer distance along body y (with `cal`,
-    the biases, odometer mounting and scale of a filter are applied first)."""
+    the biases, odometer mounting and scale of a filter are applied first). The SINS runs pass by pass
+    (estimators.sins.strapdown.Mechanization)."""
     gyro = cal[es.CAL_GYRO] if cal is not None else np.zeros(3)
     accel = cal[es.CAL_ACCEL] if cal is not None else np.zeros(3)
-    dt = 1.0 / (1.0 / np.median(np.diff(log.imu_t)))
-    t = np.concatenate([[log.imu_t[0] - dt], log.imu_t])
-    zero = np.zeros((1, 3))
-    lat0, lon0, h0 = prep.nav0[es.LAT], prep.nav0[es.LON], prep.nav0[es.HGT]
-    dtheta_b, dv_b = body_increments(log, cfg)
-    sins = mechanize(t, np.concatenate([zero, dtheta_b - gyro * dt]), np.concatenate([zero, dv_b - accel * dt]),
-                     lat0, lon0, h0, np.zeros(3), prep.nav0[es.QUAT], cfg.n_samples)
-    q = sins.q_nb[:: prep.steps][: prep.t_kf.size]
+    dt = 1.0 / (1.0 / prep.imu_dt)
+    sins = Mechanization(prep.nav0[es.LAT], prep.nav0[es.LON], prep.nav0[es.HGT], np.zeros(3), prep.nav0[es.QUAT],
+                         cfg.n_samples)
+    q = np.empty((prep.t_kf.size, 4))
+    for a, b in prep.segments:
+        t, dtheta_b, dv_b, first_row = prep.epoch_increments(a, b)
+        try:
+            q[a:b + 1] = sins.run(t, dtheta_b - gyro * dt, dv_b - accel * dt, first_row).q_nb[::prep.steps]
+        except ValueError as err:
+            raise PositioningError(f"imu: {err}") from None
     mount = cal[es.CAL_MOUNT] if cal is not None else np.zeros(3)
     scale = cal[es.CAL_SCALE] if cal is not None else 0.0
     y_m_b = quat_to_mat(rotvec_to_quat(mount))[:, 1]  # odometer axis in b (C_m^b as a rotation vector)
@@ -277,4 +280,3 @@ def dead_reckoning(log: Log, cfg: Config, prep: Prepared, cal: np.ndarray | None
     v = np.concatenate([np.zeros((1, 3)), step_n / np.diff(prep.t_kf)[:, None]])
     nan = np.full((prep.t_kf.size, N_SD), np.nan)
     return Solution(prep.t_kf, llh, v, q, nan, np.zeros(prep.t_kf.size, np.int32))
-

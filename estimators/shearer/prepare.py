@@ -7,6 +7,9 @@ longer than STRAIGHT_CUT_FRACTION of the face (the distance between the two surv
 ends when the shearer stands after it. The first cycle has no CPOEM points; its face ends are surveyed (the survey
 stream). The start pose comes from the survey (position, heading) and from levelling the accelerometers while the
 shearer stands before the first cut.
+
+The IMU increments are not held whole: `Prepared.mech(a, b)` compensates a pass's rows (epochs a..b) when a filter
+runs it, read from the log's ImuRows, so the estimators' memory holds a pass of increments, not the run's.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimators.io.log import Log
+from estimators.io.log import ImuRows, Log
 from estimators.kalman import error_state as es
 from estimators.nav import earth
 from estimators.nav.rotations import (
@@ -92,21 +95,22 @@ def straight_cuts(u: np.ndarray, mode: np.ndarray, face_travel: float) -> list[t
     return runs
 
 
-def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndarray, steps: int,
-                   cfg: Config) -> tuple[np.ndarray, np.ndarray, list[str]]:
+def _initial_state(log: Log, prep: Prepared, cfg: Config) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Navigation vector at t[0] (IMU point) and the start calibration, from the stand before the first cut:
     survey position and heading, level from the accelerometers (coarse), then the fine alignment of 000
     (estimators.sins.fine_alignment, EKF) over the stand, whose mean attitude over its last seconds and bias estimates
     start the filter. A stand the fine alignment finds moving is levelled only (noted)."""
     notes = []
-    first_move = np.flatnonzero(mode == MODE_MOVING)
-    stand_end = (first_move[0] - 1) * steps if first_move.size else dv_b.shape[0]
-    dt = t_mech[1] - t_mech[0]
+    steps = prep.steps
+    first_move = np.flatnonzero(prep.mode == MODE_MOVING)
+    stand_end = (first_move[0] - 1) * steps if first_move.size else prep.n_kf * steps
+    dt = prep.mech_dt
     n = int(min(stand_end, cfg.level_window_s / dt))
     if n < max(5, int(1.0 / dt)):
         raise PositioningError(f"odometer: the shearer moves {n * dt:.2f} s after the start; levelling needs at "
                                f"least 1 s of standing before the first cut")
-    f_b = dv_b[:n].sum(axis=0) / (n * dt)
+    stand = prep.mech(0, -(-n // steps))
+    f_b = stand.dv_b[:n].sum(axis=0) / (n * dt)
     pitch = np.arcsin(np.clip(f_b[1] / np.linalg.norm(f_b), -1, 1))
     roll = np.arctan2(-f_b[0], f_b[2])
     if not np.isfinite(log.survey_yaw[0]):
@@ -114,10 +118,10 @@ def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndar
     q_nb = euler_to_quat(pitch, roll, log.survey_yaw[0])
     lat, lon, h = log.survey_llh[0]
     cal = np.zeros(es.N_CAL)
-    imu_dt = float(np.median(np.diff(log.imu_t)))
+    imu_dt = prep.imu_dt
     n_imu = round(n * dt / imu_dt)
-    dtheta_s, dv_s = body_increments(log, cfg)
-    res = fine_align(dtheta_s[:n_imu], dv_s[:n_imu], imu_dt, lat, q_nb, (cfg.imu.gyro_arw, cfg.imu.accel_vrw),
+    _, dtheta_s, dv_s = prep.increments(0, n_imu)
+    res = fine_align(dtheta_s[1:], dv_s[1:], imu_dt, lat, q_nb, (cfg.imu.gyro_arw, cfg.imu.accel_vrw),
                      np.array([cfg.sd_level0, cfg.sd_level0, log.survey_sd[0, 2]]), "ekf", h=h,
                      gyro_bias_sigma=cfg.imu.gyro_bias, accel_bias_sigma=cfg.imu.accel_bias,
                      velocity_sigma=cfg.r_zupt, rate_sigma=cfg.r_zaru, on_motion="flag")
@@ -140,13 +144,26 @@ def _initial_state(log: Log, t_mech: np.ndarray, dv_b: np.ndarray, mode: np.ndar
     return nav, cal, notes
 
 
-@dataclass
-class Prepared:
-    """The log resampled for the filters: mechanization increments, filter epochs, odometer, cuts, segments."""
+@dataclass(frozen=True)
+class Mech:
+    """The mechanization increments of epochs a..b (Prepared.mech): update times t (U + 1,), row 0 at epoch a, and
+    the coning/sculling-compensated rotation vectors phi_b and velocity increments dv_b (U, 3) over
+    (t[u], t[u + 1]], U = (b - a) * steps."""
 
-    t_mech: np.ndarray
+    t: np.ndarray
     phi_b: np.ndarray
     dv_b: np.ndarray
+
+
+@dataclass
+class Prepared:
+    """The log resampled for the filters: filter epochs, odometer, cuts, segments, start state, and the IMU
+    increments of any epochs on demand (`mech`, `increments`)."""
+
+    imu: ImuRows
+    mat_bs: np.ndarray
+    imu_dt: float
+    n_samples: int
     steps: int
     t_kf: np.ndarray
     odo: np.ndarray
@@ -159,52 +176,81 @@ class Prepared:
     cal0: np.ndarray
     notes: list[str]
 
+    @property
+    def n_kf(self) -> int:
+        """The last filter epoch (epochs 0..n_kf)."""
+        return self.t_kf.size - 1
 
-def body_increments(log: Log, cfg: Config) -> tuple[np.ndarray, np.ndarray]:
-    """The IMU increments turned from the sensor axes into b with the calibrated mounting."""
-    mat_bs = euler_to_mat(*cfg.imu_mounting_rad)
-    return log.dtheta @ mat_bs.T, log.dv @ mat_bs.T
+    @property
+    def mech_dt(self) -> float:
+        """The first mechanization interval [s]."""
+        t = self.increments(0, self.n_samples)[0]
+        return float(t[-1] - t[0])
+
+    def increments(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The IMU increments (row k over (t[k-1], t[k]]) of samples i0+1..i1 turned into b, with row 0 at sample i0
+        (its increments unused): sample 0 is the start, a period before the log's first row, with zero increments."""
+        t, dtheta, dv = self.imu.read(max(i0 - 1, 0), i1)
+        if i0 == 0:
+            t = np.concatenate([[t[0] - 1.0 / (1.0 / self.imu_dt)], t])
+            dtheta, dv = np.concatenate([np.zeros((1, 3)), dtheta]), np.concatenate([np.zeros((1, 3)), dv])
+        return t, dtheta @ self.mat_bs.T, dv @ self.mat_bs.T
+
+    def epoch_increments(self, a: int, b: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """`increments` of epochs a..b (row 0 at epoch a), and the log's row number of row 0 (-1: the start)."""
+        per_epoch = self.steps * self.n_samples
+        return *self.increments(a * per_epoch, b * per_epoch), a * per_epoch - 1
+
+    def mech(self, a: int, b: int) -> Mech:
+        """The mechanization increments of epochs a..b (Mech); PositioningError naming the log's first row that
+        compensation refuses."""
+        *increments, first_row = self.epoch_increments(a, b)
+        try:
+            return Mech(*compensated_increments(*increments, self.n_samples, first_row))
+        except ValueError as err:
+            raise PositioningError(f"imu: {err}") from None
+
+
+def body_mounting(cfg: Config) -> np.ndarray:
+    """C_s^b of the calibrated mounting: the IMU increments turned from the sensor axes into b."""
+    return euler_to_mat(*cfg.imu_mounting_rad)
 
 
 def prepare(log: Log, cfg: Config) -> Prepared:
     """The log resampled for the filters (Prepared); PositioningError names the stream a log cannot be used for."""
     if log.survey_t.size == 0:
         raise PositioningError("survey: no rows; the start position and heading must be surveyed")
-    imu_rate = 1.0 / np.median(np.diff(log.imu_t))
+    imu_dt = log.imu.period()
+    imu_rate = 1.0 / imu_dt
     steps_f = imu_rate / cfg.n_samples / cfg.filter_rate_hz
     if abs(steps_f - round(steps_f)) > 1e-6 or round(steps_f) < 1:
         raise PositioningError(f"imu: {imu_rate:.6g} Hz is not {cfg.n_samples} x {cfg.filter_rate_hz:g} Hz x an "
                                f"integer; choose filter_rate_hz to divide the mechanization rate")
     steps = round(steps_f)
-    t = np.concatenate([[log.imu_t[0] - 1.0 / imu_rate], log.imu_t])
-    zero = np.zeros((1, 3))
-    dtheta_b, dv_b = body_increments(log, cfg)
-    try:
-        t_mech, phi_b, dv_b = compensated_increments(t, np.concatenate([zero, dtheta_b]),
-                                                     np.concatenate([zero, dv_b]), cfg.n_samples)
-    except ValueError as err:
-        raise PositioningError(f"imu: {err}") from None
-    n_kf = (t_mech.size - 1) // steps
-    t_mech = t_mech[: n_kf * steps + 1]
-    t_kf = t_mech[::steps]
-    odo, mode = _odometer_at(log, t_kf, cfg.stand_settle_s)
-    nav0, cal0, notes = _initial_state(log, t_mech, dv_b, mode, steps, cfg)
-    u = odo - odo[0]
+    per_epoch = steps * cfg.n_samples
+    n_kf = log.imu.size // cfg.n_samples // steps
+    if n_kf < 1:
+        raise PositioningError(f"imu: {log.imu.size} rows, fewer than one filter epoch ({per_epoch} rows)")
+    t_kf = np.concatenate([[np.nan], log.imu.times_at(np.arange(1, n_kf + 1) * per_epoch - 1)])
+    prep = Prepared(log.imu, body_mounting(cfg), imu_dt, cfg.n_samples, steps, t_kf, np.zeros(0), np.zeros(0, np.int8),
+                    [], [], np.zeros(0, int), None, np.zeros(es.N_NAV), np.zeros(es.N_CAL), [])
+    t_kf[0] = prep.increments(0, 1)[0][0]
+    prep.odo, prep.mode = _odometer_at(log, t_kf, cfg.stand_settle_s)
+    prep.nav0, prep.cal0, prep.notes = _initial_state(log, prep, cfg)
+    u = prep.odo - prep.odo[0]
     if log.survey_t.size >= 2:
         d = earth.lla_to_enu(*log.survey_llh[1], *log.survey_llh[0])
         face_travel = float(np.hypot(d[0], d[1]))
     else:
         face_travel = float(np.ptp(u))
-        notes.append("survey has no far face end: face length taken from the odometer")
-    cuts = straight_cuts(u, mode, face_travel)
+        prep.notes.append("survey has no far face end: face length taken from the odometer")
+    prep.cuts = straight_cuts(u, prep.mode, face_travel)
     settle = round(cfg.filter_rate_hz)  # one second of the stand after the cut belongs to the pass
-    ends = sorted({min(last + 1 + settle, n_kf) for _, last in cuts})
+    ends = sorted({min(last + 1 + settle, n_kf) for _, last in prep.cuts})
     bounds = [0] + [e for e in ends if 0 < e < n_kf] + [n_kf]
-    segments = list(itertools.pairwise(bounds))
-    survey_epochs = np.minimum(np.searchsorted(t_kf, log.survey_t[1:]), n_kf)
-    rams = None
+    prep.segments = list(itertools.pairwise(bounds))
+    prep.survey_epochs = np.minimum(np.searchsorted(t_kf, log.survey_t[1:]), n_kf)
     if log.ram_t.size and len(cfg.support_u_m) >= 2:
-        rams = RamLog.from_rows(log.ram_t, log.ram_support, log.ram_extension, log.ram_valid, cfg.support_u_m,
-                               cfg.ram_noise_sd)
-    return Prepared(t_mech, phi_b, dv_b, steps, t_kf, odo, mode, cuts, segments, survey_epochs, rams, nav0,
-                     cal0, notes)
+        prep.rams = RamLog.from_rows(log.ram_t, log.ram_support, log.ram_extension, log.ram_valid, cfg.support_u_m,
+                                     cfg.ram_noise_sd)
+    return prep

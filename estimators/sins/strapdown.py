@@ -103,9 +103,10 @@ def strapdown_step(lat, lon, h, v, q, phi, dv_b, dt, lat_e, h_e, v_e, hold_heigh
 
 
 @nb.njit(cache=True)
-def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height):
-    """Update u (over (t_upd[u-1], t_upd[u]]) with the compensated phi[u-1], dv_b[u-1]; outputs at index u."""
-    for u in range(1, lat.size):
+def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height, u_first):
+    """Update u (over (t_upd[u-1], t_upd[u]]) with the compensated phi[u-1], dv_b[u-1]; outputs at index u, from
+    u_first (1; 2 where rows 0 and 1 are the last two updates of an earlier block)."""
+    for u in range(u_first, lat.size):
         # Mid-interval position and velocity, extrapolated from the last two epochs.
         if u >= 2:
             lat_m = lat[u - 1] + 0.5 * (lat[u - 1] - lat[u - 2])
@@ -118,13 +119,13 @@ def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height):
             t_upd[u] - t_upd[u - 1], lat_m, h_m, v_m, hold_height)
 
 
-def compensated_increments(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray,
-                           n_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def compensated_increments(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, n_samples: int,
+                           first_row: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Check a log of increments (row k over (t[k-1], t[k]]; row 0 unused) and compensate it per update of
     `n_samples` increments: (update times t[0], t[N], ... ; rotation vectors; body velocity increments).
 
-    Raises ValueError with one line naming the first bad row: shapes, time order, a sample-rate change (a gap or
-    a mixed-rate log), non-finite values."""
+    Raises ValueError with one line naming the first bad row (numbered from `first_row`, the number of row 0 in a
+    longer log): shapes, time order, a sample-rate change (a gap or a mixed-rate log), non-finite values."""
     t = np.ascontiguousarray(t, float)
     dtheta = np.ascontiguousarray(dtheta, float)
     dv = np.ascontiguousarray(dv, float)
@@ -132,17 +133,17 @@ def compensated_increments(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray,
         raise ValueError(f"increments must be ({t.size}, 3) like t; got {dtheta.shape} and {dv.shape}")
     step = np.diff(t)
     if t.size > 1 and not np.all(step > 0):
-        raise ValueError(f"time must increase; row {int(np.argmin(step > 0)) + 1} does not")
+        raise ValueError(f"time must increase; row {first_row + int(np.argmin(step > 0)) + 1} does not")
     if t.size > 2:
         median = np.median(step)
         odd = np.flatnonzero(np.abs(step - median) > 0.5 * median)
         if odd.size:
-            raise ValueError(f"sample interval at row {odd[0] + 1} is {step[odd[0]]:.6g} s, the median is "
+            raise ValueError(f"sample interval at row {first_row + odd[0] + 1} is {step[odd[0]]:.6g} s, the median is "
                              f"{median:.6g} s: resample or split the log at the gap")
     for name, arr in (("dtheta", dtheta), ("dv", dv)):
         bad = np.flatnonzero(~np.isfinite(arr).all(axis=1))
         if bad.size:
-            raise ValueError(f"{name} row {bad[0]} is not finite")
+            raise ValueError(f"{name} row {first_row + bad[0]} is not finite")
     phi, dv_b = compensate(dtheta, dv, n_samples)
     t_upd = np.ascontiguousarray(t[: phi.shape[0] * n_samples + 1: n_samples])
     return t_upd, phi, dv_b
@@ -163,5 +164,37 @@ def mechanize(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, lat0: float, lo
     vel, quat = np.empty((n, 3)), np.empty((n, 4))
     lat[0], lon[0], hgt[0], vel[0] = lat0, lon0, h0, v0_n
     quat[0] = np.asarray(q0_nb, float) / np.linalg.norm(q0_nb)
-    _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height)
+    _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height, 1)
     return NavState(t_upd, lat, lon, hgt, vel, quat)
+
+
+class Mechanization:
+    """`mechanize` over consecutive blocks of increments, carrying the state from block to block: the rows are,
+    bit for bit, those of one call over the whole log. Each block (t, dtheta, dv) starts at the last block's end
+    (row 0 unused, t[0] the end time) and holds a whole number of updates of n_samples increments."""
+
+    def __init__(self, lat0: float, lon0: float, h0: float, v0_n: np.ndarray, q0_nb: np.ndarray, n_samples: int = 4,
+                 hold_height: bool = False):
+        earth.check_latitude(lat0)
+        self.n_samples, self.hold_height = n_samples, hold_height
+        self._last = NavState(np.zeros(1), np.array([lat0]), np.array([lon0]), np.array([h0]),
+                              np.asarray(v0_n, float).reshape(1, 3),
+                              (np.asarray(q0_nb, float) / np.linalg.norm(q0_nb)).reshape(1, 4))
+
+    def run(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, first_row: int = 0) -> NavState:
+        """The solution at the block's update times (t[0], t[N], ...; row 0 the state the block starts from);
+        `first_row` numbers the block's rows in a ValueError (compensated_increments)."""
+        t_upd, phi, dv_b = compensated_increments(t, dtheta, dv, self.n_samples, first_row)
+        k = self._last.lat.size  # rows of history: 1 at the start, then the last two updates
+        n = phi.shape[0] + k
+        lat, lon, hgt = np.empty(n), np.empty(n), np.empty(n)
+        vel, quat = np.empty((n, 3)), np.empty((n, 4))
+        last = self._last
+        lat[:k], lon[:k], hgt[:k], vel[:k], quat[:k] = last.lat, last.lon, last.h, last.v_n, last.q_nb
+        pad = np.zeros((k - 1, 3))
+        _mechanize_kernel(np.concatenate([np.zeros(k - 1), t_upd]), np.concatenate([pad, phi]),
+                          np.concatenate([pad, dv_b]), lat, lon, hgt, vel, quat, self.hold_height, k)
+        rows = slice(n - 2, n) if n >= 2 else slice(0, n)
+        self._last = NavState(t_upd[-2:], lat[rows], lon[rows], hgt[rows], vel[rows], quat[rows])
+        out = slice(k - 1, n)
+        return NavState(t_upd, lat[out], lon[out], hgt[out], vel[out], quat[out])

@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from estimators.io.log import log_from_columns
+from estimators.io.log import ImuArrays, log_from_columns
 from estimators.io.logformat import FLAG_SKIPPED, FLAG_VELOCITY, FLAG_ZUPT
 from estimators.kalman import error_state as es
 from estimators.nav import earth
@@ -174,8 +174,8 @@ def test_nan_increment_names_the_row(default_log):
     scn, log = default_log
     dtheta = log.dtheta.copy()
     dtheta[1234, 1] = np.nan
-    with pytest.raises(PositioningError, match=r"imu: dtheta row 1235 is not finite"):
-        estimate(dataclasses.replace(log, dtheta=dtheta), positioning_config(scn), ("kf",))
+    with pytest.raises(PositioningError, match=r"imu: dtheta row 1234 is not finite"):
+        estimate(dataclasses.replace(log, imu=ImuArrays(log.imu_t, dtheta, log.dv)), positioning_config(scn), ("kf",))
 
 
 def test_true_mounting_is_in_the_frame_the_filter_estimates_it_in():

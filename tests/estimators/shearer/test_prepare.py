@@ -9,7 +9,9 @@ import numpy as np
 
 from estimators.io.log import log_from_columns
 from estimators.shearer.odometer_filter import MODE_MOVING, MODE_SETTLING, MODE_STANDING
+from estimators.nav.rotations import euler_to_mat
 from estimators.shearer.prepare import prepare
+from estimators.sins.strapdown import compensated_increments
 from tests.conftest import simulated
 from twin.pipeline.estimate import positioning_config
 from twin.sensors.streams import imu_truth, sensor_streams
@@ -65,3 +67,27 @@ def test_a_log_in_which_the_machine_never_moves_is_all_stand():
     assert not np.any(log.odo_direction) and np.ptp(log.odo_distance) == 0
     prep = prepare(log, positioning_config(scn))
     assert np.all(prep.mode == MODE_STANDING) and prep.cuts == []
+
+
+def test_each_pass_reads_the_increments_the_whole_log_gives():
+    """The filters read a pass's increments when they run it (Prepared.mech): every segment's, and any window of
+    epochs, are the whole log's compensated increments sliced at its epochs, bit for bit, and the epochs' times are
+    the whole log's update times."""
+    scn, result = simulated("default")
+    streams = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), 0)
+    log = log_from_columns(streams["imu"], streams["odometer"], streams["survey"])
+    cfg = positioning_config(scn)
+    prep = prepare(log, cfg)
+    dt = np.median(np.diff(log.imu_t))
+    mat_bs = euler_to_mat(*cfg.imu_mounting_rad)
+    t = np.concatenate([[log.imu_t[0] - 1.0 / (1.0 / dt)], log.imu_t])
+    zero = np.zeros((1, 3))
+    t_mech, phi_b, dv_b = compensated_increments(t, np.concatenate([zero, log.dtheta @ mat_bs.T]),
+                                                 np.concatenate([zero, log.dv @ mat_bs.T]), cfg.n_samples)
+    assert np.array_equal(prep.t_kf, t_mech[::prep.steps][:prep.t_kf.size])
+    assert len(prep.segments) >= 3
+    for a, b in [*prep.segments, (0, 7), (prep.segments[1][0] + 3, prep.segments[2][0] + 5)]:
+        mech = prep.mech(a, b)
+        rows = slice(a * prep.steps, b * prep.steps)
+        assert np.array_equal(mech.t, t_mech[a * prep.steps:b * prep.steps + 1])
+        assert np.array_equal(mech.phi_b, phi_b[rows]) and np.array_equal(mech.dv_b, dv_b[rows])

@@ -15,7 +15,7 @@ from estimators.nav.rotations import (
     rotvec_to_quat,
 )
 from estimators.sins.coning import coefficients_exact, coning_drift
-from estimators.sins.strapdown import body_attitude, compensate, mechanize
+from estimators.sins.strapdown import Mechanization, NavState, body_attitude, compensate, mechanize
 from twin.papers.motions import coning, sculling
 
 
@@ -92,3 +92,29 @@ def test_bad_input_is_refused():
         mechanize(gap, ok, ok, 0.5, 0.0, 0.0, np.zeros(3), q0)
     with pytest.raises(ValueError, match="outside \\[-89, 89\\]"):
         mechanize(t, ok, ok, np.radians(89.5), 0.0, 0.0, np.zeros(3), q0)
+
+
+def test_mechanization_in_blocks_gives_the_rows_of_one_call_bit_for_bit():
+    """Mechanization carries the last two updates from block to block (the mid-interval extrapolation reads them),
+    so blocks of any whole number of updates give mechanize's rows exactly; a block's bad row is named in the
+    whole log's numbering."""
+    rng = np.random.default_rng(5)
+    n = 4 * 600
+    t = np.arange(n + 1) * 0.005
+    dtheta = rng.normal(0.0, 1e-3, (n + 1, 3)) + np.array([0.0, 0.0, 2e-4])
+    dv = rng.normal(0.0, 1e-3, (n + 1, 3)) + np.array([0.0, 0.0, 9.8 * 0.005])
+    q0 = np.array([0.9, 0.1, -0.2, 0.3])
+    args = (0.7, 0.2, 150.0, np.array([0.1, -0.2, 0.0]), q0)
+    whole = mechanize(t, dtheta, dv, *args)
+    blocks = Mechanization(*args)
+    rows = []
+    edges = [0, 4, 40, 1200, 2000, n]  # in increments; whole updates of 4
+    for a, b in zip(edges[:-1], edges[1:]):
+        part = blocks.run(t[a:b + 1], dtheta[a:b + 1], dv[a:b + 1])
+        rows.append(part if a == 0 else NavState(*(x[1:] for x in vars(part).values())))
+    for key, value in vars(whole).items():
+        assert np.array_equal(np.concatenate([getattr(r, key) for r in rows]), value), key
+    bad = dtheta.copy()
+    bad[1500, 2] = np.nan
+    with pytest.raises(ValueError, match="dtheta row 1500 is not finite"):
+        Mechanization(*args).run(t[1200:2001], bad[1200:2001], dv[1200:2001], first_row=1200)
