@@ -228,7 +228,7 @@ class Fault(Section):
 
 
 READING_FAULTS = ("stuck", "offset", "drift", "scale", "dropout", "noise_burst")
-"""The sensor faults of a support's readings, each kind `<sensor>_<fault>` (twin.sensors.faults.apply_reading_faults)."""
+"""The sensor faults of a support's readings, each kind `<sensor>_<fault>` (twin.sensors.faults: apply_gain_faults, ReadingFaults)."""
 SUPPORT_SENSORS = ("ram", "leg_pressure", "ram_pressure")
 """The support sensors the reading faults act on: the ram's stroke, the legs' and the ram's pressure transducers."""
 TARGETED = (*(f"{sensor}_{fault}" for sensor in SUPPORT_SENSORS for fault in READING_FAULTS), "push_shortfall",

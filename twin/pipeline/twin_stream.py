@@ -5,8 +5,10 @@ twin.pipeline.simulate hands over the shearer truth a ride chunk (a cycle) at a 
 TruthChunks with their halos (twin.sensors.chunks), draws the shearer's sensor streams for each
 (twin.sensors.streams.ShearerSensors, which carries the sensors' state), and appends truth and readings to their
 Parquet files in fixed row groups (estimators.io.logformat.StreamAppender), so the files' bytes do not depend on
-the chunking. What stays in memory for the whole run: the face's own tables (pans and supports, a row per move)
-and the shearer's (t, s), which the support streams read for the shearer's place along the face.
+the chunking. The supports' push-ram and pressure streams are drawn after the face, a span of time at a time
+(twin.sensors.streams.SupportSensors), and appended the same way. What stays in memory for the whole run: the face's
+own tables (pans and supports, a row per move) and the shearer's (t, s), which the support streams read for the
+shearer's place along the face.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from twin.face.haulage import Timeline
 from twin.pipeline.alignment_loop import alignment_table
 from twin.pipeline.simulate import Progress, SimResult, cycles_table, last_truth_time, simulate_stream
 from twin.sensors.chunks import ChunkAssembler, TruthChunk, halo_rows
-from twin.sensors.streams import ShearerSensors, support_streams
+from twin.sensors.faults import faults_table
+from twin.sensors.streams import ShearerSensors, SupportSensors, support_imu_readings
 from twin.view.summary import ShearerStats
 
 SHEARER_STREAMS = ("imu", "odometer", "mag", "survey", "face_survey")
@@ -75,8 +78,18 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
         write_stream(run_dir, STREAMS[name], cols)
     write_stream(run_dir, ALIGNMENT, alignment_table(scn, cycles["t"], result.offsets, result.alignment))
     if sensors:
-        truth = {**result.tables, "truth_shearer": {k: np.concatenate(v) for k, v in held.items()}}
-        for name, cols in support_streams(scn, truth, 0).items():
-            write_stream(run_dir, STREAMS[name], cols)
+        shearer = {k: np.concatenate(v) for k, v in held.items()}
+        supports = result.tables["truth_supports"]
+        support_sensors = SupportSensors(scn, 0)
+        with StreamAppender(run_dir, STREAMS["pushram"]) as pushram, \
+                StreamAppender(run_dir, STREAMS["pressure"]) as pressure:
+            for t0, t1, last in support_sensors.spans(float(shearer["t"][-1])):
+                readings = support_sensors.step(t0, t1, last, supports, shearer)
+                pushram.append(readings["pushram"])
+                pressure.append(readings["pressure"])
+        write_stream(run_dir, STREAMS["faults"], faults_table(scn))
+        imu = support_imu_readings(scn, supports, shearer, 0)
+        if imu is not None:
+            write_stream(run_dir, STREAMS["support_imu"], imu)
         report("sensors", 1.0)
     return result, stats

@@ -66,28 +66,42 @@ def apply_gain_faults(x: np.ndarray, t: np.ndarray, faults: Iterable[Fault], sen
         x[m, f.target] += f.value * (t[m] - f.t_start_s)
 
 
-def apply_reading_faults(x: np.ndarray, t: np.ndarray, faults: Iterable[Fault], sensor: str, noise: np.ndarray,
-                         rng: np.random.Generator, resolution: float) -> np.ndarray:
-    """The rest of a reading, in place on x (samples t x supports): the base `noise` (drawn for the whole stream
-    before any fault's, so that a fault changes nothing outside its window), `<sensor>_noise_burst` (+ value N(0, 1)),
-    quantization to `resolution`, `<sensor>_stuck` (frozen at the window's first quantized reading) and
-    `<sensor>_dropout` (NaN). Returns the valid flags (int8, 0 on dropout)."""
-    x += noise
-    for f in faults_of(faults, f"{sensor}_noise_burst"):
-        m = window_mask(t, f)
-        x[m, f.target] += f.value * rng.standard_normal(int(m.sum()))
-    if resolution > 0:
-        x[:] = np.round(x / resolution) * resolution
-    for f in faults_of(faults, f"{sensor}_stuck"):
-        rows = np.flatnonzero(window_mask(t, f))
-        if rows.size:
-            x[rows, f.target] = x[rows[0], f.target]
-    valid = np.ones(x.shape, dtype=np.int8)
-    for f in faults_of(faults, f"{sensor}_dropout"):
-        m = window_mask(t, f)
-        x[m, f.target] = np.nan
-        valid[m, f.target] = 0
-    return valid
+class ReadingFaults:
+    """The rest of a support transducer's reading, applied chunk by chunk (samples t x supports, in time order): the
+    base noise, `<sensor>_noise_burst` (+ value N(0, 1), from a generator of its own per fault, spawned from `rng`),
+    quantization to `resolution`, `<sensor>_stuck` (frozen at the window's first quantized reading, carried to the
+    chunks after it) and `<sensor>_dropout` (NaN). Each fault's draws come in its window's sample order, so any
+    partition of the samples into chunks gives the readings of one chunk, and a fault changes nothing outside its
+    window."""
+
+    def __init__(self, faults: Iterable[Fault], sensor: str, rng: np.random.Generator, resolution: float):
+        self.resolution = resolution
+        bursts = faults_of(faults, f"{sensor}_noise_burst")
+        self.bursts = list(zip(bursts, rng.spawn(len(bursts))))
+        self.stuck: list[tuple[Fault, list[float]]] = [(f, []) for f in faults_of(faults, f"{sensor}_stuck")]
+        self.dropouts = faults_of(faults, f"{sensor}_dropout")
+
+    def apply(self, x: np.ndarray, t: np.ndarray, noise: np.ndarray) -> np.ndarray:
+        """The reading of the true values x (samples t x supports) with the base `noise`, in place; returns the valid
+        flags (int8, 0 on dropout)."""
+        x += noise
+        for f, gen in self.bursts:
+            m = window_mask(t, f)
+            x[m, f.target] += f.value * gen.standard_normal(int(m.sum()))
+        if self.resolution > 0:
+            x[:] = np.round(x / self.resolution) * self.resolution
+        for f, frozen in self.stuck:
+            rows = np.flatnonzero(window_mask(t, f))
+            if rows.size:
+                if not frozen:
+                    frozen.append(float(x[rows[0], f.target]))
+                x[rows, f.target] = frozen[0]
+        valid = np.ones(x.shape, dtype=np.int8)
+        for f in self.dropouts:
+            m = window_mask(t, f)
+            x[m, f.target] = np.nan
+            valid[m, f.target] = 0
+        return valid
 
 
 def faults_table(scn: Scenario) -> dict[str, np.ndarray]:

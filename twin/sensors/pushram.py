@@ -19,8 +19,9 @@ support, in this fixed order whatever their order in the schedule:
 7. ram_stuck        the reading freezes at the (quantized) reading of the window's first sample
 8. ram_dropout      extension NaN, valid 0
 
-The base noise is drawn for the whole stream before any fault noise, so with the same rng a fault changes
-nothing outside its window.
+The base noise is drawn from the stream's generator in sample order and each fault's noise from a generator of its
+own, so a fault changes nothing outside its window, and the stream drawn in chunks (a streaming run) is the stream
+drawn at once.
 
 push_shortfall is a fault of the face, not of the sensor: the pan falls short while the sensor reads the
 full commanded stroke. The twin shortens the real push (the truth); this module leaves the reading unchanged,
@@ -58,7 +59,7 @@ from twin.config.scenario import Scenario
 from twin.config.sensors import Fault
 from twin.face.layout import support_stations
 from twin.sensors.clock import sample_times, true_at
-from twin.sensors.faults import apply_gain_faults, apply_reading_faults, faults_of, window_mask
+from twin.sensors.faults import ReadingFaults, apply_gain_faults, faults_of, window_mask
 
 
 def rail_deviation_m(n_chutes: np.ndarray, value_deg: float, chute_length_m: float) -> np.ndarray:
@@ -108,23 +109,39 @@ def _rail_deviation(x: np.ndarray, t_grid: np.ndarray, fault: Fault, scn: Scenar
     x[rows] += np.where(covered, err[None, :], 0.0)
 
 
+class PushRams:
+    """The PUSHRAM stream drawn chunk by chunk: `step` takes the next sample times (in order) and gives their rows. The
+    base noise comes from `rng` in sample order and each fault's own draws from a generator of its own
+    (twin.sensors.faults.ReadingFaults), so any partition of the samples gives the stream of one step."""
+
+    def __init__(self, scn: Scenario, rng: np.random.Generator, faults: list[Fault]):
+        self.scn, self.faults, self.rng = scn, faults, rng
+        self.stations = support_stations(scn)
+        self.reading = ReadingFaults(faults, "ram", rng, scn.sensors.pushram.resolution_m)
+
+    def step(self, t_grid: np.ndarray, supports: dict[str, np.ndarray],
+             shearer: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
+        """Rows (t, support, extension, valid) of every support at the sample times t_grid. `supports` holds the
+        truth_supports columns (t, support, ram are used) up to the last sample at least; `shearer` (truth_shearer
+        columns t and s over the run) places rail_deviation where the shearer travels; see the module doc."""
+        n_sup = self.stations.size
+        x = true_at(supports, "ram", t_grid, n_sup)
+        noise = self.rng.standard_normal(x.shape)  # drawn first, whatever the faults: see the module doc
+        apply_gain_faults(x, t_grid, self.faults, "ram")
+        for f in faults_of(self.faults, "rail_deviation"):
+            _rail_deviation(x, t_grid, f, self.scn, self.stations, shearer)
+        valid = self.reading.apply(x, t_grid, self.scn.sensors.pushram.noise_m * noise)
+        return {"t": np.repeat(t_grid, n_sup), "support": np.tile(np.arange(n_sup, dtype=np.int32), t_grid.size),
+                "extension": x.ravel(), "valid": valid.ravel()}
+
+
 def pushram_stream(scn: Scenario, supports: dict[str, np.ndarray], t_end: float, rng: np.random.Generator,
                    faults: list[Fault], shearer: dict[str, np.ndarray] | None = None) -> dict[str, np.ndarray]:
-    """The PUSHRAM stream (t, support, extension, valid): every support at each sample of [0, t_end].
+    """The PUSHRAM stream (t, support, extension, valid): every support at each sample of [0, t_end] (PushRams in one
+    step).
 
     `supports` holds the truth_supports columns (t, support, ram are used); `faults` the scenario's fault
     schedule (ram_* on their target, rail_deviation; push_shortfall leaves the reading unchanged). `shearer`
     (truth_shearer columns t and s) places rail_deviation where the shearer travels; see the module doc.
     """
-    cfg = scn.sensors.pushram
-    stations = support_stations(scn)
-    n_sup = stations.size
-    t_grid = sample_times(0.0, t_end, cfg.rate_hz)
-    x = true_at(supports, "ram", t_grid, n_sup)
-    noise = rng.standard_normal(x.shape)  # drawn first, whatever the faults: see the module doc
-    apply_gain_faults(x, t_grid, faults, "ram")
-    for f in faults_of(faults, "rail_deviation"):
-        _rail_deviation(x, t_grid, f, scn, stations, shearer)
-    valid = apply_reading_faults(x, t_grid, faults, "ram", cfg.noise_m * noise, rng, cfg.resolution_m)
-    return {"t": np.repeat(t_grid, n_sup), "support": np.tile(np.arange(n_sup, dtype=np.int32), t_grid.size),
-            "extension": x.ravel(), "valid": valid.ravel()}
+    return PushRams(scn, rng, faults).step(sample_times(0.0, t_end, scn.sensors.pushram.rate_hz), supports, shearer)

@@ -11,6 +11,7 @@ twin.sensors.chunks); the whole run in one chunk gives the same numbers (`sensor
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +19,7 @@ import numpy as np
 from twin.config.imu_grades import grade
 from twin.config.scenario import Scenario
 from twin.sensors.chunks import TruthChunk, halo_rows, split_truth
+from twin.sensors.clock import sample_times
 from twin.sensors.faults import (
     check_faults_in_run,
     faults_of,
@@ -29,8 +31,8 @@ from twin.sensors.imu import IdealImu
 from twin.sensors.imu_errors import ImuErrorModel
 from twin.sensors.magnetometer import Magnetometer
 from twin.sensors.odometer import Odometer
-from twin.sensors.pressure import pressure_stream
-from twin.sensors.pushram import pushram_stream
+from twin.sensors.pressure import Pressures
+from twin.sensors.pushram import PushRams
 from twin.sensors.support_imu import support_imu_stream
 from twin.sensors.survey import FaceSurvey, Survey
 
@@ -82,25 +84,59 @@ class ShearerSensors:
                 "survey": self.survey.step(chunk), "face_survey": self.face_survey.step(chunk)}
 
 
+SUPPORT_BLOCK_S = 900.0
+"""A run's support streams are drawn this much time at a time (SupportSensors.step)."""
+
+
+class SupportSensors:
+    """The supports' push-ram and pressure streams of one trial, drawn a span of time at a time: `step(t0, t1, last)`
+    gives the readings of every sensor clock time in [t0, t1) ([t0, t1] for the last span) from the run's truth_supports
+    rows (in memory: a row per move) and the shearer's (t, s) (for rail_deviation). Any partition of the run into spans
+    gives the streams of one step (twin.sensors.pushram.PushRams, twin.sensors.pressure.Pressures)."""
+
+    def __init__(self, scn: Scenario, trial: int):
+        faults = list(scn.faults)
+        self.scn, self.shortfalls = scn, faults_of(faults, "push_shortfall")
+        self.pushram = PushRams(scn, trial_rng(scn, trial, _PUSHRAM), faults)
+        self.pressure = Pressures(scn, trial_rng(scn, trial, _PRESSURE), faults)
+
+    def step(self, t0: float, t1: float, last: bool, supports: dict[str, np.ndarray],
+             shearer: dict[str, np.ndarray]) -> dict[str, dict[str, np.ndarray]]:
+        def clock(rate_hz: float) -> np.ndarray:
+            t = sample_times(t0, t1, rate_hz)
+            return t if last else t[t < t1]
+
+        pushram = self.pushram.step(clock(self.scn.sensors.pushram.rate_hz), supports, shearer)
+        # A push shortfall happens at the pans, not in the sensors: the readings keep the commanded strokes.
+        for fault in self.shortfalls:
+            short = shortfall_profile(fault, self.pushram.stations.size)[pushram["support"]]
+            pushram["extension"] = pushram["extension"] + np.where(window_mask(pushram["t"], fault), short, 0.0)
+        return {"pushram": pushram, "pressure": self.pressure.step(clock(self.scn.sensors.pressure.rate_hz), supports)}
+
+    def spans(self, t_end: float) -> list[tuple[float, float, bool]]:
+        """The spans (t0, t1, last) of SUPPORT_BLOCK_S a run to t_end is drawn in."""
+        edges = [*np.arange(0.0, t_end, SUPPORT_BLOCK_S), t_end]
+        return [(a, b, k == len(edges) - 2) for k, (a, b) in enumerate(itertools.pairwise(edges))]
+
+
 def support_streams(scn: Scenario, truth: dict[str, dict[str, np.ndarray]], trial: int = 0
                     ) -> dict[str, dict[str, np.ndarray]]:
     """The streams of the supports (pushram, pressure, support_imu) and the fault schedule, from the whole run's truth
-    (the shearer's truth is read for its position along the face)."""
+    (the shearer's truth is read for its position along the face) in one SupportSensors step."""
     shearer, supports = truth["truth_shearer"], truth["truth_supports"]
-    duration = float(shearer["t"][-1])
-    faults = list(scn.faults)
-    pushram = pushram_stream(scn, supports, duration, trial_rng(scn, trial, _PUSHRAM), faults, shearer)
-    # A push shortfall happens at the pans, not in the sensors: the readings keep the commanded strokes.
-    for fault in faults_of(faults, "push_shortfall"):
-        short = shortfall_profile(fault, int(pushram["support"].max()) + 1)[pushram["support"]]
-        pushram["extension"] = pushram["extension"] + np.where(window_mask(pushram["t"], fault), short, 0.0)
-    streams = {"pushram": pushram, "pressure": pressure_stream(scn, supports, duration, trial_rng(scn, trial, _PRESSURE),
-                                                               faults),
+    streams = {**SupportSensors(scn, trial).step(0.0, float(shearer["t"][-1]), True, supports, shearer),
                "faults": faults_table(scn)}
-    if scn.sensors.support_imu.supports:
-        streams["support_imu"] = support_imu_stream(scn, supports, shearer, trial_rng(scn, trial, _SUPPORT_IMU),
-                                                    faults)
-    return streams
+    imu = support_imu_readings(scn, supports, shearer, trial)
+    return streams | ({"support_imu": imu} if imu is not None else {})
+
+
+def support_imu_readings(scn: Scenario, supports: dict[str, np.ndarray], shearer: dict[str, np.ndarray],
+                         trial: int) -> dict[str, np.ndarray] | None:
+    """The SUPPORT_IMU stream of one trial from the whole run's truth_supports and shearer (t, s) (drawn at once);
+    None without instrumented supports."""
+    if not scn.sensors.support_imu.supports:
+        return None
+    return support_imu_stream(scn, supports, shearer, trial_rng(scn, trial, _SUPPORT_IMU), list(scn.faults))
 
 
 def sensor_streams(scn: Scenario, truth: dict[str, dict[str, np.ndarray]], ideal: ImuTruth,

@@ -56,7 +56,11 @@ def test_a_transducer_fault_acts_on_its_target_inside_its_window(sensor, fault):
     other = "ram" if column == "leg" else "leg"
     changed = ~np.isclose(clean[column], faulty[column], atol=1e-9, equal_nan=False)
     inside = (faulty["t"] >= 40.0) & (faulty["t"] < 60.0) & (faulty["support"] == 7)
-    assert changed[inside].sum() >= 10 and not changed[~inside].any()
+    assert not changed[~inside].any()
+    if fault == "stuck":  # frozen at the window's first reading, which the clean readings leave now and then
+        assert np.all(faulty[column][inside] == faulty[column][inside][0]) and changed[inside].sum() >= 3
+    else:
+        assert changed[inside].sum() >= 10
     np.testing.assert_array_equal(clean[other], faulty[other])
     if fault == "dropout":
         assert np.isnan(faulty[column][inside]).all() and not faulty[f"valid_{column}"][inside].any()
