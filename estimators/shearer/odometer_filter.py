@@ -229,18 +229,21 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
     Fixes (fix_epoch sorted, fix_llh (F, 3) lat/lon/h, fix_r (F, 3, 3) ENU covariance, fix_gate (F,) the largest
     normalized innovation squared accepted) apply at their epoch.
     Stores per epoch: posterior navigation and calibration, covariance, the update x+ and Phi for the smoother,
-    the velocity innovation in m (NaN where none) and, per fix, its normalized innovation squared.
+    the velocity innovation in m (NaN where none) and, per fix, its normalized innovation squared. p_pred and
+    phi_store of one row are scratch (a pass nothing smooths keeps neither: 2 x 441 floats an epoch).
     """
     lever = params[P_LEVER:P_LEVER + 3]
     r_vel = np.diag(np.array([params[P_R_LATERAL], params[P_R_ALONG], params[P_R_VERTICAL]]) ** 2)
     k_fix = np.searchsorted(fix_epoch, j0 + 1)
     x = np.zeros(N_STATES)
+    smoothed = p_pred.shape[0] > 1
     for j in range(j0 + 1, j1 + 1):
         t_span, f_sum, disp, w_sum = mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, (j - 1) * steps, steps)
         phi, qd = transition(nav, nominal, f_sum, t_span, q_psd, params[P_TAU_FORCE])
         put(p, phi @ p @ phi.T + qd)
-        put(phi_store[j], phi)
-        put(p_pred[j], p)
+        k = j if smoothed else 0
+        put(phi_store[k], phi)
+        put(p_pred[k], p)
         x[:] = 0.0
         flag, innov = odometer_aiding(x, p, odo_mode[j], nav, cal, disp, w_sum, lever, t_span,
                                       odo_dist[j] - odo_dist[j - 1], nominal, r_vel, params)
@@ -251,7 +254,7 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
             nis_out[k_fix], applied = gated_update(x, p, z, h, r, fix_gate[k_fix])
             flag |= FLAG_POSITION if applied else FLAG_SKIPPED
             k_fix += 1
-        if keep_covariance(x, p, p_pred[j]):
+        if keep_covariance(x, p, p_pred[k]):
             flag |= FLAG_COVARIANCE_REPAIRED
         apply_correction(nav, cal, x)
         put(x_post[j], x)

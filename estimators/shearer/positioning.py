@@ -130,8 +130,8 @@ class _Forward:
 
 class _Segment(NamedTuple):
     """One pass (epochs a..b, row 0 the previous pass's last) of the filter kernel: posterior error states and
-    covariances, predicted covariances and transitions (for the smoother), navigation and calibration rows, flags
-    each fix's row in the pass, NIS gate and NIS."""
+    covariances, predicted covariances and transitions (for the smoother; one row of scratch when the pass is not
+    smoothed), navigation and calibration rows, flags each fix's row in the pass, NIS gate and NIS."""
 
     x_post: np.ndarray
     p_post: np.ndarray
@@ -146,12 +146,13 @@ class _Segment(NamedTuple):
 
 
 def _run_segment(prep: Prepared, mech: Mech, a: int, b: int, fixes: Fixes, q_psd: np.ndarray, params: np.ndarray,
-                 nav: np.ndarray, cal: np.ndarray, p: np.ndarray, nominal: np.ndarray) -> _Segment:
+                 nav: np.ndarray, cal: np.ndarray, p: np.ndarray, nominal: np.ndarray, smoothed: bool) -> _Segment:
     """The filter kernel (odometer_filter.run_filter) over epochs (a, b] (their increments `mech`) with `fixes`,
-    from (nav, cal, p, nominal), which it leaves at epoch b."""
+    from (nav, cal, p, nominal), which it leaves at epoch b; `smoothed`: the smoother's rows kept."""
     m = b - a + 1
+    rows = m if smoothed else 1
     seg = _Segment(np.zeros((m, es.N_STATES)), np.zeros((m, es.N_STATES, es.N_STATES)),
-                   np.zeros((m, es.N_STATES, es.N_STATES)), np.zeros((m, es.N_STATES, es.N_STATES)),
+                   np.zeros((rows, es.N_STATES, es.N_STATES)), np.zeros((rows, es.N_STATES, es.N_STATES)),
                    np.zeros((m, es.N_NAV)), np.zeros((m, es.N_CAL)), np.zeros(m, np.int32), fixes.epoch - a,
                    fixes.gate, np.full(fixes.epoch.size, np.nan))
     seg.p_post[0], seg.p_pred[0], seg.phi[0] = p, p, np.eye(es.N_STATES)
@@ -163,13 +164,15 @@ def _run_segment(prep: Prepared, mech: Mech, a: int, b: int, fixes: Fixes, q_psd
 
 
 def _checked_segment(prep: Prepared, cfg: Config, a: int, b: int, fixes: Fixes, q_psd: np.ndarray,
-                     params: np.ndarray, state: tuple[np.ndarray, ...], notes: list[str]) -> tuple[_Segment, Fixes]:
+                     params: np.ndarray, state: tuple[np.ndarray, ...], notes: list[str],
+                     smoothed: bool) -> tuple[_Segment, Fixes]:
     """_run_segment from state = (nav, cal, p, nominal) under the health monitor (health.run_checked): a pass that
     loses track runs again from its start with fewer fixes; the epochs of the fixes it left out are flagged
     FLAG_SKIPPED. Returns the segment kept and its fixes."""
     saved = snapshot(state)
     mech = prep.mech(a, b)
-    seg, kept = run_checked(lambda keep: _run_segment(prep, mech, a, b, fixes.take(keep), q_psd, params, *state),
+    seg, kept = run_checked(lambda keep: _run_segment(prep, mech, a, b, fixes.take(keep), q_psd, params, *state,
+                                                      smoothed),
                             lambda s: filter_lost(prep.t_kf[a:b + 1], s.nav, _sd(s.p_post), cfg)
                             | innovations_inconsistent(s.nis, s.gate, s.fix_row, b - a + 1),
                             lambda: restore(state, saved),
@@ -197,7 +200,8 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
     n_fixes = n_gated = 0
     for a, b in prep.segments:
         fixes = fixes_for(prep, cfg, log, a, b, points, notes) if cpoem else Fixes.empty()
-        seg, fixes = _checked_segment(prep, cfg, a, b, fixes, q_psd, params, (nav, cal, p, nominal), notes)
+        seg, fixes = _checked_segment(prep, cfg, a, b, fixes, q_psd, params, (nav, cal, p, nominal), notes,
+                                      smooth or keep_dir is not None)
         n_fixes += fixes.epoch.size
         n_gated += int(np.sum(~(seg.nis <= fixes.gate)))
         fwd.nav[a + 1:b + 1], fwd.cal[a + 1:b + 1] = seg.nav[1:], seg.cal[1:]

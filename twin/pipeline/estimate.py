@@ -11,19 +11,23 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 
 from estimators.faults.hydraulic_checks import HydraulicLayout
 from estimators.faults.ram_checks import RamLayout
 from estimators.io import metrics
 from estimators.io.log import load_log
 from estimators.io.logformat import (
+    ESTIMATE,
     ESTIMATE_DETECTORS,
     ESTIMATE_FUSION,
     ESTIMATE_STATES,
     STREAMS,
+    Stream,
     read_estimate,
     read_stream,
     write_estimate,
@@ -170,14 +174,16 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers
     survey = read_stream(run_dir, STREAMS["survey"])
     cycles = _optional(run_dir, "truth_cycles") if truth is not None else None
     states_truth = true_states(scn) if truth is not None else None
-    for name, sol in sols.items():
-        write_estimate(run_dir, name, solution_columns(sol, scn))
-        if sol.cal is not None:
-            write_estimate(run_dir, name, state_columns(sol), ESTIMATE_STATES)
-        if sol.fusion is not None:
-            write_estimate(run_dir, name, sol.fusion, ESTIMATE_FUSION)
-        if sol.detectors is not None:
-            write_estimate(run_dir, name, sol.detectors, ESTIMATE_DETECTORS)
+    written: dict[str, list[str]] = {stream.name: [] for stream in (ESTIMATE, ESTIMATE_STATES, ESTIMATE_FUSION,
+                                                                    ESTIMATE_DETECTORS)}
+    for name in list(sols):  # each solution written, scored and let go before the next
+        sol = sols.pop(name)
+        for stream, columns in ((ESTIMATE, solution_columns(sol, scn)),
+                                (ESTIMATE_STATES, state_columns(sol) if sol.cal is not None else None),
+                                (ESTIMATE_FUSION, sol.fusion), (ESTIMATE_DETECTORS, sol.detectors)):
+            if columns is not None:
+                write_estimate(run_dir, name, columns, stream)
+                written[stream.name].append(name)
         table = read_estimate(run_dir, name)
         entry = {"truth": truth is not None}
         if truth is not None:
@@ -186,16 +192,35 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers
         entry |= {"notes": sol.notes, "self": metrics.self_assessment(table, survey)}
         out[name] = entry | (_calibration(sol, states_truth) if sol.cal is not None else {})
     if recording:
-        estimates = {name: read_estimate(run_dir, name) for name in sols}
-        states = {name: read_estimate(run_dir, name, ESTIMATE_STATES) for name, sol in sols.items() if sol.cal is not None}
-        fusion = {name: read_estimate(run_dir, name, ESTIMATE_FUSION) for name, sol in sols.items()
-                  if sol.fusion is not None}
+        def tables(stream: Stream) -> EstimateTables:
+            return EstimateTables(run_dir, stream, written[stream.name])
+
         thresholds = detector_thresholds(scn)
         detectors = {name: (read_estimate(run_dir, name, ESTIMATE_DETECTORS), thresholds)
-                     for name, sol in sols.items() if sol.detectors is not None}
-        write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, truth, estimates, states, states_truth,
-                                 rate_hz=record_rate_hz, fusion=fusion, detectors=detectors, supports=supports)
+                     for name in written[ESTIMATE_DETECTORS.name]}
+        write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, truth, tables(ESTIMATE), tables(ESTIMATE_STATES),
+                                 states_truth, rate_hz=record_rate_hz, fusion=tables(ESTIMATE_FUSION),
+                                 detectors=detectors, supports=supports)
     return out
+
+
+class EstimateTables(Mapping):
+    """A run's estimate files of one kind (ESTIMATE, ESTIMATE_STATES, ...) by method, each read when it is looked
+    up: a recording of many methods holds one table at a time."""
+
+    def __init__(self, run_dir: Path, stream: Stream, methods: list[str]):
+        self.run_dir, self.stream, self.methods = Path(run_dir), stream, methods
+
+    def __getitem__(self, method: str) -> pa.Table:
+        if method not in self.methods:
+            raise KeyError(method)
+        return read_estimate(self.run_dir, method, self.stream)
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self.methods)
+
+    def __len__(self) -> int:
+        return len(self.methods)
 
 
 PAPER_FIGURES = {

@@ -19,7 +19,8 @@ from estimators.nav.rotations import (
 from estimators.shearer import odometer_filter as kf
 from estimators.shearer.config import PositioningError
 from estimators.shearer.methods import METHODS, estimate
-from estimators.shearer.positioning import initial_covariance
+from estimators.shearer.positioning import initial_covariance, run_kf
+from estimators.shearer.prepare import prepare
 from estimators.shearer.solution import estimate_columns
 from tests.conftest import simulated
 from twin.pipeline.estimate import positioning_config
@@ -239,3 +240,16 @@ def test_nonorthogonality_states_move_the_velocity_as_the_mechanization_does():
     f_n = quat_rotate(q, f_b)
     expected = -kf.system_matrix(nav0, f_n)[kf.DV, kf.ACCEL_NONORTH] @ da * steps * dt
     assert np.abs(vel[1] - vel[0] - expected).max() < 1e-4 * np.abs(expected).max()
+
+
+def test_a_pass_gives_the_same_estimate_whether_or_not_it_keeps_the_smoothers_rows(default_log):
+    """Without smoothing the kernel keeps one row of predicted covariance and transition as scratch instead of one
+    per epoch (odometer_filter.run_filter); the forward estimate is the one the smoothed run's forward pass gives."""
+    scn, log = default_log
+    cfg = positioning_config(scn)
+    prep = prepare(log, cfg)
+    plain, none, _ = run_kf(log, cfg, prep, cpoem=False, smooth=False)
+    kept, smoothed, _ = run_kf(log, cfg, prep, cpoem=False, smooth=True)
+    assert none is None and smoothed is not None
+    for key in ("llh", "v_n", "q_nb", "sd", "flags", "cal"):
+        assert np.array_equal(getattr(plain, key), getattr(kept, key)), key
