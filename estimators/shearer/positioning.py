@@ -157,9 +157,9 @@ def _run_segment(prep: Prepared, mech: Mech, a: int, b: int, fixes: Fixes, q_psd
                    fixes.gate, np.full(fixes.epoch.size, np.nan))
     seg.p_post[0], seg.p_pred[0], seg.phi[0] = p, p, np.eye(es.N_STATES)
     seg.nav[0], seg.cal[0] = nav, cal
-    kf.run_filter(0, m - 1, prep.steps, mech.t, mech.phi_b, mech.dv_b, prep.odo[a:b + 1], prep.mode[a:b + 1], seg.fix_row, fixes.llh,
-                  fixes.r, fixes.gate, q_psd, params, nav, cal, p, nominal, seg.nav, seg.cal, seg.x_post, seg.p_post,
-                  seg.p_pred, seg.phi, seg.flags, seg.nis, np.full((m, 3), np.nan))
+    kf.run_filter(0, m - 1, prep.steps, mech.t, mech.phi_b, mech.dv_b, prep.odo[a:b + 1], prep.mode[a:b + 1],
+                  seg.fix_row, fixes.llh, fixes.r, fixes.gate, q_psd, params, nav, cal, p, nominal, seg.nav, seg.cal,
+                  seg.x_post, seg.p_post, seg.p_pred, seg.phi, seg.flags, seg.nis, np.full((m, 3), np.nan))
     return seg
 
 

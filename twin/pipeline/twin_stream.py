@@ -30,15 +30,19 @@ from twin.view.summary import ShearerStats
 
 SHEARER_STREAMS = ("imu", "odometer", "mag", "survey", "face_survey")
 """The streams drawn from the shearer's truth chunk by chunk."""
+SENSOR_CHUNK_ROWS = 1 << 18
+"""The shearer's truth goes to the sensor models in chunks of at most this many rows (22 min at 200 Hz): their
+intermediate arrays stay small whatever a cycle's length (seed004's 77 min cycles: peak 2.07 -> 1.27 GB)."""
 SUPPORT_TRUTH = ("t", "s")
 """The shearer truth columns the support streams read (held for the whole run)."""
 
 
 def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Progress | None = None,
-                chunk_rows: int | None = None, offsets: OffsetSource | None = None) -> tuple[SimResult, ShearerStats]:
+                chunk_rows: int = SENSOR_CHUNK_ROWS, offsets: OffsetSource | None = None
+                ) -> tuple[SimResult, ShearerStats]:
     """Simulate `scn` into `run_dir`: the truth streams and, with `sensors`, sensor trial 0's streams, written as the
-    run goes. `chunk_rows` cuts the shearer's truth into chunks of at most that many rows (default: a ride chunk, a
-    cycle); the files are the same whatever it is. `offsets`: the per-cycle offsets of the supports' pushes
+    run goes. `chunk_rows` cuts the shearer's truth into chunks of at most that many rows; the files are the same
+    whatever it is. `offsets`: the per-cycle offsets of the supports' pushes
     (twin.face.drift.OffsetSource). Returns the simulation's result without the shearer's truth
     (which is on disk) and the shearer's statistics."""
     report = progress or (lambda stage, frac: None)
@@ -61,10 +65,8 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
                 appenders[name].append(cols)
 
     def sink(rows: dict[str, np.ndarray]) -> None:
-        n = rows["t"].size
-        step = n if chunk_rows is None else chunk_rows
-        for a in range(0, n, step):
-            for chunk in assembler.push({k: v[a:a + step] for k, v in rows.items()}):
+        for a in range(0, rows["t"].size, chunk_rows):
+            for chunk in assembler.push({k: v[a:a + chunk_rows] for k, v in rows.items()}):
                 take(chunk)
 
     try:

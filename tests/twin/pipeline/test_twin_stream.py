@@ -18,14 +18,14 @@ pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick su
 
 @pytest.fixture(scope="module")
 def streamed(tmp_path_factory):
-    """The capped default scenario streamed twice: by ride chunk (a cycle), and in chunks of 7,919 truth rows
-    (boundaries anywhere: inside an IMU sample's group, a survey's cut, a stop) with row groups of 100,000 rows, so
-    that both files span several row groups."""
+    """The capped default scenario streamed twice: by ride chunk (a cycle: chunks larger than any), and in chunks of
+    7,919 truth rows (boundaries anywhere: inside an IMU sample's group, a survey's cut, a stop) with row groups of
+    100,000 rows, so that both files span several row groups."""
     scn, _ = simulated("default")
     dirs = []
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(lf, "ROW_GROUP_ROWS", 100_000)
-        for chunk_rows in (None, 7_919):
+        for chunk_rows in (1 << 40, 7_919):
             out = tmp_path_factory.mktemp("stream")
             stream_twin(scn, out, chunk_rows=chunk_rows)
             dirs.append(out)
