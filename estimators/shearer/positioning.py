@@ -208,7 +208,8 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
         fwd.sd[a + 1:b + 1], fwd.flags[a + 1:b + 1] = _sd(seg.p_post[1:]), seg.flags[1:]
         fwd.save_segment(a, seg.x_post, seg.p_post, seg.p_pred, seg.phi)
         if smooth:
-            x_s, p_s = np.empty_like(seg.x_post), np.empty_like(seg.p_post)
+            x_s = np.empty_like(seg.x_post)
+            p_s = seg.p_post  # smoothed in place (the backward pass reads row k before it writes it)
             seg.x_post[0] = 0.0  # the segment starts from the previous posterior
             rts_backward(seg.x_post, seg.p_post, np.zeros_like(seg.x_post), seg.p_pred, seg.phi, x_s, p_s)
             s_nav, s_cal = seg.nav.copy(), seg.cal.copy()
@@ -242,18 +243,17 @@ def rts_offline(prep: Prepared, cfg: Config, fwd: _Forward, notes: list[str]) ->
     last_update = {b: np.load(path)["x_post"][-1] for a, b, path in segs}
     x_known = p_known = None
     for a, b, path in reversed(segs):
-        data = np.load(path)
-        x_post, p_pred, phi = data["x_post"].copy(), data["p_pred"], data["phi"]
+        data = np.load(path)  # each array read fresh from the file: changed in place
+        x_post, p_pred, phi, p_post = data["x_post"], data["p_pred"], data["phi"], data["p_post"]
         x_post[0] = last_update.get(a, np.zeros(es.N_STATES))
-        p_post = data["p_post"].copy()
         x_run = x_post.copy()
         if x_known is not None:
             x_run[-1], p_post[-1] = x_known, p_known
-        x_s, p_s = np.empty_like(x_post), np.empty_like(p_post)
+        x_s, p_s = np.empty_like(x_post), p_post  # p smoothed in place, as in run_kf
         rts_backward(x_run, p_post, np.zeros_like(x_post), p_pred, phi, x_s, p_s)
         _apply_rows(nav[a:b], cal[a:b], x_s[:-1] - x_post[:-1])
         sd[a:b] = _sd(p_s[:-1])
-        x_known, p_known = x_s[0], p_s[0]
+        x_known, p_known = x_s[0].copy(), p_s[0].copy()  # not views: the pass's arrays go
     return make_solution(prep.t_kf, cfg, nav, sd, fwd.flags | FLAG_SMOOTHED, cal, notes)
 
 
