@@ -11,7 +11,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 import pyarrow.parquet as pq
 
 from estimators.io.logformat import (
@@ -22,8 +21,7 @@ from estimators.io.logformat import (
     PUSHRAM,
     SURVEY,
     LogError,
-    check_table,
-    read_schema,
+    StreamBlocks,
     read_stream,
 )
 
@@ -70,8 +68,8 @@ class ImuArrays(ImuRows):
 
 class ImuFile(ImuRows):
     """IMU rows read from a stream file row group by row group (the last group read is kept for the next window).
-    `open` checks the whole file a row group at a time (logformat.check_table, each group with the row before it),
-    so a window read later is known good."""
+    `open` checks the whole file a row group at a time (logformat.StreamBlocks), so a window read later is known
+    good."""
 
     def __init__(self, path: Path, starts: np.ndarray):
         self.path, self._starts = Path(path), starts  # first row of each row group, then the row count
@@ -80,21 +78,8 @@ class ImuFile(ImuRows):
 
     @classmethod
     def open(cls, path: Path) -> ImuFile:
-        try:
-            parquet = pq.ParquetFile(path)
-        except (pa.ArrowException, OSError, ValueError) as err:
-            raise LogError(f"{path}: not a readable Parquet file ({' '.join(str(err).split())})") from None
-        counts = [parquet.metadata.row_group(g).num_rows for g in range(parquet.num_row_groups)]
-        starts = np.concatenate([[0], np.cumsum(counts, dtype=np.int64)])
-        before = None
-        for g in range(parquet.num_row_groups):
-            table = parquet.read_row_group(g)
-            check_table(IMU, table, str(path), before, first_row=int(starts[g]))
-            if table.num_rows:
-                before = {c: table.column(c)[-1].as_py() for c in IMU_COLUMNS}
-        if parquet.num_row_groups == 0:
-            check_table(IMU, parquet.schema_arrow.empty_table(), str(path))
-        return cls(path, starts)
+        counts = [block.num_rows for block in StreamBlocks(Path(path).parent, IMU)]  # each row group checked
+        return cls(path, np.concatenate([[0], np.cumsum(counts, dtype=np.int64)]))
 
     def _group(self, g: int) -> np.ndarray:
         if self._cached is None or self._cached[0] != g:
@@ -215,7 +200,6 @@ def load_log(run_dir: Path) -> Log:
     path = Path(run_dir) / IMU.filename
     if not path.is_file():
         raise LogError(f"{path}: stream file not found")
-    read_schema(path)  # a damaged file: one line with the remedy
     imu = ImuFile.open(path)
     enough(IMU, imu.size)
     return log_from_columns(imu, required(ODOMETER), required(SURVEY),

@@ -10,6 +10,7 @@ the file, the column and the first offending row, or how to get the file back.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -526,6 +527,38 @@ def read_stream(run_dir: Path, stream: Stream, columns: tuple[str, ...] | None =
         raise LogError(f"{path}: not a readable Parquet file ({' '.join(str(err).split())}); {_remedy(path)}") from None
     check_table(stream, table, str(path))
     return table
+
+
+class StreamBlocks:
+    """A stream's file in run_dir read a row group at a time (only `columns`, declared names, when given): each
+    iteration reads the file again, each block checked as read_stream checks a whole file (check_table, with the row
+    before it and its row numbers in the file). For a consumer that needs a long stream once or twice, not whole."""
+
+    def __init__(self, run_dir: Path, stream: Stream, columns: tuple[str, ...] | None = None):
+        self.path, self.stream = Path(run_dir) / stream.filename, stream
+        if columns is not None:
+            self.stream = Stream(stream.name, stream.doc, tuple(c for c in stream.columns if c.name in columns),
+                                 stream.time_order)
+        read_schema(self.path)  # a damaged file: one line with the remedy
+
+    def __iter__(self) -> Iterator[pa.Table]:
+        parquet = pq.ParquetFile(self.path)
+        names = [c.name for c in self.stream.columns]
+        before, first_row = None, 0
+        for g in range(parquet.num_row_groups):
+            table = parquet.read_row_group(g, columns=[n for n in names if n in parquet.schema_arrow.names])
+            check_table(self.stream, table, str(self.path), before, first_row)
+            if table.num_rows:
+                before = {n: table.column(n)[-1].as_py() for n in names}
+            first_row += table.num_rows
+            yield table
+        if parquet.num_row_groups == 0:
+            check_table(self.stream, parquet.schema_arrow.empty_table(), str(self.path))
+            yield parquet.schema_arrow.empty_table()
+
+    def column(self, name: str) -> np.ndarray:
+        """One column over the whole file."""
+        return np.concatenate([b.column(name).to_numpy() for b in StreamBlocks(self.path.parent, self.stream, (name,))])
 
 
 def read_schema(path: Path) -> pa.Schema:

@@ -27,6 +27,7 @@ from estimators.io.logformat import (
     ESTIMATES_DIR,
     STREAMS,
     LogError,
+    StreamBlocks,
     read_estimate,
     read_stream,
 )
@@ -205,7 +206,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     from twin.pipeline.montecarlo_table import format_monte_carlo, write_monte_carlo
     from twin.pipeline.twin_stream import stream_twin
     from twin.sensors.faults import check_faults_in_run
-    from twin.view.recording import ESTIMATES_RRD, RUN_RRD, SHEARER_COLUMNS, write_recording
+    from twin.view.recording import BLOCK_STREAMS, ESTIMATES_RRD, RUN_RRD, SHEARER_COLUMNS, write_recording
     from twin.view.summary import format_summary, twin_summary
 
     hold_mmap_threshold()  # memory flat over a long run (twin.pipeline.malloc)
@@ -271,7 +272,9 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
             runner.submit(scn, staging, mc_trials)  # runs beside trial 0 unless sequential
         (staging / "scenario.toml").write_text(scenario_to_toml(scn))
         progress("write", 1.0)
-        tables = {name: read_stream(staging, STREAMS[name], SHEARER_COLUMNS if name == "truth_shearer" else None)
+        # The long streams are read a row group at a time (the recording holds a few of their columns whole).
+        tables = {name: (StreamBlocks if name in BLOCK_STREAMS else read_stream)(
+                      staging, STREAMS[name], SHEARER_COLUMNS if name == "truth_shearer" else None)
                   for name in STREAMS if (staging / STREAMS[name].filename).is_file()}
         write_recording(staging / RUN_RRD, scn, {k: v for k, v in tables.items() if k.startswith("truth_")},
                         result.floor_grid.mesh_t(result.frame), record_rate_hz,

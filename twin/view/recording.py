@@ -48,13 +48,16 @@ from twin.face.layout import PAN_HEIGHT_M, PAN_WIDTH_M, SUPPORT_BASE_LENGTH_M
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
 from twin.view.rerun_columns import (
     PATH_TOLERANCE_M,
+    Blocks,
     col,
+    column_of,
     decimate,
     latest_rows,
     line_rows,
     marker_rows,
     send_bar_chart,
     series,
+    take_rows,
     time_column,
     vec,
     xyzw,
@@ -214,9 +217,11 @@ def path_strips(t: np.ndarray, p: np.ndarray, cycle: np.ndarray | None, rate_hz:
 SHEARER_COLUMNS = ("t", "lat", "lon", "p_t_e", "p_t_n", "p_t_u", "q_nb_w", "q_nb_x", "q_nb_y", "q_nb_z", "v_n_e", "v_n_n",
                    "cycle")
 """The truth_shearer columns the recording draws (a run reads only these back from its Parquet)."""
+BLOCK_STREAMS = ("truth_shearer", "imu", "pushram", "pressure")
+"""The streams write_recording takes in blocks (a run reads them back a row group at a time)."""
 
 
-def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate_hz: float | None) -> None:
+def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_hz: float | None) -> None:
     sh = scn.shearer
     body_z = 0.5 * SHEARER_HEIGHT_M - sh.body_height_m  # underside on the running line
     rec.log("world/shearer/body", rr.Boxes3D(
@@ -231,12 +236,13 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate
         centers=[[drum_x, -0.5 * sh.length_m, drum_z], [drum_x, 0.5 * sh.length_m, drum_z]],
         quaternions=[[0.0, s45, 0.0, s45]] * 2,  # cylinder axis z -> body x (towards the coal wall)
         colors=[[120, 120, 130], [120, 120, 130]], fill_mode="solid"), static=True)
-    if shearer.num_rows == 0:
+    t_all = column_of(shearer, "t")
+    if t_all.size == 0:
         return
 
-    t_all, p_all = col(shearer, "t"), vec(shearer, "p_t")
+    p_all = np.column_stack([column_of(shearer, f"p_t_{a}") for a in "enu"]).astype(float)
     keep = decimate(t_all, rate_hz)
-    sub, t = shearer.take(pa.array(keep)), t_all[keep]
+    sub, t = take_rows(shearer, keep), t_all[keep]
     p = vec(sub, "p_t")
     # n (ENU at the shearer) to t (ENU at the site origin): C_n^t = (C_t^e)^T C_n^e.
     c_te = mat_en(np.radians(scn.site.lat_deg), np.radians(scn.site.lon_deg))
@@ -248,7 +254,7 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: pa.Table, rate
     rec.send_columns("world/shearer", indexes=[time_column(t[moved])],
                      columns=rr.Transform3D.columns(translation=p[moved].astype(np.float32),
                                                     quaternion=xyzw(q_tb[moved])))
-    rec.log("world/shearer_path", rr.LineStrips3D(path_strips(t_all, p_all, col(shearer, "cycle"), rate_hz),
+    rec.log("world/shearer_path", rr.LineStrips3D(path_strips(t_all, p_all, column_of(shearer, "cycle"), rate_hz),
                                                   radii=0.03, colors=[240, 120, 40]), static=True)
 
     speed = np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n"))
@@ -307,14 +313,15 @@ def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
 # Public API
 
 
-def write_recording(path: Path, scn: Scenario, truth: dict[str, pa.Table],
+def write_recording(path: Path, scn: Scenario, truth: dict[str, Blocks],
                     floor_mesh: tuple[np.ndarray, np.ndarray], rate_hz: float | None = RECORD_RATE_HZ,
-                    sensors: dict[str, pa.Table] | None = None) -> None:
+                    sensors: dict[str, Blocks] | None = None) -> None:
     """Write the truth streams of a run as a Rerun recording (.rrd) with its blueprint, reproducibly
     (twin.view.rrd_stream: the recording id from the scenario and seed).
 
     `truth` maps "truth_shearer", "truth_pans", "truth_supports" (required) and "truth_cycles" (optional: the
-    face line at each cycle's end) to tables with the columns of `estimators.io.logformat`. `floor_mesh` is (vertices (V, 3) in t,
+    face line at each cycle's end) to tables with the columns of `estimators.io.logformat` (truth_shearer may come in
+    blocks: twin.view.rerun_columns.Blocks; so may the imu, pushram and pressure `sensors`). `floor_mesh` is (vertices (V, 3) in t,
     triangle indices (T, 3)). `rate_hz` is the record rate (twin.view.rerun_columns: Hz, or FULL for every
     sample) of the shearer and the time series.
     """

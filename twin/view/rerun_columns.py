@@ -9,6 +9,8 @@ The record rate (twin.view.record_rate) is a rate in Hz, or FULL (None): every s
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 import pyarrow as pa
 import rerun as rr
@@ -34,8 +36,38 @@ MARKER_STEP_M = 0.05
 where it was last logged, at most this far behind."""
 
 
+Blocks = pa.Table | Iterable[pa.Table]
+"""A stream as one table, or as consecutive blocks of rows that can be read more than once (a long stream's file read a
+row group at a time: estimators.io.logformat.StreamBlocks, whose `column` gives one column over the whole file)."""
+
+
 def col(table: pa.Table, name: str) -> np.ndarray:
     return table.column(name).to_numpy()
+
+
+def blocks_of(data: Blocks) -> Iterable[pa.Table]:
+    return [data] if isinstance(data, pa.Table) else data
+
+
+def column_of(data: Blocks, name: str) -> np.ndarray:
+    """One column over all of a stream's rows."""
+    if isinstance(data, pa.Table):
+        return col(data, name)
+    if hasattr(data, "column"):
+        return data.column(name)
+    return np.concatenate([col(block, name) for block in data])
+
+
+def take_rows(data: Blocks, rows: np.ndarray) -> pa.Table:
+    """The rows (sorted indices over all of the stream's rows) as one table."""
+    if isinstance(data, pa.Table):
+        return data.take(pa.array(rows))
+    parts, start = [], 0
+    for block in data:
+        a, b = np.searchsorted(rows, [start, start + block.num_rows])
+        parts.append(block.take(pa.array(rows[a:b] - start)))
+        start += block.num_rows
+    return pa.concat_tables(parts)
 
 def vec(table: pa.Table, prefix: str, axes: str = "enu") -> np.ndarray:
     return np.column_stack([col(table, f"{prefix}_{a}") for a in axes]).astype(float)
@@ -126,16 +158,23 @@ def marker_rows(t: np.ndarray, p: np.ndarray, rate_hz: float | None) -> np.ndarr
     return keep[decimate(travelled, 1.0 / MARKER_STEP_M)]
 
 
-def mean_rate(t: np.ndarray, values: np.ndarray, rate_hz: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """Block means of increments per second at about rate_hz (sums over blocks / their duration; each sample at FULL
-    rate)."""
+def mean_rate(data: Blocks, columns: list[str], rate_hz: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Means of increments (the stream's `columns`) per second at about rate_hz: sums over runs of `step` rows / their
+    duration, `step` the record interval in median sample intervals (each sample at FULL rate); (times at the runs'
+    ends, (M, len(columns))). A stream given in blocks is summed block by block (a run of rows may span two)."""
+    t = column_of(data, "t")
     if t.size < 2:
-        return t, values
+        return t, np.column_stack([column_of(data, c) for c in columns]).astype(float)
     dt = float(np.median(np.diff(t)))
     step = 1 if rate_hz is FULL else max(1, int(round(1.0 / (rate_hz * dt))))
     n = (t.size // step) * step
-    blocks = values[:n].reshape(n // step, step, -1).sum(axis=1)
-    return t[step - 1:n:step], blocks / (step * dt)
+    sums, carry = [], np.zeros((0, len(columns)))
+    for block in blocks_of(data):
+        values = np.concatenate([carry, np.column_stack([col(block, c) for c in columns]).astype(float)])
+        m = (values.shape[0] // step) * step
+        sums.append(values[:m].reshape(m // step, step, len(columns)).sum(axis=1))
+        carry = values[m:]
+    return t[step - 1:n:step], np.concatenate(sums)[:n // step] / (step * dt)
 
 def line_rows(t: np.ndarray, values: np.ndarray, tolerance: float | np.ndarray,
               must: np.ndarray | None = None) -> np.ndarray:

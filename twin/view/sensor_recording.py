@@ -15,18 +15,28 @@ import pyarrow.compute  # noqa: F401  (pa.compute)
 import rerun as rr
 
 from twin.view.record_rate import FULL
-from twin.view.rerun_columns import col, decimate, mean_rate, send_bar_chart, series, vec
+from twin.view.rerun_columns import (
+    Blocks,
+    blocks_of,
+    col,
+    column_of,
+    decimate,
+    mean_rate,
+    send_bar_chart,
+    series,
+    vec,
+)
 
 
-def log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz: float | None) -> None:
+def log_sensors(rec: rr.RecordingStream, sensors: dict[str, Blocks], rate_hz: float | None) -> None:
     """Every sensor channel as time series (fast streams averaged to about rate_hz), fault windows as
-    0/1 steps, the ram readings as a bar chart per support."""
+    0/1 steps, the ram readings as a bar chart per support. The imu, pushram and pressure streams may come in blocks
+    (twin.view.rerun_columns.Blocks), the others as tables."""
     if "imu" in sensors:
-        imu = sensors["imu"]
-        t = col(imu, "t")
-        for name, prefix, label in (("gyro", "dtheta", "rad/s"), ("accel", "dv", "m/s^2")):
-            tt, rate = mean_rate(t, vec(imu, prefix, "xyz"), rate_hz)
-            series(rec, f"sensors/imu/{name}", tt, rate, [f"{a} [{label}]" for a in "xyz"], rate_hz=rate_hz)
+        tt, rates = mean_rate(sensors["imu"], [f"{p}_{a}" for p in ("dtheta", "dv") for a in "xyz"], rate_hz)
+        for k, (name, label) in enumerate((("gyro", "rad/s"), ("accel", "m/s^2"))):
+            series(rec, f"sensors/imu/{name}", tt, rates[:, 3 * k:3 * k + 3], [f"{a} [{label}]" for a in "xyz"],
+                   rate_hz=rate_hz)
     if "odometer" in sensors:
         odo = sensors["odometer"]
         series(rec, "sensors/odometer/distance", col(odo, "t"), col(odo, "distance")[:, None], ["distance [m]"],
@@ -45,12 +55,9 @@ def log_sensors(rec: rr.RecordingStream, sensors: dict[str, pa.Table], rate_hz: 
                    [f"{a} [rad/s]" for a in "xyz"], rate_hz=rate_hz)
     if "pushram" in sensors:
         ram = sensors["pushram"]
-        t, support = col(ram, "t"), col(ram, "support")
-        times, inverse = np.unique(t, return_inverse=True)
-        grid = np.full((times.size, int(support.max()) + 1), np.nan)
-        grid[inverse, support] = col(ram, "extension")
-        keep = decimate(times, FULL if rate_hz is FULL else min(rate_hz, 0.2))
-        send_bar_chart(rec, "sensors/pushram", times[keep], grid[keep])
+        times = np.unique(column_of(ram, "t"))
+        shown = times[decimate(times, FULL if rate_hz is FULL else min(rate_hz, 0.2))]
+        send_bar_chart(rec, "sensors/pushram", shown, bar_grid(ram, shown, ("extension",))[0])
     if "pressure" in sensors:
         _log_pressures(rec, sensors["pressure"], rate_hz)
     if "alignment" in sensors and sensors["alignment"].num_rows:
@@ -79,17 +86,32 @@ PRESSURE_BAR_HZ = 0.2
 """Rate of the pressure bar charts (one bar per support) at the default record rate."""
 
 
-def _log_pressures(rec: rr.RecordingStream, pressure: pa.Table, rate_hz: float | None) -> None:
+def _log_pressures(rec: rr.RecordingStream, pressure: Blocks, rate_hz: float | None) -> None:
     """The legs' and rams' pressure readings as a bar chart per support each, and the face's lowest leg pressure and
     highest ram pressure as time series (a support that failed to set, a leaking leg, a stalled ram stand out)."""
-    t, support = col(pressure, "t"), col(pressure, "support")
-    times, inverse = np.unique(t, return_inverse=True)
-    keep = decimate(times, FULL if rate_hz is FULL else min(rate_hz, PRESSURE_BAR_HZ))
-    extremes = []
-    for column, reduce in (("leg", np.fmin), ("ram", np.fmax)):
-        grid = np.full((times.size, int(support.max()) + 1), np.nan)
-        grid[inverse, support] = col(pressure, column)
-        send_bar_chart(rec, f"sensors/pressure/{column}_bars", times[keep], grid[keep])
-        extremes.append(reduce.reduce(grid, axis=1))  # NaN-ignoring, NaN where a sample has no reading
-    series(rec, "sensors/pressure/extremes", times, np.column_stack(extremes),
-           ["lowest leg [MPa]", "highest ram [MPa]"], rate_hz=rate_hz)
+    times = np.unique(column_of(pressure, "t"))
+    shown = times[decimate(times, FULL if rate_hz is FULL else min(rate_hz, PRESSURE_BAR_HZ))]
+    for column, grid in zip(("leg", "ram"), bar_grid(pressure, shown, ("leg", "ram"))):
+        send_bar_chart(rec, f"sensors/pressure/{column}_bars", shown, grid)
+    extremes = np.full((times.size, 2), np.nan)  # NaN-ignoring, NaN where a sample has no reading
+    for block in blocks_of(pressure):
+        at = np.searchsorted(times, col(block, "t"))
+        np.fmin.at(extremes[:, 0], at, col(block, "leg"))
+        np.fmax.at(extremes[:, 1], at, col(block, "ram"))
+    series(rec, "sensors/pressure/extremes", times, extremes, ["lowest leg [MPa]", "highest ram [MPa]"],
+           rate_hz=rate_hz)
+
+
+def bar_grid(data: Blocks, shown: np.ndarray, columns: tuple[str, ...]) -> list[np.ndarray]:
+    """A per-support stream's `columns` at the times `shown` (sorted), each as (times, supports) with NaN where a
+    support has no row (the later of two rows at one time)."""
+    n_sup = max(int(col(block, "support").max(initial=-1)) for block in blocks_of(data)) + 1
+    grids = [np.full((shown.size, n_sup), np.nan) for _ in columns]
+    for block in blocks_of(data):
+        t = col(block, "t")
+        at = np.minimum(np.searchsorted(shown, t), max(shown.size - 1, 0))
+        hit = np.flatnonzero(shown[at] == t) if shown.size else np.zeros(0, int)
+        support = col(block, "support")[hit]
+        for grid, column in zip(grids, columns):
+            grid[at[hit], support] = col(block, column)[hit]
+    return grids

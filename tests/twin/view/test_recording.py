@@ -8,6 +8,7 @@ import pytest
 from rerun.chunk import RrdReader
 
 from estimators.io.logformat import (
+    STREAMS,
     TRUTH_CYCLES,
     TRUTH_PANS,
     TRUTH_SHEARER,
@@ -226,3 +227,44 @@ def test_the_face_line_at_each_cycle_end(tmp_path):
         np.testing.assert_allclose(row, (x - np.polyval(np.polyfit(y, x, 1), y)) * 1e3, atol=1e-6)
     assert np.abs(bars[0]).max() < 1e-6 < np.abs(bars[1]).max()  # installed straight, kinked by the pushes
     assert {"/face/straightness_mm", "/face/creep_mm"} <= {c.entity_path for c in chunks}
+
+
+def _chunk_contents(path) -> list[tuple[str, pa.RecordBatch]]:
+    """Each chunk of a recording without its row ids (which number the rows in logging order)."""
+    out = []
+    for chunk in RrdReader(path).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        out.append((str(chunk.entity_path), batch.select([n for n in batch.schema.names if "row" not in n.lower()])))
+    return out
+
+
+def test_the_long_streams_in_blocks_give_the_recording_of_whole_tables(tmp_path):
+    """A run's recording reads truth_shearer, imu, pushram and pressure a row group at a time (BLOCK_STREAMS): given in
+    blocks cut anywhere (inside a record interval, between the rows of one sample time), every chunk it writes holds
+    what the whole tables give."""
+    from tests.conftest import simulated
+    from twin.sensors.streams import imu_truth, sensor_streams
+    from twin.view.recording import BLOCK_STREAMS
+
+    scn, result = simulated("default")
+    streams = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), 0)
+    tables = {name: make_table(STREAMS[name], cols) for name, cols in {**result.tables, **streams}.items()
+              if name in STREAMS}
+
+    def write(path, split):
+        def cut(name, table):
+            if not split or name not in BLOCK_STREAMS:
+                return table
+            edges = [0, 7, table.num_rows // 3 + 1, table.num_rows // 2 - 5, table.num_rows]
+            return [table.slice(a, b - a) for a, b in zip(edges[:-1], edges[1:])]
+        data = {name: cut(name, table) for name, table in tables.items()}
+        write_recording(path, scn, {k: v for k, v in data.items() if k.startswith("truth_")},
+                        result.floor_grid.mesh_t(result.frame), sensors={k: v for k, v in data.items()
+                                                                          if not k.startswith("truth_")})
+
+    write(tmp_path / "whole.rrd", False)
+    write(tmp_path / "blocks.rrd", True)
+    whole, blocks = _chunk_contents(tmp_path / "whole.rrd"), _chunk_contents(tmp_path / "blocks.rrd")
+    assert len(whole) == len(blocks) > 20
+    for (entity_a, a), (entity_b, b) in zip(whole, blocks):
+        assert entity_a == entity_b and a.equals(b), entity_a
