@@ -219,6 +219,7 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
                 points = segment_points(prep, cfg, a, b, s_nav, p_s[:, es.DP, es.DP])
         elif cpoem:
             points = segment_points(prep, cfg, a, b, seg.nav, seg.p_post[:, es.DP, es.DP])
+        seg = p_s = None  # the pass's arrays go before the next pass makes its own
     if n_gated:
         notes.append(f"{n_gated} of {n_fixes} position fixes rejected by the innovation gate")
     missing = np.flatnonzero(prep.mode[1:] < 0) + 1
@@ -241,20 +242,28 @@ def rts_offline(prep: Prepared, cfg: Config, fwd: _Forward, notes: list[str]) ->
     nav, cal, sd = fwd.nav.copy(), fwd.cal.copy(), fwd.sd.copy()
     segs = [(a, b, fwd.keep_dir / f"{a}.npz") for a, b in fwd.saved]
     last_update = {b: np.load(path)["x_post"][-1] for a, b, path in segs}
-    x_known = p_known = None
+    known = None
     for a, b, path in reversed(segs):
-        data = np.load(path)  # each array read fresh from the file: changed in place
-        x_post, p_pred, phi, p_post = data["x_post"], data["p_pred"], data["phi"], data["p_post"]
-        x_post[0] = last_update.get(a, np.zeros(es.N_STATES))
-        x_run = x_post.copy()
-        if x_known is not None:
-            x_run[-1], p_post[-1] = x_known, p_known
-        x_s, p_s = np.empty_like(x_post), p_post  # p smoothed in place, as in run_kf
-        rts_backward(x_run, p_post, np.zeros_like(x_post), p_pred, phi, x_s, p_s)
-        _apply_rows(nav[a:b], cal[a:b], x_s[:-1] - x_post[:-1])
-        sd[a:b] = _sd(p_s[:-1])
-        x_known, p_known = x_s[0].copy(), p_s[0].copy()  # not views: the pass's arrays go
+        known = _smooth_stored(path, last_update.get(a, np.zeros(es.N_STATES)), known, nav[a:b], cal[a:b], sd[a:b])
     return make_solution(prep.t_kf, cfg, nav, sd, fwd.flags | FLAG_SMOOTHED, cal, notes)
+
+
+def _smooth_stored(path: Path, x_first: np.ndarray, known: tuple[np.ndarray, np.ndarray] | None, nav: np.ndarray,
+                   cal: np.ndarray, sd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """rts_offline's backward pass over one stored segment (its row 0's update x_first; `known` the smoothed state and
+    covariance at its last epoch, from the later segment), applied to its rows but the last of nav, cal, sd in place;
+    returns the smoothed state and covariance at its first epoch. One segment's arrays at a time: they go on return."""
+    data = np.load(path)  # each array read fresh from the file: changed in place
+    x_post, p_pred, phi, p_post = data["x_post"], data["p_pred"], data["phi"], data["p_post"]
+    x_post[0] = x_first
+    x_run = x_post.copy()
+    if known is not None:
+        x_run[-1], p_post[-1] = known
+    x_s, p_s = np.empty_like(x_post), p_post  # p smoothed in place, as in run_kf
+    rts_backward(x_run, p_post, np.zeros_like(x_post), p_pred, phi, x_s, p_s)
+    _apply_rows(nav, cal, x_s[:-1] - x_post[:-1])
+    sd[:] = _sd(p_s[:-1])
+    return x_s[0].copy(), p_s[0].copy()
 
 
 def dead_reckoning(log: Log, cfg: Config, prep: Prepared, cal: np.ndarray | None = None) -> Solution:
