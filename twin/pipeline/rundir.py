@@ -131,7 +131,8 @@ def staged_update(path: Path, fresh: tuple[str, ...], copied: tuple[str, ...]) -
     """Yield a staging copy of run directory `path` to rewrite some of it in: every file hard-linked (copied where
     the file system cannot link), but the top-level entries `fresh` left out (written anew) and `copied` copied
     (updated in place, which a link would pass through to `path`). On success the copy replaces `path`
-    (_swap_in); on any exception, SIGTERM included, `path` is left as it was. The caller holds run_lock."""
+    (_swap_in); on any exception, SIGTERM included, `path` is left as it was, and an error message naming a file of the
+    copy names it in `path` (the user's directory, not a scratch one). The caller holds run_lock."""
     path = Path(path)
     staging = Path(tempfile.mkdtemp(prefix=f".{path.name}.partial-", dir=path.parent))
     try:
@@ -151,8 +152,10 @@ def staged_update(path: Path, fresh: tuple[str, ...], copied: tuple[str, ...]) -
                 except OSError:
                     shutil.copy2(src, dst)
         yield staging
-    except BaseException:
+    except BaseException as err:
         shutil.rmtree(staging, ignore_errors=True)
+        if len(err.args) == 1 and isinstance(err.args[0], str):
+            err.args = (err.args[0].replace(str(staging), str(path)),)
         raise
     _swap_in(staging, path)
 

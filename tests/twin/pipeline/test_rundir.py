@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from estimators.io.logformat import MARKER
+from estimators.io.logformat import MARKER, LogError
 from twin.pipeline.rundir import (
     MAX_NAME,
     RunDirError,
@@ -18,6 +18,7 @@ from twin.pipeline.rundir import (
     default_run_dir,
     run_lock,
     safe_name,
+    staged_update,
 )
 
 
@@ -86,3 +87,16 @@ def test_a_stale_lock_of_a_dead_process_is_taken_over(tmp_path):
         assert (tmp_path / ".run.lock").read_text().strip() == str(os.getpid())
         (staging / "x").write_text("1")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
+def test_an_error_in_a_staged_update_names_the_run_directory_not_the_copy(tmp_path):
+    """A one-line error about a file of the staging copy (a bad row of a stream the estimators read) names the file
+    where the user has it; the run directory is left as it was."""
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "imu.parquet").write_text("x")
+    with pytest.raises(LogError) as err:
+        with staged_update(run, fresh=(), copied=()) as staging:
+            raise LogError(f"{staging / 'imu.parquet'}: column 'dv_y' row 7: not a finite number")
+    assert str(err.value) == f"{run / 'imu.parquet'}: column 'dv_y' row 7: not a finite number"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"] and (run / "imu.parquet").read_text() == "x"
