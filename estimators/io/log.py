@@ -66,6 +66,36 @@ class ImuArrays(ImuRows):
         return self.t[i0:i1], self.dtheta[i0:i1], self.dv[i0:i1]
 
 
+class ImuBuffer(ImuRows):
+    """IMU rows appended as they come (an online run), numbered from the log's first row; `forget_before` lets the
+    rows before a given one go, so that the buffer holds what the passes still to run read."""
+
+    def __init__(self):
+        self.base = 0  # the number of the first row held
+        self.size = 0
+        self.t, self.dtheta, self.dv = np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3))
+
+    def append(self, t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray) -> None:
+        self.t, self.dtheta, self.dv = (np.concatenate([self.t, t]), np.concatenate([self.dtheta, dtheta]),
+                                        np.concatenate([self.dv, dv]))
+        self.size += t.size
+
+    def forget_before(self, row: int) -> None:
+        k = min(max(row - self.base, 0), self.t.size)
+        self.t, self.dtheta, self.dv = self.t[k:].copy(), self.dtheta[k:].copy(), self.dv[k:].copy()
+        self.base += k
+
+    def read(self, i0: int, i1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        i0, i1 = max(i0, 0), min(i1, self.size)
+        if i0 < self.base and i1 > i0:
+            raise ValueError(f"IMU rows {i0}..{self.base - 1} were let go (ImuBuffer.forget_before)")
+        k0, k1 = i0 - self.base, max(i1 - self.base, i0 - self.base)
+        return self.t[k0:k1], self.dtheta[k0:k1], self.dv[k0:k1]
+
+    def times_at(self, rows: np.ndarray) -> np.ndarray:
+        return self.read(int(rows[0]), int(rows[-1]) + 1)[0][rows - rows[0]] if rows.size else np.zeros(0)
+
+
 class ImuFile(ImuRows):
     """IMU rows read from a stream file row group by row group (the last group read is kept for the next window).
     `open` checks the whole file a row group at a time (logformat.StreamBlocks), so a window read later is known

@@ -16,6 +16,7 @@ Methods (estimators.shearer.methods runs them by name, each an estimates/NAME st
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
@@ -181,51 +182,94 @@ def _checked_segment(prep: Prepared, cfg: Config, a: int, b: int, fixes: Fixes, 
     return seg, fixes.take(kept)
 
 
+class KfPass(NamedTuple):
+    """One pass of KfPasses (epochs a..b, row 0 epoch a): the forward filter's navigation rows, one-sigma of the
+    error states and flags, and with smoothing the smoothed navigation rows and one-sigma (None without)."""
+
+    nav: np.ndarray
+    cal: np.ndarray
+    sd: np.ndarray
+    flags: np.ndarray
+    nav_s: np.ndarray | None
+    sd_s: np.ndarray | None
+
+
+class KfPasses:
+    """The SINS/odometer filter of 001 a pass at a time, its state carried from pass to pass: `run(prep, log, a, b)`
+    filters epochs (a, b] (a the end of the last pass run) with CPOEM fixes from the last pass's points (`cpoem`) and
+    with `smooth` runs the online RTS over the pass at its end (001 Fig. 4), whose points the next pass's fixes
+    come from. `keep`, if given, takes each pass's forward segment (with the smoother's per-epoch matrices) before it
+    is smoothed (rts_offline's store). run_kf runs it over a whole log; an online run pass by pass as the passes end
+    (estimators.shearer.online)."""
+
+    def __init__(self, log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
+                 keep: Callable[[int, _Segment], None] | None = None):
+        self.cfg, self.cpoem, self.smooth, self.keep = cfg, cpoem, smooth, keep
+        self.nav, self.cal = prep.nav0.copy(), prep.cal0.copy()
+        self.p = initial_covariance(cfg, log, prep.nav0[es.QUAT])
+        self.q_psd, self.params = process_noise_psd(cfg), kf_params(cfg)
+        self.nominal = np.zeros(es.N_NOMINAL)
+        self.points: Points | None = Points.empty() if cpoem else None
+        self.notes = list(prep.notes)
+        self.n_fixes = self.n_gated = 0
+
+    def run(self, prep: Prepared, log: Log, a: int, b: int) -> KfPass:
+        cfg = self.cfg
+        fixes = fixes_for(prep, cfg, log, a, b, self.points, self.notes) if self.cpoem else Fixes.empty()
+        seg, fixes = _checked_segment(prep, cfg, a, b, fixes, self.q_psd, self.params,
+                                      (self.nav, self.cal, self.p, self.nominal), self.notes,
+                                      self.smooth or self.keep is not None)
+        self.n_fixes += fixes.epoch.size
+        self.n_gated += int(np.sum(~(seg.nis <= fixes.gate)))
+        if self.keep is not None:
+            self.keep(a, seg)
+        out = KfPass(seg.nav, seg.cal, _sd(seg.p_post), seg.flags, None, None)
+        if not self.smooth:
+            if self.cpoem:
+                self.points = segment_points(prep, cfg, a, b, seg.nav, seg.p_post[:, es.DP, es.DP])
+            return out
+        x_s = np.empty_like(seg.x_post)
+        p_s = seg.p_post  # smoothed in place (the backward pass reads row k before it writes it)
+        seg.x_post[0] = 0.0  # the segment starts from the previous posterior
+        rts_backward(seg.x_post, seg.p_post, np.zeros_like(seg.x_post), seg.p_pred, seg.phi, x_s, p_s)
+        nav_s, cal_s = seg.nav.copy(), seg.cal.copy()
+        _apply_rows(nav_s, cal_s, x_s - seg.x_post)
+        if self.cpoem:
+            self.points = segment_points(prep, cfg, a, b, nav_s, p_s[:, es.DP, es.DP])
+        return out._replace(nav_s=nav_s, sd_s=_sd(p_s))
+
+    def finish(self, prep: Prepared) -> list[str]:
+        """The run's notes, with the fixes gated and the odometer's gaps."""
+        cfg, notes = self.cfg, self.notes
+        if self.n_gated:
+            notes.append(f"{self.n_gated} of {self.n_fixes} position fixes rejected by the innovation gate")
+        missing = np.flatnonzero(prep.mode[1:] < 0) + 1
+        if missing.size:
+            notes.append(f"odometer: no data over {missing.size} filter steps ({missing.size / cfg.filter_rate_hz:.1f} "
+                         f"s, first at t = {prep.t_kf[missing[0]]:.1f} s): velocity updates skipped")
+        return notes
+
+
 def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
            keep_dir: Path | None = None) -> tuple[Solution, Solution | None, _Forward]:
-    """One forward run; with `smooth`, the online RTS at each pass end (its output and CPOEM points)."""
+    """One forward run (KfPasses over the log's passes); with `smooth`, the online RTS at each pass end (its output
+    and CPOEM points)."""
     n = prep.t_kf.size - 1
     fwd = _Forward(n, keep_dir)
-    nav = prep.nav0.copy()
-    cal = prep.cal0.copy()
-    p = initial_covariance(cfg, log, prep.nav0[es.QUAT])
-    fwd.nav[0], fwd.sd[0] = nav, _sd(p)
-    q_psd = process_noise_psd(cfg)
-    params = kf_params(cfg)
-    nominal = np.zeros(es.N_NOMINAL)
+    passes = KfPasses(log, cfg, prep, cpoem, smooth,
+                      None if keep_dir is None else lambda a, seg: fwd.save_segment(a, seg.x_post, seg.p_post,
+                                                                                   seg.p_pred, seg.phi))
+    fwd.nav[0], fwd.sd[0] = passes.nav, _sd(passes.p)
     smooth_nav = fwd.nav.copy() if smooth else None
     smooth_sd = fwd.sd.copy() if smooth else None
-    points: Points | None = Points.empty() if cpoem else None
-    notes = list(prep.notes)
-    n_fixes = n_gated = 0
     for a, b in prep.segments:
-        fixes = fixes_for(prep, cfg, log, a, b, points, notes) if cpoem else Fixes.empty()
-        seg, fixes = _checked_segment(prep, cfg, a, b, fixes, q_psd, params, (nav, cal, p, nominal), notes,
-                                      smooth or keep_dir is not None)
-        n_fixes += fixes.epoch.size
-        n_gated += int(np.sum(~(seg.nis <= fixes.gate)))
-        fwd.nav[a + 1:b + 1], fwd.cal[a + 1:b + 1] = seg.nav[1:], seg.cal[1:]
-        fwd.sd[a + 1:b + 1], fwd.flags[a + 1:b + 1] = _sd(seg.p_post[1:]), seg.flags[1:]
-        fwd.save_segment(a, seg.x_post, seg.p_post, seg.p_pred, seg.phi)
+        one = passes.run(prep, log, a, b)
+        fwd.nav[a + 1:b + 1], fwd.cal[a + 1:b + 1] = one.nav[1:], one.cal[1:]
+        fwd.sd[a + 1:b + 1], fwd.flags[a + 1:b + 1] = one.sd[1:], one.flags[1:]
         if smooth:
-            x_s = np.empty_like(seg.x_post)
-            p_s = seg.p_post  # smoothed in place (the backward pass reads row k before it writes it)
-            seg.x_post[0] = 0.0  # the segment starts from the previous posterior
-            rts_backward(seg.x_post, seg.p_post, np.zeros_like(seg.x_post), seg.p_pred, seg.phi, x_s, p_s)
-            s_nav, s_cal = seg.nav.copy(), seg.cal.copy()
-            _apply_rows(s_nav, s_cal, x_s - seg.x_post)
-            smooth_nav[a + 1:b + 1], smooth_sd[a + 1:b + 1] = s_nav[1:], _sd(p_s[1:])
-            if cpoem:
-                points = segment_points(prep, cfg, a, b, s_nav, p_s[:, es.DP, es.DP])
-        elif cpoem:
-            points = segment_points(prep, cfg, a, b, seg.nav, seg.p_post[:, es.DP, es.DP])
-        seg = p_s = None  # the pass's arrays go before the next pass makes its own
-    if n_gated:
-        notes.append(f"{n_gated} of {n_fixes} position fixes rejected by the innovation gate")
-    missing = np.flatnonzero(prep.mode[1:] < 0) + 1
-    if missing.size:
-        notes.append(f"odometer: no data over {missing.size} filter steps ({missing.size / cfg.filter_rate_hz:.1f} s, "
-                     f"first at t = {prep.t_kf[missing[0]]:.1f} s): velocity updates skipped")
+            smooth_nav[a + 1:b + 1], smooth_sd[a + 1:b + 1] = one.nav_s[1:], one.sd_s[1:]
+        one = None  # the pass's arrays go before the next pass makes its own
+    notes = passes.finish(prep)
     forward = make_solution(prep.t_kf, cfg, fwd.nav, fwd.sd, fwd.flags, fwd.cal, notes)
     smoothed = None
     if smooth:

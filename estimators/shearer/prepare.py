@@ -3,8 +3,9 @@ coning/sculling-compensated at the mechanization rate, the filter epochs, the od
 cuts and the segments (passes), and the start state.
 
 Passes and face ends are found from the odometer alone: a straight cut is a run of travel in one direction
-longer than STRAIGHT_CUT_FRACTION of the face (the distance between the two surveyed face-end points); the pass
-ends when the shearer stands after it. The first cycle has no CPOEM points; its face ends are surveyed (the survey
+longer than STRAIGHT_CUT_FRACTION of the face (the distance between the two surveyed face-end points), which ends
+where the travel turns (estimators.shearer.odometer_epochs); its pass ends a second into the stand after it. The
+log can come in pieces (`Preparer`, for an online run): the epochs and passes are the ones the whole log gives. The first cycle has no CPOEM points; its face ends are surveyed (the survey
 stream). The start pose comes from the survey (position, heading) and from levelling the accelerometers while the
 shearer stands before the first cut.
 
@@ -14,12 +15,12 @@ runs it, read from the log's ImuRows, so the estimators' memory holds a pass of 
 
 from __future__ import annotations
 
-import itertools
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 
-from estimators.io.log import ImuRows, Log
+from estimators.io.log import PERIOD_ROWS, ImuRows, Log
 from estimators.kalman import error_state as es
 from estimators.nav import earth
 from estimators.nav.rotations import (
@@ -30,69 +31,16 @@ from estimators.nav.rotations import (
 )
 from estimators.shearer.config import Config, PositioningError
 from estimators.shearer.cpoem import RamLog
-from estimators.shearer.odometer_filter import (
-    MODE_MOVING,
-    MODE_NO_DATA,
-    MODE_SETTLING,
-    MODE_STANDING,
+from estimators.shearer.odometer_epochs import (
+    ODO_PERIOD_ROWS,
+    STRAIGHT_CUT_FRACTION,
+    Growing,
+    TravelRuns,
+    odometer_at,
 )
+from estimators.shearer.odometer_filter import MODE_MOVING, MODE_STANDING
 from estimators.sins.fine_alignment import fine_align
 from estimators.sins.strapdown import compensated_increments
-
-
-def _odometer_at(log: Log, t_kf: np.ndarray, settle_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Odometer distance at the epochs and the odometer channel of each interval (t[j-1], t[j]]
-    (estimators.shearer.odometer_filter MODE_*): moving where the odometer counted or showed a haulage direction;
-    standing where it shows neither from settle_s before the interval to settle_s after it (the machine may still
-    coast at a stop, or creep before its direction signal comes on at a start), settling in between; no data
-    outside the log or where the interval overlaps a dropout (two consecutive samples more than 2.5 nominal
-    periods apart). The look-ahead makes a stand known settle_s late, which an online run waits for."""
-    t = log.odo_t
-    dist = np.interp(t_kf, t, log.odo_distance)
-    lo, hi = t_kf[:-1], t_kf[1:]
-    covered = (lo >= t[0]) & (hi <= t[-1])
-    if t.size > 1:
-        step = np.diff(t)
-        gap = np.flatnonzero(step > 2.5 * np.median(step))
-        if gap.size:
-            gap_start, gap_end = t[gap], t[gap + 1]  # disjoint and sorted
-            k = np.searchsorted(gap_end, lo, side="right")  # the first dropout ending after the interval starts
-            covered &= ~((k < gap.size) & (gap_start[np.minimum(k, gap.size - 1)] < hi))
-    moving = np.concatenate([[0], np.cumsum(log.odo_direction != 0)])[np.searchsorted(t, t_kf, side="right")]
-    moved = (np.diff(moving) > 0) | (np.abs(np.diff(dist)) > 0)
-    active = (log.odo_direction != 0) | (np.diff(log.odo_distance, prepend=log.odo_distance[:1]) != 0)
-    t_active = t[active]
-    last = np.searchsorted(t_active, lo, side="right") - 1  # the last sample showing motion up to the start
-    after = np.searchsorted(t_active, hi, side="left")  # the first one from the end on
-    if t_active.size == 0:  # the machine never moves in this log
-        settled = np.ones(lo.size, bool)
-    else:
-        settled = (((last < 0) | (lo - t_active[np.maximum(last, 0)] >= settle_s))
-                   & ((after >= t_active.size) | (t_active[np.minimum(after, t_active.size - 1)] - hi >= settle_s)))
-    still = np.where(settled, MODE_STANDING, MODE_SETTLING)
-    mode = np.where(covered, np.where(moved, MODE_MOVING, still), MODE_NO_DATA)
-    return dist, np.concatenate([[MODE_STANDING], mode]).astype(np.int8)
-
-
-STRAIGHT_CUT_FRACTION = 0.8
-"""A run of travel in one direction longer than this fraction of the face is a straight cut (a sump or a cut-out
-into the snake covers the snake and the shearer, up to about half of a short face)."""
-
-
-def straight_cuts(u: np.ndarray, mode: np.ndarray, face_travel: float) -> list[tuple[int, int]]:
-    """(first, last) epochs of each run of travel in one direction longer than STRAIGHT_CUT_FRACTION of the
-    face."""
-    du = np.diff(u, prepend=u[0])
-    moving = np.flatnonzero((mode == MODE_MOVING) & (du != 0))
-    if moving.size == 0:
-        return []
-    sign = np.sign(du[moving])
-    breaks = np.flatnonzero(sign[1:] != sign[:-1]) + 1
-    runs = []
-    for grp in np.split(moving, breaks):
-        if abs(u[grp[-1]] - u[grp[0] - 1]) > STRAIGHT_CUT_FRACTION * face_travel:
-            runs.append((int(grp[0]), int(grp[-1])))
-    return runs
 
 
 def _initial_state(log: Log, prep: Prepared, cfg: Config) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -216,41 +164,195 @@ def body_mounting(cfg: Config) -> np.ndarray:
     return euler_to_mat(*cfg.imu_mounting_rad)
 
 
+def _cat(old: np.ndarray, new: np.ndarray) -> np.ndarray:
+    return np.concatenate([old, new]) if new.size else old
+
+
+class Preparer:
+    """`prepare` as the log comes: `update(part, final)` takes the rows of the odometer, survey, push-ram and face
+    survey streams that came since the last call (part.imu is not read: the ImuRows given at the start has the IMU's
+    rows) and returns the Prepared of the epochs known so far (None until the start can be prepared).
+
+    An epoch is known once the odometer has reached stand_settle_s past it (its channel looks ahead that far), and a
+    pass (a segment) once its straight cut has ended: the travel turned (a sump at the face end) and the pass's
+    second of stand after it is known; the last pass ends with the log (`final`). Fed a whole log at once with
+    final=True it is `prepare`. The odometer rows are kept from the last known epoch on, and `forget_before` lets an
+    online run drop the IMU and push-ram rows its next passes do not read, so that its memory does not grow with
+    the log (the epochs' times, distance and channel do: 17 bytes an epoch)."""
+
+    def __init__(self, cfg: Config, imu: ImuRows):
+        self.cfg, self.imu = cfg, imu
+        z = np.zeros(0)
+        self.log = Log(imu, z, z, np.zeros(0, np.int64), z, np.zeros((0, 3)), z, np.zeros((0, 3)))
+        """The rows kept: odometer from the last known epoch on, survey and face survey whole, push rams since the
+        last forget_before."""
+        self.prep: Prepared | None = None
+        self._t_kf, self._odo, self._mode = Growing(float), Growing(float), Growing(np.int8)
+        self._odo_period = np.nan
+        self._odo_first = np.nan
+        self._prev_distance = np.nan  # the odometer reading before the kept rows
+        self._active_before = -np.inf  # the last reading before the kept rows that showed motion
+        self._runs = TravelRuns()
+        self._cuts_seen = 0  # runs of _runs.closed looked at
+        self._ends_seen = 0  # cuts whose pass end is placed
+        self._face_travel: float | None = None
+        self.started = False
+        """The start state is known (Prepared.nav0, cal0)."""
+
+    def _take(self, part: Log) -> None:
+        """Append a part's rows to the kept ones."""
+        log = self.log
+        self.log = dataclasses.replace(
+            log, odo_t=_cat(log.odo_t, part.odo_t), odo_distance=_cat(log.odo_distance, part.odo_distance),
+            odo_direction=_cat(log.odo_direction, part.odo_direction),
+            survey_t=_cat(log.survey_t, part.survey_t), survey_llh=_cat(log.survey_llh, part.survey_llh),
+            survey_yaw=_cat(log.survey_yaw, part.survey_yaw), survey_sd=_cat(log.survey_sd, part.survey_sd),
+            ram_t=_cat(log.ram_t, part.ram_t), ram_support=_cat(log.ram_support, part.ram_support),
+            ram_extension=_cat(log.ram_extension, part.ram_extension), ram_valid=_cat(log.ram_valid, part.ram_valid),
+            face_u=_cat(log.face_u, part.face_u), face_llh=_cat(log.face_llh, part.face_llh),
+            face_sd=_cat(log.face_sd, part.face_sd))
+        if np.isnan(self._odo_first) and self.log.odo_t.size:
+            self._odo_first = float(self.log.odo_t[0])
+
+    def update(self, part: Log, final: bool = False) -> Prepared | None:
+        """The Prepared of the epochs known after `part` (module docstring); PositioningError names the stream a log
+        cannot be used for."""
+        self._take(part)
+        log, cfg = self.log, self.cfg
+        if np.isnan(self._odo_period) and (log.odo_t.size > ODO_PERIOD_ROWS or final) and log.odo_t.size > 1:
+            self._odo_period = float(np.median(np.diff(log.odo_t[:ODO_PERIOD_ROWS + 1])))
+        if self.prep is None and not self._start(final):
+            return None
+        prep = self.prep
+        per_epoch = prep.steps * prep.n_samples
+        n_imu = self.imu.size // per_epoch  # epochs the IMU has reached
+        if n_imu > self._t_kf.n - 1:
+            self._t_kf.extend(self.imu.times_at(np.arange(self._t_kf.n, n_imu + 1) * per_epoch - 1))
+        t_kf = self._t_kf.data
+        if final:
+            n_known = n_imu
+        elif log.odo_t.size:
+            n_known = int(np.searchsorted(t_kf, log.odo_t[-1] - cfg.stand_settle_s, side="right")) - 1
+        else:
+            n_known = -1
+        if n_known > self._odo.n - 1 and log.odo_t.size and (final or not np.isnan(self._odo_period)):
+            self._odometer(t_kf[max(self._odo.n - 1, 0):n_known + 1], final)
+        prep.t_kf, prep.odo, prep.mode = t_kf[:self._odo.n], self._odo.data, self._mode.data
+        if prep.t_kf.size == 0:
+            return prep
+        if not self.started and not self._initial(final):
+            return prep
+        self._segments(final)
+        n_kf = prep.n_kf
+        epochs = np.searchsorted(prep.t_kf, log.survey_t[1:])
+        prep.survey_epochs = np.minimum(epochs, n_kf) if final else epochs
+        if log.ram_t.size and len(cfg.support_u_m) >= 2:
+            prep.rams = RamLog.from_rows(log.ram_t, log.ram_support, log.ram_extension, log.ram_valid,
+                                         cfg.support_u_m, cfg.ram_noise_sd)
+        return prep
+
+    def _start(self, final: bool) -> bool:
+        """Make the Prepared once the IMU's period is known (PERIOD_ROWS rows, or the whole log); False before."""
+        log, cfg = self.log, self.cfg
+        if self.imu.size <= PERIOD_ROWS and not final:
+            return False
+        if log.survey_t.size == 0:
+            if not final:
+                return False
+            raise PositioningError("survey: no rows; the start position and heading must be surveyed")
+        imu_dt = self.imu.period()
+        imu_rate = 1.0 / imu_dt
+        steps_f = imu_rate / cfg.n_samples / cfg.filter_rate_hz
+        if abs(steps_f - round(steps_f)) > 1e-6 or round(steps_f) < 1:
+            raise PositioningError(f"imu: {imu_rate:.6g} Hz is not {cfg.n_samples} x {cfg.filter_rate_hz:g} Hz x an "
+                                   f"integer; choose filter_rate_hz to divide the mechanization rate")
+        steps = round(steps_f)
+        per_epoch = steps * cfg.n_samples
+        if self.imu.size // per_epoch < 1:
+            raise PositioningError(f"imu: {self.imu.size} rows, fewer than one filter epoch ({per_epoch} rows)")
+        self.prep = Prepared(self.imu, body_mounting(cfg), imu_dt, cfg.n_samples, steps, np.zeros(0), np.zeros(0),
+                             np.zeros(0, np.int8), [], [], np.zeros(0, int), None, np.zeros(es.N_NAV),
+                             np.zeros(es.N_CAL), [])
+        self._t_kf.extend(self.prep.increments(0, 1)[0][:1])
+        return True
+
+    def _odometer(self, t_kf: np.ndarray, final: bool) -> None:
+        """Distance and channel of the epochs t_kf (the first already known, unless it is epoch 0), then the kept
+        odometer rows cut to those from the last at or before the last known epoch."""
+        log = self.log
+        dist, mode = odometer_at(log.odo_t, log.odo_distance, log.odo_direction, self._prev_distance,
+                                  self._active_before, t_kf, self.cfg.stand_settle_s, self._odo_period,
+                                  self._odo_first, float(log.odo_t[-1]))
+        first = self._odo.n == 0
+        j0 = max(self._odo.n, 1)
+        self._odo.extend(dist if first else dist[1:])
+        self._mode.extend(np.concatenate([[MODE_STANDING], mode]) if first else mode)
+        u = self._odo.data
+        self._runs.add(j0, u[j0:] - u[j0 - 1:-1], self._mode.data[j0:])
+        if final:
+            self._runs.finish()
+        keep = max(int(np.searchsorted(log.odo_t, t_kf[-1], side="right")) - 1, 0)
+        if keep:
+            active = (log.odo_direction[:keep] != 0) | (
+                np.diff(log.odo_distance[:keep], prepend=log.odo_distance[0] if np.isnan(self._prev_distance)
+                        else self._prev_distance) != 0)
+            if active.any():
+                self._active_before = float(log.odo_t[:keep][active][-1])
+            self._prev_distance = float(log.odo_distance[keep - 1])
+            self.log = dataclasses.replace(log, odo_t=log.odo_t[keep:], odo_distance=log.odo_distance[keep:],
+                                           odo_direction=log.odo_direction[keep:])
+
+    def _initial(self, final: bool) -> bool:
+        """The start state once the stand before the first move is known (_initial_state); False before."""
+        prep = self.prep
+        if not np.any(prep.mode == MODE_MOVING) and not final:
+            return False
+        prep.nav0, prep.cal0, prep.notes = _initial_state(self.log, prep, self.cfg)
+        self.started = True
+        return True
+
+    def _segments(self, final: bool) -> None:
+        """The straight cuts among the runs that have ended, and the passes they end (one second of the stand after
+        a cut belongs to its pass); with `final` the last pass, to the end of the log."""
+        prep, log = self.prep, self.log
+        n_kf = prep.n_kf
+        if self._face_travel is None:
+            if log.survey_t.size >= 2:
+                d = earth.lla_to_enu(*log.survey_llh[1], *log.survey_llh[0])
+                self._face_travel = float(np.hypot(d[0], d[1]))
+            elif final:
+                self._face_travel = float(np.ptp(prep.odo))
+                prep.notes.append("survey has no far face end: face length taken from the odometer")
+            else:
+                return  # the runs wait for the face's length
+        u = prep.odo
+        for first, last in self._runs.closed[self._cuts_seen:]:
+            if abs(u[last] - u[first - 1]) > STRAIGHT_CUT_FRACTION * self._face_travel:
+                prep.cuts.append((first, last))
+        self._cuts_seen = len(self._runs.closed)
+        settle = round(self.cfg.filter_rate_hz)
+        start = prep.segments[-1][1] if prep.segments else 0
+        for _, last in prep.cuts[self._ends_seen:]:
+            end = last + 1 + settle
+            if end >= n_kf and not final:
+                break
+            self._ends_seen += 1
+            if start < end < n_kf:
+                prep.segments.append((start, end))
+                start = end
+        if final and start < n_kf:
+            prep.segments.append((start, n_kf))
+
+    def forget_before(self, epoch: int) -> None:
+        """Drop the push-ram readings at or before epoch `epoch`: the CPOEM fixes of the passes from it on read
+        strokes since their last pass's points (an online run, after each pass)."""
+        log = self.log
+        keep = log.ram_t > self.prep.t_kf[epoch]
+        self.log = dataclasses.replace(log, ram_t=log.ram_t[keep], ram_support=log.ram_support[keep],
+                                       ram_extension=log.ram_extension[keep], ram_valid=log.ram_valid[keep])
+
+
 def prepare(log: Log, cfg: Config) -> Prepared:
-    """The log resampled for the filters (Prepared); PositioningError names the stream a log cannot be used for."""
-    if log.survey_t.size == 0:
-        raise PositioningError("survey: no rows; the start position and heading must be surveyed")
-    imu_dt = log.imu.period()
-    imu_rate = 1.0 / imu_dt
-    steps_f = imu_rate / cfg.n_samples / cfg.filter_rate_hz
-    if abs(steps_f - round(steps_f)) > 1e-6 or round(steps_f) < 1:
-        raise PositioningError(f"imu: {imu_rate:.6g} Hz is not {cfg.n_samples} x {cfg.filter_rate_hz:g} Hz x an "
-                               f"integer; choose filter_rate_hz to divide the mechanization rate")
-    steps = round(steps_f)
-    per_epoch = steps * cfg.n_samples
-    n_kf = log.imu.size // cfg.n_samples // steps
-    if n_kf < 1:
-        raise PositioningError(f"imu: {log.imu.size} rows, fewer than one filter epoch ({per_epoch} rows)")
-    t_kf = np.concatenate([[np.nan], log.imu.times_at(np.arange(1, n_kf + 1) * per_epoch - 1)])
-    prep = Prepared(log.imu, body_mounting(cfg), imu_dt, cfg.n_samples, steps, t_kf, np.zeros(0), np.zeros(0, np.int8),
-                    [], [], np.zeros(0, int), None, np.zeros(es.N_NAV), np.zeros(es.N_CAL), [])
-    t_kf[0] = prep.increments(0, 1)[0][0]
-    prep.odo, prep.mode = _odometer_at(log, t_kf, cfg.stand_settle_s)
-    prep.nav0, prep.cal0, prep.notes = _initial_state(log, prep, cfg)
-    u = prep.odo - prep.odo[0]
-    if log.survey_t.size >= 2:
-        d = earth.lla_to_enu(*log.survey_llh[1], *log.survey_llh[0])
-        face_travel = float(np.hypot(d[0], d[1]))
-    else:
-        face_travel = float(np.ptp(u))
-        prep.notes.append("survey has no far face end: face length taken from the odometer")
-    prep.cuts = straight_cuts(u, prep.mode, face_travel)
-    settle = round(cfg.filter_rate_hz)  # one second of the stand after the cut belongs to the pass
-    ends = sorted({min(last + 1 + settle, n_kf) for _, last in prep.cuts})
-    bounds = [0] + [e for e in ends if 0 < e < n_kf] + [n_kf]
-    prep.segments = list(itertools.pairwise(bounds))
-    prep.survey_epochs = np.minimum(np.searchsorted(t_kf, log.survey_t[1:]), n_kf)
-    if log.ram_t.size and len(cfg.support_u_m) >= 2:
-        prep.rams = RamLog.from_rows(log.ram_t, log.ram_support, log.ram_extension, log.ram_valid, cfg.support_u_m,
-                                     cfg.ram_noise_sd)
-    return prep
+    """The log resampled for the filters (Prepared) from the whole log at once (Preparer); PositioningError names
+    the stream a log cannot be used for."""
+    return Preparer(cfg, log.imu).update(log, final=True)
