@@ -53,8 +53,9 @@ ShearerSink = Callable[[dict[str, np.ndarray]], None]
 class SimResult:
     """The truth tables (logformat stream name -> columns; truth_shearer only from `simulate`, a streaming run's
     sink takes it), the floor, the face frame, the simulated time, the number of push-advance events and the
-    per-support offsets [m] each cycle's shear applied (cycles, supports), and what the face alignment system
-    published after each shear (twin.pipeline.alignment_loop; none in open loop)."""
+    per-support offsets [m] each cycle's shear applied (cycles, supports), what the face alignment system
+    published after each shear (twin.pipeline.alignment_loop; none in open loop) and, fed by an estimator, the errors
+    of each shear's estimated path (AlignmentLoop.path_errors)."""
 
     tables: dict[str, dict[str, np.ndarray]]
     floor_grid: FloorGrid
@@ -63,6 +64,7 @@ class SimResult:
     events: int
     offsets: np.ndarray
     alignment: list[ShearOffsets]
+    path_errors: list[dict[str, float]]
 
 
 def window_sizes(scn: Scenario) -> list[int]:
@@ -151,8 +153,9 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
     strokes = StrokeControl(scn, state.ram) if scn.supports.push.control == "stroke" else None
     applied: list[np.ndarray] = []
-    loop = AlignmentLoop(scn, [(c.t_start, c.t_cut_end) for c in timeline.cycles]) if scn.alignment.mode != "none" else None
     recorder = FaceRecorder(scn, frame, state, sim)
+    loop = (AlignmentLoop(scn, cycles_table(timeline), recorder, last_truth_time(scn, timeline))
+            if scn.alignment.mode != "none" else None)
     length = scn.face.pan_length_m
     events = 0
     hydraulics_free = 0.0  # when the last event's rams are done and its supports set
@@ -324,9 +327,11 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
             # The face runs at most one chunk ahead of the ride: memory stays that of two chunks.
             hand_over(keep=1)
         hand_over(keep=0)
+    if loop is not None:
+        loop.finish()
     legs_until(timeline.duration)
     recorder.record_legs(timeline.duration, state)
     pans_tab, sups_tab = recorder.tables()
     tables = {lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab, lf.TRUTH_CYCLES.name: cycles_table(timeline)}
     return SimResult(tables, FloorGrid.from_scenario(scn, floor), frame, timeline.duration, events, np.array(applied),
-                     [] if loop is None else loop.published)
+                     [] if loop is None else loop.published, [] if loop is None else loop.path_errors)
