@@ -37,30 +37,36 @@ PassFixes = tuple[Fixes, np.ndarray]
 """A pass's rail-model fixes with each one's var_floor (F,) (rf.rail_fix_update)."""
 
 
+def _epoch_output(n: int, r_yaw: float) -> fk.EpochOutput:
+    """Output rows for n epochs as the kernel finds them (rows it does not write keep these)."""
+    return fk.EpochOutput(np.zeros((n, es.N_NAV)), np.zeros((n, es.N_CAL)), np.zeros((n, es.N_STATES)),
+                          np.zeros(n, np.int32), np.zeros(n, np.int32), np.full((n, fk.N_SUB), np.nan),
+                          np.full(n, r_yaw), np.full(n, np.nan), np.full((n, fk.N_SUB, fk.N_DELTA), np.nan))
+
+
 class FederatedRun:
-    """One run of the federated (or centralized) filter over the segments of a log.
+    """One run of the federated (or centralized) filter over the segments of a log, a pass at a time (`run_pass`,
+    whose output rows are the pass's own: an online run keeps nothing of the passes before).
 
     mag: (calibrated mean reading per epoch (K, 3), NaN where none; the M_* vector), None without magnetometer;
-    det_params: the D_* vector of the rail model's detectors (rf), None without rail fixes. `out` holds the
-    kernel's output per epoch (fk.EpochOutput), `fixes` per pass the rail fixes' epochs, points, detector statistics
-    and whether each was applied."""
+    det_params: the D_* vector of the rail model's detectors (rf), None without rail fixes. With `whole`, `out`
+    gathers the kernel's output at every epoch of the log (fk.EpochOutput) and `fixes` per pass the rail fixes'
+    epochs, points, detector statistics and whether each was applied, for `solution`."""
 
     def __init__(self, log: Log, cfg: Config, prep: Prepared, federated: bool,
-                 mag: tuple[np.ndarray, np.ndarray] | None = None, det_params: np.ndarray | None = None):
+                 mag: tuple[np.ndarray, np.ndarray] | None = None, det_params: np.ndarray | None = None,
+                 whole: bool = True):
         self.prep, self.cfg = prep, cfg
-        n = prep.t_kf.size
-        mag_b, params_m = mag if mag is not None else (np.full((n, 3), np.nan), np.zeros(fk.N_MAG_PARAMS))
-        no_mech = np.zeros((0, 3))  # each pass's increments are given to it (run_pass)
-        self.sensors = fk.Sensors(prep.steps, 0, np.zeros(0), no_mech, no_mech, prep.odo, prep.mode, mag_b)
+        self.mag_b, params_m = mag if mag is not None else (None, np.zeros(fk.N_MAG_PARAMS))
         self.tuning = fk.Tuning(process_noise_psd(cfg), kf_params(cfg), params_m,
                                 det_params if det_params is not None else np.zeros(rf.N_DET_PARAMS))
-        self.out = fk.EpochOutput(np.zeros((n, es.N_NAV)), np.zeros((n, es.N_CAL)), np.zeros((n, es.N_STATES)),
-                                  np.zeros(n, np.int32), np.zeros(n, np.int32), np.full((n, fk.N_SUB), np.nan),
-                                  np.full(n, params_m[fk.M_R_YAW]), np.full(n, np.nan),
-                                  np.full((n, fk.N_SUB, fk.N_DELTA), np.nan))
-        self.out.nav[0], self.out.cal[0] = prep.nav0, prep.cal0
-        self.fixes: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []  # epoch, llh, stats, applied
         self.p0 = initial_covariance(cfg, log, prep.nav0[es.QUAT])
+        self.last = _epoch_output(1, params_m[fk.M_R_YAW])  # the last pass's last row (its row 0 for the next)
+        self.last.nav[0], self.last.cal[0], self.last.sd[0] = prep.nav0, prep.cal0, np.sqrt(np.diag(self.p0))
+        self.out = _epoch_output(prep.t_kf.size, params_m[fk.M_R_YAW]) if whole else None
+        if self.out is not None:
+            self.out.nav[0], self.out.cal[0] = prep.nav0, prep.cal0
+        self.fixes: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []  # epoch, llh, stats, applied
         p_sub, beta = fk.initial_covariances(self.p0, federated)
         detectors = rf.DetectorState(fsprt_state(rf.DET_DOF), np.zeros(1, np.int8), np.zeros(rf.N_COUNTS, np.int64),
                                      np.zeros((max(cfg.detector.window, 1), 2)))
@@ -69,48 +75,53 @@ class FederatedRun:
         self.mode = fk.FEDERATED if federated else fk.CENTRALIZED
         self.health_notes: list[str] = []  # what the health monitor did (run_pass)
 
-    def run_pass(self, a: int, b: int, rail: PassFixes | None = None) -> np.ndarray:
+    def run_pass(self, a: int, b: int, rail: PassFixes | None = None) -> tuple[np.ndarray, fk.EpochOutput]:
         """The filter over epochs (a, b] with the pass's rail fixes (none: None), under the health monitor
         (estimators.shearer.health.run_checked: a pass that loses track runs again from its start with fewer
         fixes, then without the magnetometer); returns the fixes' detector statistics (F, 3) (NaN for a fix not
-        tested or left out)."""
+        tested or left out) and the kernel's output over epochs a..b (row 0 the last pass's last)."""
+        prep, m = self.prep, b - a + 1
         fixes, var_floor = rail if rail is not None else (Fixes.empty(), np.zeros(0))
         self.state.det.counts[rf.COUNT_TESTED] = 0  # rail fixes tested in this pass (rail_kinematics.ARM_FIXES)
         start = snapshot(self.state)
-        mag = np.isfinite(self.sensors.mag_b[a + 1:b + 1]).any()
+        mag_b = self.mag_b[a:b + 1] if self.mag_b is not None else np.full((m, 3), np.nan)
+        mag = np.isfinite(mag_b[1:]).any()
         everything = np.ones(fixes.epoch.size, bool)
         fallbacks = [(label, (keep, True)) for label, keep in fix_fallbacks(fixes)]
         if mag:
             fallbacks.append(("without any position fix or the magnetometer", (~everything, False)))
-
-        mech = self.prep.mech(a, b)
-        with_mech = self.sensors._replace(mech_epoch=a, t_mech=mech.t, phi_b=mech.phi_b, dv_b=mech.dv_b)
+        out = _epoch_output(m, self.tuning.mag_params[fk.M_R_YAW])
+        for field, last in zip(out, self.last):
+            field[0] = last[0]
+        mech = prep.mech(a, b)
+        sensors = fk.Sensors(prep.steps, 0, mech.t, mech.phi_b, mech.dv_b, prep.odo[a:b + 1], prep.mode[a:b + 1],
+                             mag_b)
 
         def run(arg):
             keep, use_mag = arg
-            sensors = with_mech
-            if not use_mag:
-                mag_b = sensors.mag_b.copy()
-                mag_b[a + 1:b + 1] = np.nan
-                sensors = sensors._replace(mag_b=mag_b)
-            results = rf.RailResults(np.full((int(keep.sum()), 3), np.nan), np.zeros(int(keep.sum()), np.int8))
             taken = fixes.take(keep)
-            kernel_fixes = rf.RailFixes(taken.epoch, taken.llh, taken.r, taken.advance, var_floor[keep],
+            results = rf.RailResults(np.full((taken.epoch.size, 3), np.nan), np.zeros(taken.epoch.size, np.int8))
+            kernel_fixes = rf.RailFixes(taken.epoch - a, taken.llh, taken.r, taken.advance, var_floor[keep],
                                         ~np.isfinite(taken.gate))
-            fk.run_afkf(self.mode, a, b, sensors, kernel_fixes, results, self.tuning, self.state, self.out)
+            fk.run_afkf(self.mode, 0, m - 1, sensors if use_mag else sensors._replace(mag_b=np.full((m, 3), np.nan)),
+                        kernel_fixes, results, self.tuning, self.state, out)
             return results
 
         def lost(_results):
-            return filter_lost(self.prep.t_kf[a:b + 1], self.out.nav[a:b + 1], self.out.sd[a:b + 1], self.cfg)
+            return filter_lost(prep.t_kf[a:b + 1], out.nav, out.sd, self.cfg)
 
         results, (keep, _) = run_checked(run, lost, lambda: restore(self.state, start), (everything, True),
-                                         fallbacks, self.prep.t_kf[a:b + 1], self.health_notes)
-        self.out.flags[fixes.epoch[~keep]] |= FLAG_SKIPPED
+                                         fallbacks, prep.t_kf[a:b + 1], self.health_notes)
+        out.flags[fixes.epoch[~keep] - a] |= FLAG_SKIPPED
         stats = np.full((fixes.epoch.size, 3), np.nan)
         applied = np.zeros(fixes.epoch.size, np.int8)
         stats[keep], applied[keep] = results.stats, results.applied
-        self.fixes.append((fixes.epoch, fixes.llh, stats, applied))
-        return stats
+        self.last = fk.EpochOutput(*(field[-1:].copy() for field in out))
+        if self.out is not None:
+            for whole, rows in zip(self.out, out):
+                whole[a + 1:b + 1] = rows[1:]
+            self.fixes.append((fixes.epoch, fixes.llh, stats, applied))
+        return stats, out
 
     def solution(self, notes: list[str]) -> Solution:
         """The run's Solution (notes: the method's so far; the fusion's are added) with its fusion columns."""

@@ -10,7 +10,8 @@ estimators.shearer.positioning.KfPasses filters them. A pass's rows are the batc
 rows of the pass under way, the odometer from the last known epoch, the push-ram readings since the last pass's points,
 and the epochs' times, distance and channel (17 bytes an epoch).
 
-Methods: ``kf_cpoem_rts`` (each pass smoothed at its end, the output), ``kf_cpoem`` and ``kf`` (the forward filter).
+Methods: ``kf_cpoem_rts`` (each pass smoothed at its end, the output), ``kf_cpoem`` and ``kf`` (the forward filter) of
+001, and 004's ``fkf_rail`` (estimators.shearer.rail_kinematics.RailPasses; it reads the face survey stream too).
 """
 
 from __future__ import annotations
@@ -24,11 +25,12 @@ from estimators.io.log import ImuBuffer, log_from_columns
 from estimators.io.logformat import FLAG_SMOOTHED, IMU, ODOMETER, SURVEY
 from estimators.shearer.config import Config, PositioningError
 from estimators.shearer.health import filter_lost
-from estimators.shearer.positioning import KfPasses
+from estimators.shearer.positioning import KfPass, KfPasses
 from estimators.shearer.prepare import Preparer
+from estimators.shearer.rail_kinematics import RailPasses
 from estimators.shearer.solution import Solution, make_solution
 
-ONLINE_METHODS = ("kf_cpoem_rts", "kf_cpoem", "kf")
+ONLINE_METHODS = ("kf_cpoem_rts", "kf_cpoem", "kf", "fkf_rail")
 """The methods that run online."""
 
 _EMPTY = {stream.name: {c.name: np.zeros(0, c.dtype) for c in stream.columns} for stream in (IMU, ODOMETER, SURVEY)}
@@ -55,29 +57,30 @@ class OnlinePositioning:
         self.cfg, self.method = cfg, method
         self.imu = ImuBuffer()
         self.preparer = Preparer(cfg, self.imu)
-        self.passes: KfPasses | None = None
+        self.passes: KfPasses | RailPasses | None = None
         self.done = 0
         """Passes run."""
 
     def feed(self, streams: Mapping[str, Mapping[str, np.ndarray]], final: bool = False) -> list[PassEstimate]:
         """The passes that end with these rows (stream name -> columns as in estimators.io.logformat: imu, odometer,
-        survey, pushram; missing streams have no new rows); `final`: the log ends here."""
+        survey, pushram, face_survey; missing streams have no new rows); `final`: the log ends here."""
         part = log_from_columns(*(streams.get(k, _EMPTY[k]) for k in ("imu", "odometer", "survey")),
-                                pushram=streams.get("pushram"))
+                                pushram=streams.get("pushram"), face_survey=streams.get("face_survey"))
         imu = part.imu
         self.imu.append(imu.t, imu.dtheta, imu.dv)
         prep = self.preparer.update(part, final)
         if prep is None or not self.preparer.started:
             return []
         log = self.preparer.log
-        if self.passes is None:
-            self.passes = KfPasses(log, self.cfg, prep, cpoem=self.method != "kf",
-                                   smooth=self.method == "kf_cpoem_rts")
+        if self.passes is None and prep.segments[self.done:]:
+            self.passes = (RailPasses(log, self.cfg, prep, self.cfg.isolate_by, whole=False)
+                           if self.method == "fkf_rail" else
+                           KfPasses(log, self.cfg, prep, cpoem=self.method != "kf", smooth=self.method == "kf_cpoem_rts"))
         out = []
         per_epoch = prep.steps * prep.n_samples
         for a, b in prep.segments[self.done:]:
             one = self.passes.run(prep, log, a, b)
-            smoothed = one.nav_s is not None
+            smoothed = isinstance(one, KfPass) and one.nav_s is not None
             nav, sd = (one.nav_s, one.sd_s) if smoothed else (one.nav, one.sd)
             t = prep.t_kf[a + 1:b + 1]
             flags = one.flags[1:] | (FLAG_SMOOTHED if smoothed else 0)

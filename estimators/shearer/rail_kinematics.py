@@ -20,6 +20,7 @@ from estimators.faults.detectors import DetectorConfig, chi2_threshold
 from estimators.io.log import Log
 from estimators.io.logformat import FLAG_ISOLATED
 from estimators.kalman import error_state as es
+from estimators.shearer import federated_filter as fk
 from estimators.shearer import rail_fix_update as rf
 from estimators.shearer.config import Config, PositioningError
 from estimators.shearer.cpoem import Points, advance_direction
@@ -70,29 +71,43 @@ def detector_params(det: DetectorConfig, isolate_by: str | None) -> np.ndarray:
     return out
 
 
-def run_rail(log: Log, cfg: Config, prep: Prepared, isolate_by: str | None = "fsprt") -> Solution:
-    """004: the federated SINS/odometer + SINS/rail-kinematics-model filter; the rail model's fixes are left out
-    while the `isolate_by` detector holds a fault (None: never)."""
-    det_params = detector_params(cfg.detector, isolate_by)
-    if prep.rams is None:
-        raise PositioningError("pushram: the rail kinematics model needs the push-ram stream and the support "
-                               "positions along the face")
-    rail_cfg = dataclasses.replace(cfg, cpoem_spacing_m=cfg.chute_length_m or cfg.cpoem_spacing_m,
-                                   advance_sd=cfg.rail_advance_sd or cfg.advance_sd)
-    notes = list(prep.notes)
-    run = FederatedRun(log, cfg, prep, True, det_params=det_params)
-    points, surveyed = face_survey_points(log, prep), True
-    for a, b in prep.segments:
-        fixes, var_floor = _rail_fixes(prep, rail_cfg, log, a, b, points, surveyed, notes)
-        stats = run.run_pass(a, b, (fixes, var_floor))
+class RailPasses:
+    """004's filter a pass at a time, its state carried from pass to pass: `run(prep, log, a, b)` filters epochs
+    (a, b] (a the end of the last pass run) with the rail model's fixes from the last pass's points (the face
+    survey's for the first pass) and returns the kernel's output over epochs a..b (fk.EpochOutput); the pass's
+    estimate gives the next pass its points. run_rail runs it over a whole log (`whole`: the output of every epoch
+    gathered for the Solution); an online run pass by pass as the passes end (estimators.shearer.online)."""
+
+    def __init__(self, log: Log, cfg: Config, prep: Prepared, isolate_by: str | None = "fsprt", whole: bool = True):
+        det_params = detector_params(cfg.detector, isolate_by)
+        if prep.rams is None:
+            raise PositioningError("pushram: the rail kinematics model needs the push-ram stream and the support "
+                                   "positions along the face")
+        self.rail_cfg = dataclasses.replace(cfg, cpoem_spacing_m=cfg.chute_length_m or cfg.cpoem_spacing_m,
+                                            advance_sd=cfg.rail_advance_sd or cfg.advance_sd)
+        self.notes = list(prep.notes)
+        self.filter = FederatedRun(log, cfg, prep, True, det_params=det_params, whole=whole)
+        self.points, self.surveyed = face_survey_points(log, prep), True
+
+    def run(self, prep: Prepared, log: Log, a: int, b: int) -> fk.EpochOutput:
+        fixes, var_floor = _rail_fixes(prep, self.rail_cfg, log, a, b, self.points, self.surveyed, self.notes)
+        stats, out = self.filter.run_pass(a, b, (fixes, var_floor))
         cov = np.zeros((b - a + 1, 3, 3))
-        cov[:, [0, 1, 2], [0, 1, 2]] = run.out.sd[a:b + 1, es.DP] ** 2
-        points = next_pass_points(segment_points(prep, rail_cfg, a, b, run.out.nav[a:b + 1], cov),
-                                  prep.t_kf[a:b + 1], run.out.flags[a:b + 1],
-                                  prep.t_kf[fixes.epoch[np.isfinite(stats[:, rf.DET_FSPRT])]])
-        surveyed = False
-    sol = run.solution(notes)
-    sol.detectors = detector_columns(prep, run)
+        cov[:, [0, 1, 2], [0, 1, 2]] = out.sd[:, es.DP] ** 2
+        self.points = next_pass_points(segment_points(prep, self.rail_cfg, a, b, out.nav, cov), prep.t_kf[a:b + 1],
+                                       out.flags, prep.t_kf[fixes.epoch[np.isfinite(stats[:, rf.DET_FSPRT])]])
+        self.surveyed = False
+        return out
+
+
+def run_rail(log: Log, cfg: Config, prep: Prepared, isolate_by: str | None = "fsprt") -> Solution:
+    """004: the federated SINS/odometer + SINS/rail-kinematics-model filter (RailPasses over the log's passes); the
+    rail model's fixes are left out while the `isolate_by` detector holds a fault (None: never)."""
+    passes = RailPasses(log, cfg, prep, isolate_by)
+    for a, b in prep.segments:
+        passes.run(prep, log, a, b)
+    sol = passes.filter.solution(passes.notes)
+    sol.detectors = detector_columns(prep, passes.filter)
     return sol
 
 

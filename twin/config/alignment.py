@@ -14,10 +14,10 @@ from twin.config.section import Section, between
 class Alignment(Section):
     """The face alignment loop (none: open loop, the face drifts)."""
 
-    mode: Literal["none", "truth", "kf_cpoem_rts", "kf_cpoem", "kf"] = "none"
+    mode: Literal["none", "truth", "kf_cpoem_rts", "kf_cpoem", "kf", "fkf_rail"] = "none"
     """Path fed to the alignment system: none (open loop), truth (the true shearer path of each shear: the upper bound
     of what an estimator can give), or a shearer positioning method run online on the run's own readings (001's
-    filter; twin.pipeline.alignment_loop.EstimatedShears)."""
+    filters, 004's fkf_rail; twin.pipeline.alignment_loop.EstimatedShears)."""
     delay_shears: Annotated[int, Field(ge=0, le=5)] = 0
     """Shears between the one whose path gave the offsets and the one that applies them, besides the next: 0 applies
     a shear's offsets on the next shear (the roof support system reads them as the shear ends)."""

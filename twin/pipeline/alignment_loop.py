@@ -7,7 +7,7 @@ stop after each cycle), so the loop sees shear k's path once cycle k's chunk is 
 offsets of cycle k come from shear k - 1 - d (none before the first). Mode truth feeds the system the true path of
 the body reference point over each straight cut (truth_cycles' t to t_cut_end).
 
-An estimator mode (kf_cpoem_rts, kf_cpoem, kf) feeds it what the machine itself would know (`EstimatedShears`): trial
+An estimator mode (kf_cpoem_rts, kf_cpoem, kf, fkf_rail) feeds it what the machine itself would know (`EstimatedShears`): trial
 0's shearer and push-ram readings, drawn from the truth as the twin makes it (the numbers the run's files hold), go to
 the method online (estimators.shearer.online), and each pass's straight cut, as the filter estimated it, is the shear
 of the cycle it lies in; a cycle that ends without one, or whose pass the filter lost track over, leaves the last
@@ -121,7 +121,7 @@ class EstimatedShears:
         readings = self.support.step(self.t_drawn, t1, last, self.support_rows.since(self.t_drawn), path)
         self.t_drawn = t1
         streams = {name: {k: np.concatenate([p[name][k] for p in parts]) for k in parts[0][name]}
-                   for name in ("imu", "odometer", "survey")}
+                   for name in ("imu", "odometer", "survey", "face_survey")}
         return self.online.feed({**streams, "pushram": readings["pushram"]}, final=last)
 
 
@@ -172,8 +172,8 @@ class AlignmentLoop:
             self.published.append(self.system.shear(p_f, np.zeros(p_f.shape[0]), label=f"shear {len(self.published)}"))
 
     def replay(self, streams: dict[str, dict[str, np.ndarray]]) -> list[ShearOffsets]:
-        """An estimator mode on a saved run's readings (imu, odometer, survey, pushram columns): what the system
-        published after each shear."""
+        """An estimator mode on a saved run's readings (imu, odometer, survey, pushram, face_survey columns): what
+        the system published after each shear."""
         online = OnlinePositioning(positioning_config(self.scn), self.scn.alignment.mode)
         self._take(online.feed(streams, final=True), np.inf)
         return self.published

@@ -14,7 +14,7 @@ from tests.conftest import simulated
 from twin.pipeline.estimate import positioning_config
 from twin.sensors.streams import imu_truth, sensor_streams
 
-STREAMS = ("imu", "odometer", "survey", "pushram")
+STREAMS = ("imu", "odometer", "survey", "pushram", "face_survey")
 
 
 @pytest.fixture(scope="module")
@@ -32,14 +32,15 @@ def _pieces(streams, edges):
                for name, cols in streams.items()}
 
 
-@pytest.mark.parametrize("method", ["kf_cpoem_rts", "kf"])
+@pytest.mark.parametrize("method", ["kf_cpoem_rts", "kf", "fkf_rail"])
 def test_a_log_fed_in_pieces_gives_the_batch_rows_pass_by_pass(default_streams, method):
     """Cut anywhere (inside passes, inside stands, a cut of 0.3 s), the online run's passes joined are the batch
     method's epochs 1.. bit for bit; a pass comes out as soon as its cut has ended, before the log does; the IMU
     buffer then lets its rows go."""
     scn, streams = default_streams
     cfg = positioning_config(scn)
-    batch = estimate(log_from_columns(*(streams[k] for k in STREAMS)), cfg, (method,), workers=1)[method]
+    batch = estimate(log_from_columns(*(streams[k] for k in STREAMS[:3]), pushram=streams["pushram"],
+                                      face_survey=streams["face_survey"]), cfg, (method,), workers=1)[method]
     t_end = streams["imu"]["t"][-1]
     rng = np.random.default_rng(3)
     for edges in ([], sorted(rng.uniform(0, t_end, 7)), [1000.0, 1000.3, 2500.0]):
@@ -80,8 +81,8 @@ def test_a_straight_cut_is_the_passes_run_across_the_face(default_streams):
 
 def test_a_method_that_cannot_run_online_and_a_forgotten_row_are_refused(default_streams):
     scn, _ = default_streams
-    with pytest.raises(PositioningError, match="fkf_rail: not a method that runs online"):
-        OnlinePositioning(positioning_config(scn), "fkf_rail")
+    with pytest.raises(PositioningError, match="afkf: not a method that runs online"):
+        OnlinePositioning(positioning_config(scn), "afkf")
     buf = ImuBuffer()
     buf.append(np.arange(10.0), np.zeros((10, 3)), np.zeros((10, 3)))
     buf.forget_before(4)
