@@ -20,6 +20,7 @@ from estimators.io.csvio import export_csv
 from estimators.io.logformat import LogError
 from estimators.shearer.config import PositioningError
 from twin.config.scenario import ScenarioError
+from twin.opcua.access import DEFAULT_ENDPOINT, PASSWORD_ENV, ServeError
 from twin.pipeline import api
 from twin.pipeline.api import default_scenario
 from twin.pipeline.montecarlo import MonteCarloError
@@ -43,6 +44,19 @@ def record_rate(text: str) -> float | None:
         return parse_record_rate(text)
     except ValueError as err:
         raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def speed_factor(text: str) -> float:
+    """--speed's value: a factor of real time above 0, or 'max' (as fast as the twin runs)."""
+    if text == "max":
+        return float("inf")
+    try:
+        speed = float(text)
+    except ValueError:
+        speed = 0.0
+    if not speed > 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a speed (a factor of real time above 0, or 'max')")
+    return speed
 
 
 def tcp_port(text: str) -> int:
@@ -142,6 +156,20 @@ def main(argv: list[str] | None = None) -> int:
     p_exp.add_argument("--csv", type=Path, required=True, help="folder for the CSV files")
     p_rep = sub.add_parser("report", help="plots of a run directory as one HTML page (DIR/report/report.html)")
     p_rep.add_argument("run_dir", type=Path)
+    p_srv = sub.add_parser("serve", help="run a face scenario and publish it on OPC UA (needs the opcua extra)")
+    p_srv.add_argument("scenario", nargs="?", type=Path, help="scenario TOML (default: the shipped default.toml)")
+    p_srv.add_argument("--endpoint", default=DEFAULT_ENDPOINT, help=f"opc.tcp://HOST:PORT (default {DEFAULT_ENDPOINT})")
+    p_srv.add_argument("--speed", type=speed_factor, default=1.0,
+                       help="times real time (default 1; 'max': as fast as the twin runs)")
+    p_srv.add_argument("--publish-rate", type=float, default=None, metavar="HZ",
+                       help="publications per simulated second (default 10)")
+    p_srv.add_argument("--user", help="the one user a non-loopback endpoint admits (password in "
+                                      f"{PASSWORD_ENV})")
+    p_srv.add_argument("--out", type=Path, help="run directory written as it serves (default: runs/NAME-seedN-served)")
+    p_srv.add_argument("--seed", type=int, help="override the scenario's random seed")
+    p_srv.add_argument("--cycles", type=int, metavar="N", help="override the number of cutting cycles")
+    p_srv.add_argument("--force", action="store_true", help="replace an existing non-empty run directory")
+    p_srv.add_argument("--twin-only", action="store_true", help="truth only, no sensor streams")
     try:
         args = parser.parse_args(argv)
         if args.command == "view" and args.port is not None and not args.web:
@@ -151,7 +179,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with sigterm_as_interrupt():
             return _command(args)
-    except (ScenarioError, RunDirError, LogError, PositioningError, FileNotFoundError, MonteCarloError) as err:
+    except (ScenarioError, RunDirError, LogError, PositioningError, FileNotFoundError, MonteCarloError,
+            ServeError) as err:
         print(f"longwall: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as err:
@@ -181,6 +210,13 @@ def _command(args: argparse.Namespace) -> int:
     elif args.command == "report":
         from twin.view.report import build_report
         print(build_report(args.run_dir))
+    elif args.command == "serve":
+        served = api.serve(args.scenario or default_scenario(), args.out, args.seed, args.cycles,
+                           endpoint=args.endpoint, speed=args.speed, publish_hz=args.publish_rate, user=args.user,
+                           force=args.force, sensors=not args.twin_only,
+                           ready=lambda: print(f"serving on {args.endpoint} (Ctrl-C stops it)", flush=True))
+        print(f"published {served['simulated_s']:.0f} s of the face in {served['wall_s']:.1f} s "
+              f"({served['simulated_s'] / served['wall_s']:.0f}x real time, {served['ticks']} publications)")
     return 0
 
 

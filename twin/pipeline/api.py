@@ -121,6 +121,20 @@ def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Pat
     `offsets` is the roof support system's input per cycle (twin.face.drift.OffsetSource: the cycle and the pans'
     states in, per-support offsets out), added to the scenario's supports.push.offsets."""
     record_rate_hz = _record_rate(record_rate_hz)
+    source, scenario, name = _loaded(scenario, seed, cycles)
+    out = Path(out) if out is not None else default_run_dir(name, scenario.seed)
+    if not isinstance(scenario, Scenario):
+        check_resources(source, estimate_resources(scenario))
+        return _run_paper(scenario, out, force, quiet)
+    check_trials(trials, workers, ray_address)
+    check_resources(source, estimate_resources(scenario, trials, sensors, workers))
+    return _run_face(scenario, source, out, force, quiet, trials, sensors, workers, ray_address, record_rate_hz,
+                     offsets)
+
+
+def _loaded(scenario: str | Path | Scenario | Experiment | Turntable, seed: int | None, cycles: int | None
+            ) -> tuple[str, Scenario | Experiment | Turntable, str]:
+    """(where it came from, the scenario with `seed` and `cycles` applied, the run's name)."""
     if isinstance(scenario, str | Path):
         source, scenario = str(scenario), load_scenario(scenario, seed)
     else:
@@ -131,14 +145,40 @@ def run(scenario: str | Path | Scenario | Experiment | Turntable, out: str | Pat
             raise ScenarioError(f"{source}: --cycles: an experiment has no cutting cycles; run it without --cycles")
         scenario = parse_any({**scenario.model_dump(), "cycles": cycles}, f"{source} with --cycles {cycles}")
         name = f"{scenario.name}-{cycles}cycles"
-    out = Path(out) if out is not None else default_run_dir(name, scenario.seed)
+    return source, scenario, name
+
+
+def serve(scenario: str | Path | Scenario, out: str | Path | None = None, seed: int | None = None,
+          cycles: int | None = None, *, endpoint: str | None = None, speed: float = 1.0, publish_hz: float | None = None,
+          user: str | None = None, force: bool = False, sensors: bool = True, ready=None) -> dict:
+    """Serve a face scenario on OPC UA (twin.opcua.server; needs the opcua extra) until its run ends, the run
+    directory (truth, sensor trial 0, the offsets applied) written to `out` (default runs/NAME-seedN-served) as it
+    goes. Returns the publication's figures."""
+    import asyncio
+
+    from twin.opcua.access import DEFAULT_ENDPOINT, ServeError, check_access, parse_endpoint
+
+    check_access(parse_endpoint(endpoint or DEFAULT_ENDPOINT)[0], user)
+    try:
+        from twin.opcua.server import PUBLISH_HZ
+        from twin.opcua.server import serve as serve_face
+    except ModuleNotFoundError as err:
+        raise ServeError(f"longwall serve needs {err.name}: install the opcua extra (pip install -e \".[opcua]\")"
+                         ) from None
+    source, scenario, name = _loaded(scenario, seed, cycles)
     if not isinstance(scenario, Scenario):
-        check_resources(source, estimate_resources(scenario))
-        return _run_paper(scenario, out, force, quiet)
-    check_trials(trials, workers, ray_address)
-    check_resources(source, estimate_resources(scenario, trials, sensors, workers))
-    return _run_face(scenario, source, out, force, quiet, trials, sensors, workers, ray_address, record_rate_hz,
-                     offsets)
+        raise ScenarioError(f"{source}: an experiment has no face to serve; serve a face scenario")
+    if scenario.haulage.reversal_stop_s < 1.0:
+        raise ServeError(f"{source}: haulage.reversal_stop_s = {scenario.haulage.reversal_stop_s:g} s: the served face "
+                         f"hands each shear over in the reversal stop after it (for the offsets of the next); set it "
+                         f"to at least 1 s")
+    if scenario.alignment.mode != "none":
+        raise ServeError(f"{source}: [alignment] mode = {scenario.alignment.mode}: the twin's own face alignment "
+                         f"system would steer beside the external one OPC UA clients are; set mode = \"none\"")
+    check_resources(source, estimate_resources(scenario, 1, sensors, 1))
+    out = Path(out) if out is not None else default_run_dir(f"{name}-served", scenario.seed)
+    return asyncio.run(serve_face(scenario, out, endpoint or DEFAULT_ENDPOINT, speed, publish_hz or PUBLISH_HZ, user,
+                                  force, sensors, ready))
 
 
 def check_trials(trials: int, workers: int, ray_address: str | None,

@@ -27,7 +27,7 @@ from twin.face.ride import PanVersion, ride_targets_t, shoe_pans, simulate_ride
 from twin.face.simulator import WINDOW_MARGIN_PANS, FaceSimulator
 from twin.face.truth import shearer_truth
 from twin.pipeline.alignment_loop import AlignmentLoop
-from twin.pipeline.face_recorder import FaceRecorder, split_columns
+from twin.pipeline.face_recorder import FaceRecorder, concat_rows, split_columns
 from twin.sensors.clock import sample_times
 from twin.sensors.faults import faults_of, shortfall_profile
 
@@ -47,6 +47,17 @@ Progress = Callable[[str, float], None]
 """Callback (stage, fraction done in 0..1)."""
 ShearerSink = Callable[[dict[str, np.ndarray]], None]
 """Takes the truth_shearer columns of the next stretch of the run, in time order (a streaming run's consumer)."""
+
+
+@dataclass(frozen=True)
+class LiveTaps:
+    """What a live consumer (twin.opcua.server) sees of a run as the twin makes it: the truth_shearer chunks as they
+    are handed over, and after each cycle's face events the truth_supports rows recorded since the last (a row per
+    move). With taps, every finished chunk is handed over before a cycle's offsets are asked for, so that a consumer
+    that steers the face has seen the shear before it."""
+
+    shearer: ShearerSink
+    supports: Callable[[dict[str, np.ndarray]], None]
 
 
 @dataclass
@@ -137,10 +148,11 @@ def simulate(scn: Scenario, progress: Progress | None = None, offsets: OffsetSou
 
 
 def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress | None = None,
-                    offsets: OffsetSource | None = None) -> SimResult:
+                    offsets: OffsetSource | None = None, live: LiveTaps | None = None) -> SimResult:
     """Run the twin for a scenario, handing the shearer truth to `shearer_sink` a ride chunk (a cycle) at a time as
     it is made; the result holds the other truth tables. At most two chunks of the shearer's truth exist at once.
-    `offsets` is the roof support system's per-cycle input (twin.face.drift.OffsetSource), added to the scenario's."""
+    `offsets` is the roof support system's per-cycle input (twin.face.drift.OffsetSource), added to the scenario's;
+    `live` taps the run as it goes (LiveTaps)."""
     report = progress or (lambda stage, frac: None)
     rng = np.random.default_rng(scn.seed)
     frame = FaceFrame(np.radians(scn.face.azimuth_deg))
@@ -295,14 +307,19 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
             if loop is not None:
                 loop.observe(chunk)
             shearer_sink(chunk)
+            if live is not None:
+                live.shearer(chunk)
             handed[0] += 1
             report("shearer", handed[0] / (len(bounds) - 1))
 
     half = scn.shearer.length_m / 2
+    supports_told = 0  # the recorder's support row blocks the live taps have seen
     with ThreadPoolExecutor(max_workers=1) as pool:
         for plan in timeline.cycles:
             if loop is not None:  # the shears whose paths this cycle's offsets come from, handed over
                 hand_over(keep=max(0, len(pending) - max(0, loop.shears_needed(plan.cycle) - handed[0])))
+            elif live is not None:
+                hand_over(keep=0)
             applied.append(cycle_offsets(scn, plan.cycle, state.pans, offsets, None if loop is None else loop.offsets))
             ctrl.begin_cycle(plan.direction, applied[-1])
             step = length * scn.pattern.push_step_pans
@@ -316,6 +333,9 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
                 if t_due >= plan.t_push_end - MIN_EVENT_S or not event(t_due, None, plan.t_push_end, repush=k > 0):
                     break
             report("face", (plan.cycle + 1) / len(timeline.cycles))
+            if live is not None:
+                live.supports(concat_rows(recorder.sup_rows[supports_told:]))
+                supports_told = len(recorder.sup_rows)
             last = plan.cycle == len(timeline.cycles) - 1
             # Chunk k ends in the reversal stop after cycle k, before cycle k+1's first push.
             ready = [plan.cycle] if len(bounds) - 1 == len(timeline.cycles) else (

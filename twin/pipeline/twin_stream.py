@@ -22,7 +22,7 @@ from twin.config.scenario import Scenario
 from twin.face.drift import OffsetSource
 from twin.face.haulage import Timeline
 from twin.pipeline.alignment_loop import alignment_table
-from twin.pipeline.simulate import Progress, SimResult, cycles_table, last_truth_time, simulate_stream
+from twin.pipeline.simulate import LiveTaps, Progress, SimResult, cycles_table, last_truth_time, simulate_stream
 from twin.sensors.chunks import ChunkAssembler, TruthChunk, halo_rows
 from twin.sensors.faults import faults_table
 from twin.sensors.streams import ShearerSensors, SupportSensors, support_imu_readings
@@ -38,12 +38,12 @@ SUPPORT_TRUTH = ("t", "s")
 
 
 def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Progress | None = None,
-                chunk_rows: int = SENSOR_CHUNK_ROWS, offsets: OffsetSource | None = None
+                chunk_rows: int = SENSOR_CHUNK_ROWS, offsets: OffsetSource | None = None, live: LiveTaps | None = None
                 ) -> tuple[SimResult, ShearerStats]:
     """Simulate `scn` into `run_dir`: the truth streams and, with `sensors`, sensor trial 0's streams, written as the
     run goes. `chunk_rows` cuts the shearer's truth into chunks of at most that many rows; the files are the same
     whatever it is. `offsets`: the per-cycle offsets of the supports' pushes
-    (twin.face.drift.OffsetSource). Returns the simulation's result without the shearer's truth
+    (twin.face.drift.OffsetSource); `live` taps the run as it goes (twin.pipeline.simulate.LiveTaps). Returns the simulation's result without the shearer's truth
     (which is on disk) and the shearer's statistics."""
     report = progress or (lambda stage, frac: None)
     timeline = Timeline(scn)
@@ -70,7 +70,7 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
                 take(chunk)
 
     try:
-        result = simulate_stream(scn, sink, progress, offsets)
+        result = simulate_stream(scn, sink, progress, offsets, live)
         for chunk in assembler.finish():
             take(chunk)
     finally:

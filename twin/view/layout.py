@@ -114,7 +114,8 @@ WEB_START_S = 30.0
 """How long the web viewer may take to answer before it is taken as failed."""
 
 
-def _free_port() -> int:
+def free_port() -> int:
+    """A TCP port free on the loopback address now (the system's choice)."""
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         return sock.getsockname()[1]
@@ -125,7 +126,7 @@ def serve_web(run_dir: Path, port: int = WEB_PORT) -> tuple[subprocess.Popen, st
     only) and its data on a free gRPC port. Returns the server process (in a session of its own: stop it with
     stop_web), once it answers, and the URL that opens the recordings; FileNotFoundError (one line) when it cannot
     start (the port taken, say)."""
-    grpc = _free_port()
+    grpc = free_port()
     command = _viewer_command(run_dir)
     server = subprocess.Popen([command[0], "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port", str(port),
                                "--port", str(grpc), *command[1:]],

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import socket
 import subprocess
 import sys
 import tempfile
@@ -19,6 +18,7 @@ import pytest
 
 import twin.pipeline.montecarlo
 from twin.cli import default_scenario, main
+from twin.view.layout import free_port
 
 pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
@@ -36,12 +36,6 @@ def assert_same_table(a: pa.Table, b: pa.Table) -> None:
             assert np.array_equal(x, y, equal_nan=True), name
         else:
             assert x.tolist() == y.tolist(), name
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")

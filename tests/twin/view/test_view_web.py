@@ -13,7 +13,7 @@ import pytest
 from tests.twin.view.test_recording import flat_floor, synthetic_truth
 from twin.cli import main
 from twin.config.scenario import Face, Scenario
-from twin.view.layout import _free_port
+from twin.view.layout import free_port
 from twin.view.recording import RUN_RRD, write_recording
 
 pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
@@ -29,7 +29,7 @@ def run_dir(tmp_path_factory):
 
 
 def test_the_web_viewer_answers_on_localhost_and_stops_on_ctrl_c(run_dir):
-    port = _free_port()
+    port = free_port()
     view = subprocess.Popen([sys.executable, "-c", "import sys; from twin.cli import main; sys.exit(main(sys.argv[1:]))",
                              "view", str(run_dir), "--web", "--port", str(port)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,

@@ -1,0 +1,233 @@
+"""`longwall serve`: the twin on OPC UA (issue 27). The twin runs (streaming, twin.pipeline.twin_stream) in a thread
+and writes its run directory as it goes; its shearer and supports are published on an asyncua server
+(twin.opcua.address_space), paced at `speed` times real time (inf: as fast as the twin runs), `publish_hz` of
+simulated time; an external face alignment system's offsets, written to FaceAlignmentSystem/Offsets with a new
+SequenceNumber, are applied by the twin's roof support system on the next shear (FasInput, through the face's
+per-cycle offset input, twin.face.drift.OffsetSource).
+
+Memory is bounded: the twin hands its chunks (a cycle of shearer truth, a cycle's support rows) through a queue of
+QUEUE_CHUNKS, so it runs at most that far ahead of what is published.
+
+Access: anonymous on a loopback address only; binding any other address needs a user (its password from the
+environment variable PASSWORD_ENV), checked by the server's user manager, and is refused without one, in one line.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import os
+import queue
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+from asyncua import Server, ua
+from asyncua.server.user_managers import User, UserManager, UserRole
+
+from twin.config.push import check_offsets, offset_limits
+from twin.config.scenario import Scenario, scenario_to_toml
+from twin.face.layout import support_stations
+from twin.opcua.access import PASSWORD_ENV, ServeError, check_access, parse_endpoint
+from twin.opcua.address_space import HAULAGE_STATES, FaceNodes, build
+from twin.pipeline.rundir import atomic_run_dir, check_target
+from twin.pipeline.simulate import LiveTaps
+
+QUEUE_CHUNKS = 4
+"""Chunks the twin may run ahead of the publisher."""
+PUBLISH_HZ = 10.0
+"""Default publication rate [Hz of simulated time]."""
+
+
+class _PasswordUsers(UserManager):
+    """One user, its password from the environment: read and write access; nobody else."""
+
+    def __init__(self, name: str, password: str):
+        self.name, self.password = name, password
+
+    def get_user(self, iserver, username=None, password=None, certificate=None):
+        if username == self.name and password == self.password:
+            return User(role=UserRole.User, name=username)
+        return None
+
+
+class FasInput:
+    """The roof support system's offsets from OPC UA (an OffsetSource): at cycle k's start it waits until the shear
+    before is published (the twin's first k chunks of shearer truth, which end in the reversal stop after cycle
+    k - 1; twin.pipeline.simulate.shearer_chunks), then takes
+    the Offsets last written if their SequenceNumber is new (a face-pushable set: twin.config.push.check_offsets;
+    another is refused, Status says why, none applied)."""
+
+    def __init__(self, scn: Scenario, server: Server, nodes: FaceNodes):
+        self.scn, self.nodes = scn, nodes
+        self.aspace = server.iserver.aspace
+        self.chunks = 0  # shearer chunks published
+        self.condition = threading.Condition()
+        self.applied_sequence = 0
+        self.status = "no offsets written yet"
+        self.applied = np.zeros(support_stations(scn).size)
+        self.stopped = False
+
+    def _read(self, node):
+        return self.aspace.read_attribute_value(node.nodeid, ua.AttributeIds.Value).Value.Value
+
+    def published(self) -> None:
+        """The publisher has published one more chunk."""
+        with self.condition:
+            self.chunks += 1
+            self.condition.notify_all()
+
+    def stop(self) -> None:
+        with self.condition:
+            self.stopped = True
+            self.condition.notify_all()
+
+    def __call__(self, cycle: int, pans: np.ndarray) -> np.ndarray | None:
+        if cycle > 0:
+            with self.condition:
+                self.condition.wait_for(lambda: self.stopped or self.chunks >= cycle)
+        sequence = int(self._read(self.nodes.sequence))
+        offsets = np.zeros(self.applied.size)
+        if sequence != self.applied_sequence:
+            written = np.asarray(self._read(self.nodes.offsets), float)
+            try:
+                check_offsets(written, self.applied.size, **offset_limits(self.scn))
+            except ValueError as err:
+                self.status = f"sequence {sequence} refused at cycle {cycle}: {err}"
+            else:
+                offsets = written
+                self.status = f"sequence {sequence} applied on cycle {cycle}"
+            self.applied_sequence = sequence
+        self.applied = offsets
+        return offsets
+
+
+class Publisher:
+    """Writes the twin's truth to the nodes at `publish_hz` of simulated time, paced at `speed` times real time."""
+
+    def __init__(self, nodes: FaceNodes, fas: FasInput, speed: float, publish_hz: float):
+        self.nodes, self.fas, self.speed, self.publish_hz = nodes, fas, speed, publish_hz
+        self.supports: list[dict[str, np.ndarray]] = []  # rows not yet published, in time order
+        self.start: tuple[float, float] | None = None  # (simulated, wall) time of the first row
+        self.last_tick = -math.inf
+        self.shown = (None, None)  # (applied sequence, status) last written
+        self.ticks = 0
+
+    async def shearer(self, chunk: dict[str, np.ndarray]) -> None:
+        t = chunk["t"]
+        tick = np.floor(t * self.publish_hz)
+        rows = np.flatnonzero(np.diff(tick, prepend=self.last_tick) > 0)
+        speed = np.sqrt(chunk["v_n_e"] ** 2 + chunk["v_n_n"] ** 2 + chunk["v_n_u"] ** 2)
+        direction = np.sign(np.gradient(chunk["s"], t)) if t.size > 1 else np.zeros(t.size)
+        for i in rows:
+            await self._pace(float(t[i]))
+            values = {"ShearerPosition": float(chunk["s"][i]), "PositionEast": float(chunk["p_t_e"][i]),
+                      "PositionNorth": float(chunk["p_t_n"][i]), "PositionUp": float(chunk["p_t_u"][i]),
+                      "Speed": float(speed[i]), "Direction": int(direction[i]),
+                      "HaulageState": HAULAGE_STATES[int(chunk["phase"][i])], "Cycle": int(chunk["cycle"][i]),
+                      "SimulationTime": float(t[i])}
+            for name, value in values.items():
+                await self.nodes.shearer[name].write_value(value)
+            await self._shields(float(t[i]))
+            self.ticks += 1
+            await asyncio.sleep(0)  # the clients' requests are served between publications
+        if t.size:
+            self.last_tick = float(tick[-1])
+        self.fas.published()
+
+    async def _pace(self, t: float) -> None:
+        if self.start is None:
+            self.start = (t, time.perf_counter())
+        if math.isfinite(self.speed):
+            due = self.start[1] + (t - self.start[0]) / self.speed - time.perf_counter()
+            if due > 0:
+                await asyncio.sleep(due)
+
+    async def _shields(self, t: float) -> None:
+        """The shields whose rows up to t are new: their latest values; the face alignment system's state."""
+        if self.supports:
+            rows = {k: np.concatenate([r[k] for r in self.supports]) for k in self.supports[0]}
+            now = rows["t"] <= t
+            if now.any():
+                new = {k: v[now] for k, v in rows.items()}
+                order = np.lexsort((np.arange(now.sum()), new["support"]))  # by shield, then as recorded
+                sup = new["support"][order]
+                for i in order[np.flatnonzero(np.append(sup[1:] != sup[:-1], True))]:  # each shield's latest row
+                    k = int(new["support"][i])
+                    node = self.nodes.shields[k]
+                    for name, col in (("RamStroke", "ram"), ("RamPressure", "ram_pressure"),
+                                      ("LegPressure", "leg_pressure"), ("Advance", "advance")):
+                        await node[name].write_value(float(new[col][i]))
+                    await node["Set"].write_value(bool(new["set"][i]))
+                    await node["AppliedOffset"].write_value(float(self.fas.applied[k]))
+                self.supports = [{k: v[~now] for k, v in rows.items()}] if (~now).any() else []
+        shown = (self.fas.applied_sequence, self.fas.status)
+        if shown != self.shown:
+            await self.nodes.applied_sequence.write_value(ua.Variant(shown[0], ua.VariantType.UInt32))
+            await self.nodes.status.write_value(shown[1])
+            self.shown = shown
+
+
+async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
+                publish_hz: float = PUBLISH_HZ, user: str | None = None, force: bool = False, sensors: bool = True,
+                ready=None) -> dict:
+    """Serve `scn` on `endpoint` until its run ends (the run directory `out` written as it goes); `ready()` is called
+    once the server listens. Returns what was published: simulated time, ticks, wall time."""
+    from twin.pipeline.twin_stream import stream_twin
+
+    host, port = parse_endpoint(endpoint)
+    check_access(host, user)
+    if not speed > 0:
+        raise ServeError(f"--speed {speed:g}: must be above 0 (inf: as fast as the twin runs)")
+    check_target(out, force)
+    server = Server(user_manager=_PasswordUsers(user, os.environ[PASSWORD_ENV]) if user else None)
+    await server.init()
+    server.set_endpoint(f"opc.tcp://{host}:{port}/longwall/")
+    server.set_server_name(f"longwall-twin {scn.name}")
+    server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+    server.set_identity_tokens([ua.UserNameIdentityToken] if user else [ua.AnonymousIdentityToken])
+    nodes = await build(server, support_stations(scn).size)
+    fas = FasInput(scn, server, nodes)
+    publisher = Publisher(nodes, fas, speed, publish_hz)
+    chunks: queue.Queue = queue.Queue(maxsize=QUEUE_CHUNKS)
+    loop = asyncio.get_running_loop()
+    start = time.perf_counter()
+
+    def run_twin(staging: Path) -> None:
+        try:
+            taps = LiveTaps(lambda rows: chunks.put(("shearer", rows)), lambda rows: chunks.put(("supports", rows)))
+            stream_twin(scn, staging, sensors, offsets=fas, live=taps)
+            (staging / "scenario.toml").write_text(scenario_to_toml(scn))
+            chunks.put(("done", None))
+        except BaseException as err:  # handed to the publisher, which raises it
+            chunks.put(("error", err))
+
+    try:
+        await server.start()
+    except OSError as err:
+        raise ServeError(f"--endpoint {endpoint}: cannot listen there ({err.strerror or err}); choose another port "
+                         f"or stop what holds it") from None
+    try:
+        if ready is not None:
+            ready()
+        with atomic_run_dir(out, force) as staging:
+            twin = threading.Thread(target=run_twin, args=(staging,), daemon=True)
+            twin.start()
+            while True:
+                kind, item = await loop.run_in_executor(None, chunks.get)
+                if kind == "shearer":
+                    await publisher.shearer(item)
+                elif kind == "supports":
+                    publisher.supports.append(item)
+                elif kind == "error":
+                    raise item
+                else:
+                    break
+            twin.join()
+    finally:
+        fas.stop()
+        await server.stop()
+    t = publisher.start
+    return {"ticks": publisher.ticks, "wall_s": time.perf_counter() - start,
+            "simulated_s": publisher.last_tick / publish_hz - (t[0] if t else 0.0)}
