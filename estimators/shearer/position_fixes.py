@@ -111,17 +111,10 @@ def line_frames(direction: np.ndarray, x_n: np.ndarray) -> np.ndarray:
 
 def segment_points(prep: Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, cov_enu: np.ndarray) -> Points:
     """CPOEM points of the straight cut inside epochs [a, b] from navigation rows nav and position covariances
-    cov_enu (3, 3) (epochs a..b)."""
-    u = prep.odo - prep.odo[0]
-    lever = np.asarray(cfg.lever_arm_m, float)
+    cov_enu (3, 3) (epochs a..b), from the pass's rows alone."""
+    u = prep.odo[a:b + 1] - prep.odo[0]
     for first, last in prep.cuts:
         if first > a and last <= b:
-            llh = np.zeros((prep.t_kf.size, 3))
-            cov = np.zeros((prep.t_kf.size, 3, 3))
-            c_nb = np.zeros((prep.t_kf.size, 3, 3))
-            llh[a:b + 1] = body_llh(nav, lever)
-            cov[a:b + 1] = cov_enu
-            c_nb[a:b + 1] = quat_to_mat(nav[:, es.QUAT])
-            return record(u, prep.t_kf, llh, cov, c_nb, cfg.cpoem_spacing_m, first - 1, last)
+            return record(u, prep.t_kf[a:b + 1], body_llh(nav, np.asarray(cfg.lever_arm_m, float)), cov_enu,
+                          quat_to_mat(nav[:, es.QUAT]), cfg.cpoem_spacing_m, first - 1 - a, last - a)
     return Points.empty()
-
