@@ -1,0 +1,89 @@
+"""Benchmark: `longwall serve` publishing the default scenario on OPC UA as fast as it runs (issue 27's target: at
+least 50x real time), with an asyncua client subscribed to the shearer's position and every shield's ram stroke the
+whole time (the load of a face automation system watching it). Prints the simulated time published, the wall time,
+the factor of real time, the publications and the data changes the client received.
+
+Run: python benchmarks/bench_serve.py [--cycles N] [--publish-rate HZ]
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import subprocess
+import sys
+import tempfile
+
+from asyncua import Client
+
+from twin.opcua.address_space import NAMESPACE, shield_name
+from twin.view.layout import free_port
+
+TARGET_X = 50.0
+
+
+class Counter:
+    """Counts the data changes of a subscription."""
+
+    def __init__(self):
+        self.changes = 0
+
+    def datachange_notification(self, node, val, data) -> None:
+        self.changes += 1
+
+
+async def watch(port: int, server: subprocess.Popen) -> int:
+    """Subscribe to ShearerPosition and every shield's RamStroke until the server ends; the changes received."""
+    url = f"opc.tcp://127.0.0.1:{port}/longwall/"
+    for _ in range(300):
+        try:
+            client = Client(url)
+            await client.connect()
+            break
+        except (OSError, asyncio.TimeoutError):
+            await asyncio.sleep(0.2)
+    counter = Counter()
+    try:
+        ns = await client.get_namespace_index(NAMESPACE)
+        longwall = await client.nodes.objects.get_child(f"{ns}:Longwall")
+        nodes = [await longwall.get_child([f"{ns}:Shearer", f"{ns}:ShearerPosition"])]
+        rss = await longwall.get_child(f"{ns}:RoofSupportSystem")
+        for k in range(len(await rss.get_children())):
+            nodes.append(await rss.get_child([f"{ns}:{shield_name(k)}", f"{ns}:RamStroke"]))
+        sub = await client.create_subscription(100, counter)
+        await sub.subscribe_data_change(nodes)
+        while server.poll() is None:
+            await asyncio.sleep(0.5)
+    except Exception:  # the server ended under the client: what it received counts
+        pass
+    finally:
+        try:
+            await client.disconnect()
+        except Exception:
+            pass
+    return counter.changes
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cycles", type=int, default=2)
+    parser.add_argument("--publish-rate", type=float, default=10.0, metavar="HZ")
+    args = parser.parse_args()
+    port = free_port()
+    with tempfile.TemporaryDirectory(prefix="bench-serve-") as tmp:
+        server = subprocess.Popen([sys.executable, "-m", "twin.cli", "serve", "--speed", "max", "--cycles",
+                                   str(args.cycles), "--publish-rate", str(args.publish_rate), "--endpoint",
+                                   f"opc.tcp://127.0.0.1:{port}", "--out", f"{tmp}/served", "--twin-only"],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        changes = asyncio.run(watch(port, server))
+        out, err = server.communicate()
+    if server.returncode:
+        sys.exit(f"longwall serve failed: {err.strip().splitlines()[-1] if err.strip() else server.returncode}")
+    print(out.strip().splitlines()[-1])
+    factor = float(out.strip().splitlines()[-1].split("(")[1].split("x")[0])
+    print(f"real-time factor {factor:.0f}x against the target {TARGET_X:.0f}x: {'met' if factor >= TARGET_X else 'not met'}; "
+          f"the client received {changes} data changes")
+
+
+if __name__ == "__main__":
+    main()
