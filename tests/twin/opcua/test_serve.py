@@ -14,7 +14,6 @@ import pytest
 
 from twin.cli import main
 from twin.config.scenario import load_scenario
-from twin.opcua.address_space import NAMESPACE
 from twin.view.layout import free_port
 
 pytestmark = pytest.mark.slow  # the served run: over 3 s of the full suite
@@ -45,6 +44,8 @@ def test_a_non_loopback_bind_without_credentials_is_refused(capsys, tmp_path):
 async def _client(asyncua, port: int) -> dict:
     """Connect as the run starts, read ShearerPosition until it moves, write a set of offsets with SequenceNumber
     1, wait for the roof support system to say it applied them."""
+    from twin.opcua.address_space import NAMESPACE  # needs asyncua
+
     ua = asyncua.ua
     url = f"opc.tcp://127.0.0.1:{port}/longwall/"
     for _ in range(100):  # the server listens once the twin is set up
