@@ -14,6 +14,8 @@ from tests.conftest import simulated
 from twin.pipeline.estimate import positioning_config
 from twin.sensors.streams import imu_truth, sensor_streams
 
+pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
+
 STREAMS = ("imu", "odometer", "survey", "pushram", "face_survey")
 
 
