@@ -15,6 +15,7 @@ environment variable PASSWORD_ENV), checked by the server's user manager, and is
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
 import os
 import queue
@@ -146,7 +147,7 @@ class Publisher:
 
     async def _shields(self, t: float) -> None:
         """The shields whose rows up to t are new: their latest values; the face alignment system's state."""
-        if self.supports:
+        if self.supports and min(r["t"][0] for r in self.supports) <= t:  # rows in time order
             rows = {k: np.concatenate([r[k] for r in self.supports]) for k in self.supports[0]}
             now = rows["t"] <= t
             if now.any():
@@ -203,11 +204,16 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
         except BaseException as err:  # handed to the publisher, which raises it
             chunks.put(("error", err))
 
+    asyncua_log = logging.getLogger("asyncua")
+    level = asyncua_log.level
+    asyncua_log.setLevel(logging.CRITICAL)  # a port that is taken is said in one line below, not as its traceback
     try:
         await server.start()
     except OSError as err:
         raise ServeError(f"--endpoint {endpoint}: cannot listen there ({err.strerror or err}); choose another port "
                          f"or stop what holds it") from None
+    finally:
+        asyncua_log.setLevel(level)
     try:
         if ready is not None:
             ready()
@@ -219,7 +225,8 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
                 if kind == "shearer":
                     await publisher.shearer(item)
                 elif kind == "supports":
-                    publisher.supports.append(item)
+                    if item["t"].size:
+                        publisher.supports.append(item)
                 elif kind == "error":
                     raise item
                 else:
