@@ -151,6 +151,11 @@ def error_stats(err_enu: np.ndarray) -> dict[str, float]:
             "max_3d": float(norm.max()), "sep": float(np.median(norm))}
 
 
+def cycle_label(cycle: int) -> str:
+    """A cutting cycle (truth_cycles' 0-based `cycle`) as tables and plots name it: A1 for cycle 0 (001 Table 3)."""
+    return f"A{int(cycle) + 1}"
+
+
 def cycle_metrics(t: np.ndarray, err_enu: np.ndarray, truth_cycles) -> list[dict]:
     """Error statistics (`error_stats`) per cutting cycle and over the whole run.
 

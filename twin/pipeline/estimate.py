@@ -281,7 +281,7 @@ def format_estimators(estimators: dict, scenario: str = "") -> str:
     n = max(len(e["cycles"]) - 1 for e in estimators.values())
     lines = ["", "shearer position, SEP per cutting cycle [m]" + (f" ({paper})" if table == "sep" else "")
              + ("" if n else " (no truth_cycles.parquet: over the whole run only)"),
-             f"{'method':16s}" + "".join(f"{'A' + str(k + 1):>8s}" for k in range(n)) + f"{'all':>8s}"]
+             f"{'method':16s}" + "".join(f"{metrics.cycle_label(k):>8s}" for k in range(n)) + f"{'all':>8s}"]
     for name, e in estimators.items():
         lines.append(f"{name:16s}" + "".join(f"{c['sep']:8.3f}" for c in e["cycles"]))
     lines += ["", "shearer position, maximum error over the run [m]" + (f" ({paper})" if table == "max" else ""),

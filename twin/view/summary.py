@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimators.face.straightness import face_drift
+from estimators.io.metrics import cycle_label
 from twin.config.scenario import Scenario
 
 
@@ -78,7 +79,7 @@ def format_summary(summary: dict, wall_s: float) -> str:
         f" {'straightness rms':>17} {'max':>6} {'creep':>7} {'offsets rms':>12}   [mm]",
     ]
     for c in summary["cycles"]:
-        lines.append(f"{c['cycle']:>5} {c['t_start_s']:>10.1f} {c['t_end_s']:>10.1f} "
+        lines.append(f"{cycle_label(c['cycle']):>5} {c['t_start_s']:>10.1f} {c['t_end_s']:>10.1f} "
                      f"{c['pan_advance_error_max_mm']:>17.1f} {c['support_advance_error_max_mm']:>21.1f}"
                      f" {c['straightness_rms_mm']:>17.1f} {c['straightness_max_mm']:>6.1f} {c['creep_mm']:>7.1f}"
                      f" {c['offsets_rms_mm']:>12.1f}")
