@@ -1,20 +1,33 @@
 """`longwall report DIR`: a run directory as plots on one self-contained HTML page.
 
 Writes DIR/report/report.html (every figure embedded as a base64 PNG data URI, so the page can be mailed on its
-own) and the same figures as PNG files beside it:
+own) and the same figures as PNG files beside it, each with a caption saying what it shows and in which units.
+Cutting cycles are named A1, A2, ... as `longwall run` prints them (estimators.io.metrics.cycle_label).
 
 * `top_view.png`     the true shearer path and each estimator's path, East/North in the tangent plane t of the
-                     scenario's reference point (with truth: a second panel zoomed onto the face)
-* `errors.png`       horizontal and |up| position error against time per estimator, cutting-cycle boundaries
+                     scenario's reference point, equal scales (with truth: a second panel zoomed onto the face)
+* `plan_view.png`    the face frame F (twin.view.report_face): across the face (towards the coal wall) against along
+                     it, one panel per cycle's straight cut, the lateral scale exaggerated by a stated factor: the
+                     pans as they stood, the target line (the face alignment system's in a run with [alignment],
+                     else the cut's best-fit straight line), the true path and the best MAX_METHODS estimates with
+                     their +-1 sigma bands
+* `profile.png`      the same cuts' height (up) along the face: the true path and the estimates with their bands
+* `errors.png`       per estimator (rows) and axis east/north/up (columns): the error against time over the
+                     estimate's own +-N_SIGMA band (its sd_pos_*) and the share inside it; `sigma.png` in its place
+                     without truth: the bands alone
 * `cycle_errors.png` RMSE east/north/up per cutting cycle per estimator (metrics.json, else recomputed)
 * `detectors_METHOD.png`  for a run with estimates/METHOD_detectors.parquet (004's rail-model filter): residual
                      and dual-state chi-square against their threshold, the fading SPRT against T1/T0, the
                      rail model's isolation shaded
+* `supports.png`     heat maps support x time: the push-ram strokes and the leg pressures read
+* `pressures.png`    the legs' and push rams' pressures across the face against time, with the set and yield
+* `face_line.png`    straightness (RMS, max) and creep per cycle; the offsets each support's push applied, when any
 * `pan_line.png`     the pans' lateral deviation from their best-fit straight line at installation and at the end
                      of each cutting cycle
 
 A run without truth (e.g. imported with `longwall import`) gets the plots that need no truth, what each estimate says
-of itself (metrics.json's "self") in place of the error table, and a note naming what was left out. The run's data: twin.view.run_data; the figures: twin.view.report_figures.
+of itself (metrics.json's "self") in place of the error table, and a note naming what was left out. The run's data:
+twin.view.run_data; the figures: twin.view.report_figures and, in the face frame, twin.view.report_face.
 """
 
 from __future__ import annotations
@@ -28,13 +41,24 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from estimators.io.metrics import column
+from estimators.io.metrics import column, cycle_label
 from twin.pipeline.estimate import (
     SELF_COLUMNS,
     detector_thresholds,
     self_assessment_rows,
 )
+from twin.view.report_face import (
+    MAX_METHODS,
+    PLAN,
+    PROFILE,
+    aligned,
+    best_methods,
+    cuts,
+    section_plot,
+    sections,
+)
 from twin.view.report_figures import (
+    N_SIGMA,
     colors_for,
     cycle_plot,
     detector_plot,
@@ -45,6 +69,7 @@ from twin.view.report_figures import (
     pan_line,
     pan_line_plot,
     pressure_plot,
+    support_plot,
     top_view,
 )
 from twin.view.run_data import RunData, load_run
@@ -103,8 +128,12 @@ def _header(run: RunData, stats: dict[str, list[dict]]) -> str:
     per_method = _table(["method", "RMSE east [m]", "RMSE north [m]", "RMSE up [m]", "max horizontal [m]",
                          "max 3-D [m]", "SEP [m]"],
                         [[m] + [float(rows[-1][k]) for k in keys] for m, rows in stats.items()])
+    n_cycles = max(len(rows) - 1 for rows in stats.values()) if stats else 0
+    per_cycle = _table(["method", *(cycle_label(k) for k in range(n_cycles)), "all"],
+                       [[m] + [float(r["sep"]) for r in rows] for m, rows in stats.items()])
     if stats:
-        return facts + "<h3>Shearer position over the run</h3>" + per_method
+        return (facts + "<h3>Shearer position over the run</h3>" + per_method
+                + "<h3>Shearer position, SEP per cutting cycle [m]</h3>" + per_cycle)
     unscored = {m: e for m, e in run.metrics.get("estimators", {}).items() if m in run.estimates and "self" in e}
     if not unscored:
         return facts
@@ -119,6 +148,43 @@ def _figure_html(figs: Figures, name: str) -> str:
             f"File: <a href=\"{name}\">{name}</a></figcaption></figure>")
 
 
+def _face_figures(run: RunData, figs: Figures, stats: dict[str, list[dict]], colors: dict[str, tuple]) -> None:
+    """The plan view and the vertical profile in the face frame (twin.view.report_face)."""
+    ranked = best_methods(run, stats)
+    shown, left_out = ranked[:MAX_METHODS], ranked[MAX_METHODS:]
+    drawn = cuts(run)
+    parts = sections(run, shown, drawn)
+    which = ""
+    if shown:
+        ranking = "SEP over the run" if stats else "median horizontal one-sigma"
+        which = (f" Estimates: the {len(shown)} best by {ranking} ({', '.join(shown)}), each with its own ±1σ band"
+                 + (f"; left out: {', '.join(left_out)} (see the errors against time)." if left_out else "."))
+    cycles = run.truth.get("truth_cycles")
+    panels = "The whole run (no truth_cycles)"
+    if drawn[0].row is not None:
+        panels = "One panel per cutting cycle's straight cut" + (
+            f" ({len(drawn)} of {cycles.num_rows} cycles, evenly spread)" if len(drawn) < cycles.num_rows else "")
+    target = ("target line: the face alignment system's from the true cut" if aligned(run)
+              else "target line: the true cut's best-fit straight line")
+    truth = " No truth in this run: the estimates alone."
+    if "truth_shearer" in run.truth:
+        truth = (" The true path of the shearer's body point, the pans' centres as they stood when the cut began, and "
+                 "the target line: " + (
+                     "the one the face alignment system (the scenario's [alignment] settings) sets at the shields "
+                     "from the true cut (straight; turned towards square by at most max_turn_deg for target = "
+                     "\"square\"; none where it holds the last offsets)." if aligned(run) else
+                     "the least-squares straight line through the true cut (no face alignment in this run)."))
+    fig, factor = section_plot(drawn, parts, colors, PLAN, target)
+    figs.add("plan_view.png", fig, "Plan view in the face frame",
+             f"{panels}: x towards the coal wall against y along the face from the headgate [m], the lateral scale "
+             f"exaggerated x{factor}." + truth + which + " An estimate far off the truth is clipped at the edge.")
+    fig, factor = section_plot(drawn, parts, colors, PROFILE)
+    figs.add("profile.png", fig, "Vertical profile along the face",
+             f"{panels}: z (up) against y along the face from the headgate [m], the vertical scale exaggerated "
+             f"x{factor}." + (" The true path of the shearer's body point." if "truth_shearer" in run.truth
+                              else " No truth in this run.") + which)
+
+
 def build_report(run_dir: Path) -> Path:
     """Write run_dir/report/report.html and its PNG files; returns the page's path."""
     run = load_run(run_dir)
@@ -127,41 +193,63 @@ def build_report(run_dir: Path) -> Path:
     cycles = run.truth.get("truth_cycles")
     figs = Figures()
     figs.add("top_view.png", top_view(run, colors), "Top view",
-             "Shearer body point, East/North [m] in the tangent plane of the scenario's reference point.")
-    if run.estimates and "truth_shearer" in run.truth:
-        figs.add("errors.png", error_plot(error_series(run), cycles, colors), "Position error against time",
-                 "Estimate - truth at the truth point; dotted: cutting-cycle boundaries.")
+             "Shearer body point, East/North [m] in the tangent plane of the scenario's reference point, equal "
+             "scales.")
+    if run.scenario is not None and (run.estimates or "truth_shearer" in run.truth):
+        _face_figures(run, figs, stats, colors)
+    if run.estimates:
+        with_truth = "truth_shearer" in run.truth
+        figs.add("errors.png" if with_truth else "sigma.png", error_plot(error_series(run), cycles, colors),
+                 "Position error and one-sigma against time" if with_truth else "Position one-sigma against time",
+                 ("Each estimator's error (estimate - truth at the truth point) east, north and up [m] against "
+                  f"t [min], over its own ±{N_SIGMA}σ band (the estimate's sd_pos_e/n/u) and the share of samples "
+                  "inside it; each row on its own scale" if with_truth else
+                  f"Each estimator's own ±{N_SIGMA}σ band (sd_pos_e/n/u) east, north and up [m] against t [min], "
+                  "about zero (no truth: no errors); each row on its own scale")
+                 + "; dotted: cutting-cycle boundaries (A1, A2, ... as `longwall run` prints them).")
     if run.estimates and not stats:
         run.notes.append("no errors scored (metrics.json holds none, and the run has no truth to score against): "
                          "left out the errors per cutting cycle")
     if stats:
         figs.add("cycle_errors.png", cycle_plot(stats, colors), "Error per cutting cycle",
-                 "RMSE east/north/up per cutting cycle and estimator" + (
+                 "RMSE east/north/up [m] per cutting cycle and estimator" + (
                      " (metrics.json)." if run.metrics.get("estimators") else " (recomputed against the truth)."))
     thresholds = detector_thresholds(run.scenario) if run.scenario else None
     for m, table in run.detectors.items():
         figs.add(f"detectors_{m}.png", detector_plot(m, table, thresholds, cycles), f"Fault detectors: {m}",
-                 "One point per rail-model fix; red: thresholds (chi-square at the false-alarm probability, fading "
-                 "SPRT T1/T0); shaded: the rail model isolated.")
+                 "One point per rail-model fix against t [min]; red: thresholds (chi-square at the false-alarm "
+                 "probability, fading SPRT T1/T0); shaded: the rail model isolated.")
+    readings = {title: (table, name, valid, label) for title, table, name, valid, label in (
+        ("push-ram strokes", run.pushram, "extension", "valid", "ram extension [m]"),
+        ("leg pressures", run.pressure, "leg", "valid_leg", "leg pressure [MPa]")) if table is not None
+        and table.num_rows}
+    if readings:
+        figs.add("supports.png", support_plot(readings, cycles), "Supports: ram strokes and leg pressures",
+                 "Each support's readings (rows, 0 at the headgate) against t [min], the mean over each time bin: "
+                 "the push-ram sensors' extension [m] and the legs' pressure transducers [MPa]; dropouts left out; "
+                 "dotted: cutting-cycle boundaries.")
     if run.pressure is not None and run.pressure.num_rows:
         legs = run.scenario.supports.legs if run.scenario else None
         figs.add("pressures.png", pressure_plot(run.pressure, cycles, legs and legs.set_pressure_mpa,
                                                 legs and legs.yield_pressure_mpa), "Support pressures",
-                 "Pressure transducers of the legs and the push rams (the PRESSURE stream, readings with their faults); "
-                 "dashed: the set and yield pressures of the scenario.")
+                 "Pressure transducers of the legs and the push rams [MPa] against t [min] (the PRESSURE stream, "
+                 "readings with their faults): the face's median, 5-95 % band and extreme; dashed: the set and "
+                 "yield pressures of the scenario.")
     if {"truth_pans", "truth_cycles"} <= run.truth.keys() and run.scenario is not None:
         azimuth = np.radians(run.scenario.face.azimuth_deg)
-        figs.add("face_line.png", face_line_plot(run.truth["truth_pans"], cycles, azimuth, run.alignment),
+        offsets = run.alignment if run.alignment is not None and np.any(column(run.alignment, "offset")) else None
+        figs.add("face_line.png", face_line_plot(run.truth["truth_pans"], cycles, azimuth, offsets),
                  "Face line per cycle",
-                 "Straightness (RMS and largest deviation of the pans from their best-fit line) and creep (the pans' "
-                 "mean shift along the face) at the end of each cycle; below, the offset each support's push applied "
-                 "(the scenario's and the face alignment system's).")
+                 "Straightness (RMS and largest deviation of the pans from their best-fit line) [mm] and creep (the "
+                 "pans' mean shift along the face) [mm] at the end of each cycle" + (
+                     "; below, the offset [mm] each support's push applied per cycle (the scenario's and the face "
+                     "alignment system's)." if offsets is not None else " (no push offsets in this run)."))
     pan_html = ""
     if {"truth_pans", "truth_cycles"} <= run.truth.keys():
         labels, along_m, lateral_m = pan_line(run.truth["truth_pans"], cycles)
         figs.add("pan_line.png", pan_line_plot(labels, along_m, lateral_m), "Pan line straightness",
-                 "Each pan's lateral deviation from the best-fit straight line of the pans at installation and at "
-                 "the end of each cutting cycle.")
+                 "Each pan's lateral deviation [mm] from the best-fit straight line of the pans against the distance "
+                 "along the face [m], at installation and at the end of each cutting cycle.")
         t_end_min = np.r_[0.0, column(cycles, "t_end")] / 60
         pan_html = _table(["line", "t [min]", "max |lateral deviation| [mm]"],
                           [[label, f"{t:.1f}", float(np.abs(lat).max() * 1e3)]

@@ -1,20 +1,26 @@
-"""The report's figures (`longwall report`): top view, errors against time, errors per cycle, fault detectors, pan
-line straightness, the face line per cycle and the push offsets, as matplotlib Figures without pyplot (Agg canvas, nothing global to close).
+"""The report's figures (`longwall report`) in time and per support: top view, errors with their sigma bands against
+time, errors per cycle, fault detectors, the supports' ram strokes and leg pressures, pan line straightness, the face
+line per cycle and the push offsets, as matplotlib Figures without pyplot (Agg canvas, nothing global to close). The
+face-frame figures: twin.view.report_face.
 
 Errors are estimate - truth in metres East/North/Up at the truth point (estimators.io.metrics). Long series are
-decimated to about MAX_POINTS samples for plotting.
+decimated to about MAX_POINTS samples for plotting. Cycles are labelled A1, A2, ... (estimators.io.metrics.cycle_label).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import pyarrow as pa
 from matplotlib import colormaps
 from matplotlib.figure import Figure
-from matplotlib.ticker import MaxNLocator
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
+from matplotlib.ticker import FuncFormatter, MaxNLocator
 
 from estimators.face.straightness import face_drift
-from estimators.io.metrics import column, cycle_metrics, position_errors
+from estimators.io.metrics import column, columns, cycle_label, cycle_metrics, position_errors
 from estimators.nav import earth
 from twin.view.estimate_recording import plot_rows
 from twin.view.run_data import RunData
@@ -22,9 +28,15 @@ from twin.view.summary import latest_per_id
 
 MAX_POINTS = 4000
 """About the largest number of samples plotted per series."""
+N_SIGMA = 1
+"""Half-width of the error plots' bands in one-sigma."""
+SUPPORT_COLUMNS = 1500
+"""At most this many time bins in the supports' heat maps."""
+LEGEND_ENTRIES = 12
+"""At most about this many lines of a sequence (one per cycle) named in a legend."""
 
 
-def _origin(run: RunData) -> tuple[float, float, float]:
+def tangent_origin(run: RunData) -> tuple[float, float, float]:
     """(lat, lon [rad], h [m]) of the tangent plane t: the scenario's reference point, else the first position."""
     if run.scenario is not None:
         site = run.scenario.site
@@ -33,13 +45,13 @@ def _origin(run: RunData) -> tuple[float, float, float]:
     return tuple(float(column(first, k)[0]) for k in ("lat", "lon", "h"))
 
 
-def _decimated(table: pa.Table) -> tuple[pa.Table, np.ndarray]:
+def decimated(table: pa.Table) -> tuple[pa.Table, np.ndarray]:
     """About MAX_POINTS rows of `table` spread evenly in time, and their times [s]."""
     t = column(table, "t")
     return plot_rows(table, MAX_POINTS / max(t[-1] - t[0], 1e-9) if t.size else 1.0)
 
 
-def _enu_t(table: pa.Table, origin: tuple[float, float, float]) -> np.ndarray:
+def enu_t(table: pa.Table, origin: tuple[float, float, float]) -> np.ndarray:
     """(K, 3) East/North/Up [m] of a table's lat/lon/h in the tangent plane at `origin`."""
     return earth.lla_to_enu(column(table, "lat"), column(table, "lon"), column(table, "h"), *origin)
 
@@ -50,26 +62,38 @@ def colors_for(methods: list[str]) -> dict[str, tuple]:
     return {m: cmap(k % 10) for k, m in enumerate(methods)}
 
 
-def _cycle_lines(ax, cycles: pa.Table | None) -> None:
-    """Cutting-cycle boundaries as vertical lines [min] labelled with the cycle at the top of the axes."""
+def cycle_lines(ax, cycles: pa.Table | None, labelled: bool = True) -> None:
+    """Cutting-cycle boundaries as vertical lines [min], labelled (A1, A2, ...: cycle_label) at the top of the
+    axes."""
     if cycles is None:
         return
     starts_min = column(cycles, "t") / 60
     ax.vlines(np.r_[starts_min, column(cycles, "t_end")[-1] / 60], 0, 1, transform=ax.get_xaxis_transform(),
               colors="0.4", linestyles=":", linewidth=1)
-    for cycle, t_min in zip(column(cycles, "cycle").astype(int), starts_min):
-        ax.text(t_min, 1.0, f" cycle {cycle}", transform=ax.get_xaxis_transform(), va="bottom", fontsize=8,
+    for cycle, t_min in zip(column(cycles, "cycle").astype(int), starts_min) if labelled else ():
+        ax.text(t_min, 1.0, f" {cycle_label(cycle)}", transform=ax.get_xaxis_transform(), va="bottom", fontsize=8,
                 color="0.3")
 
 
+def cycle_axis(axis) -> None:
+    """An axis whose integer positions are 0-based cycles, ticked with their labels (A1, A2, ...)."""
+    axis.set_major_locator(MaxNLocator(integer=True))
+    axis.set_major_formatter(FuncFormatter(lambda v, _: cycle_label(round(v)) if v >= 0 else ""))
+
+
+def outside_legend(fig: Figure, ax, ncols: int = 1) -> None:
+    """The legend of `ax`'s labelled artists to the right of the figure's axes, clear of the traces."""
+    fig.legend(*ax.get_legend_handles_labels(), loc="outside right upper", fontsize=8, ncols=ncols)
+
+
 def top_view(run: RunData, colors: dict[str, tuple]) -> Figure:
-    """The true path (grey) and each estimated path, East/North [m] in t; with truth a second panel zoomed onto the
-    true path."""
-    origin = _origin(run)
+    """The true path (grey) and each estimated path, East/North [m] in t, equal scales; with truth a second panel
+    zoomed onto the true path (equal scales too)."""
+    origin = tangent_origin(run)
     truth = run.truth.get("truth_shearer")
-    paths_en = {m: _enu_t(_decimated(table)[0], origin)[:, :2] for m, table in run.estimates.items()}
-    true_en = _enu_t(_decimated(truth)[0], origin)[:, :2] if truth is not None else None
-    fig = Figure(figsize=(13, 6.5), layout="constrained")
+    paths_en = {m: enu_t(decimated(table)[0], origin)[:, :2] for m, table in run.estimates.items()}
+    true_en = enu_t(decimated(truth)[0], origin)[:, :2] if truth is not None else None
+    fig = Figure(figsize=(13, 6), layout="constrained")
     axes = fig.subplots(1, 2 if true_en is not None else 1, squeeze=False)[0]
     for ax in axes:
         for m, en in paths_en.items():
@@ -80,39 +104,72 @@ def top_view(run: RunData, colors: dict[str, tuple]) -> Figure:
         ax.set_ylabel("north [m]")
         ax.grid(alpha=0.3)
     axes[0].set_aspect("equal", adjustable="datalim")
-    axes[0].set_title("top view, equal scales")
-    axes[0].legend(fontsize=8, loc="best")
+    axes[0].set_title("every path")
+    outside_legend(fig, axes[0])
     if true_en is not None:
-        lo, hi = true_en.min(axis=0), true_en.max(axis=0)
-        margin = 0.5 + 0.1 * (hi - lo)
-        axes[1].set_xlim(lo[0] - margin[0], hi[0] + margin[0])
-        axes[1].set_ylim(lo[1] - margin[1], hi[1] + margin[1])
+        mid_en = 0.5 * (true_en.min(axis=0) + true_en.max(axis=0))
+        half_m = 0.5 + 0.6 * float(np.ptp(true_en, axis=0).max())
+        axes[1].set_xlim(mid_en[0] - half_m, mid_en[0] + half_m)
+        axes[1].set_ylim(mid_en[1] - half_m, mid_en[1] + half_m)
+        axes[1].set_aspect("equal", adjustable="box")
         axes[1].set_title("zoomed onto the true path")
     return fig
 
 
-def error_series(run: RunData) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """Per method (t [s], err_enu [m] (K, 3)) at about MAX_POINTS estimate times (needs truth_shearer)."""
-    truth = run.truth["truth_shearer"]
-    return {m: position_errors(_decimated(table)[0], truth) for m, table in run.estimates.items()}
+@dataclass(frozen=True)
+class ErrorSeries:
+    """One estimate's position at about MAX_POINTS of its times: its error and its own one-sigma."""
+
+    t: np.ndarray
+    """[s]"""
+    err_enu: np.ndarray | None
+    """(K, 3) estimate - truth East/North/Up [m] at the truth point (None: the run has no truth)."""
+    sd_enu: np.ndarray
+    """(K, 3) the estimate's sd_pos_e/n/u [m]."""
 
 
-def error_plot(errors: dict[str, tuple[np.ndarray, np.ndarray]], cycles: pa.Table | None,
-               colors: dict[str, tuple]) -> Figure:
-    """Horizontal and |up| position error against time per estimator (log scale), cycle boundaries dotted."""
-    fig = Figure(figsize=(13, 7), layout="constrained")
-    ax_h, ax_u = fig.subplots(2, 1, sharex=True)
-    for m, (t, err_enu) in errors.items():
-        ax_h.plot(t / 60, np.hypot(err_enu[:, 0], err_enu[:, 1]), color=colors[m], linewidth=1, label=m)
-        ax_u.plot(t / 60, np.abs(err_enu[:, 2]), color=colors[m], linewidth=1, label=m)
-    for ax, label in ((ax_h, "horizontal error [m]"), (ax_u, "|up error| [m]")):
-        ax.set_yscale("log")
-        ax.set_ylim(bottom=1e-3)  # below a millimetre is noise for a shearer
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3, which="both")
-        _cycle_lines(ax, cycles)
-    ax_u.set_xlabel("t [min]")
-    ax_h.legend(fontsize=8, loc="upper left", ncols=min(len(errors), 4))
+def error_series(run: RunData) -> dict[str, ErrorSeries]:
+    """Per method its ErrorSeries (errors when the run has truth_shearer)."""
+    truth = run.truth.get("truth_shearer")
+    out = {}
+    for m, table in run.estimates.items():
+        rows, t = decimated(table)
+        out[m] = ErrorSeries(t, position_errors(rows, truth)[1] if truth is not None else None,
+                             columns(rows, "sd_pos"))
+    return out
+
+
+def error_plot(series: dict[str, ErrorSeries], cycles: pa.Table | None, colors: dict[str, tuple]) -> Figure:
+    """One row per estimator, one column per axis (east, north, up): the error against time [min] over the
+    estimate's own +-N_SIGMA one-sigma band about zero (the band alone without truth), each row on its own scale, with
+    the share of samples inside the band; cycle boundaries dotted."""
+    fig = Figure(figsize=(13, 1.2 + 1.7 * len(series)), layout="constrained")
+    axes = fig.subplots(len(series), 3, sharex=True, sharey="row", squeeze=False)
+    for j, (row, (m, one)) in enumerate(zip(axes, series.items())):
+        t_min = one.t / 60
+        band_m = N_SIGMA * one.sd_enu
+        for k, ax in enumerate(row):
+            ax.fill_between(t_min, -band_m[:, k], band_m[:, k], color=colors[m], alpha=0.25, linewidth=0)
+            if one.err_enu is not None:
+                ax.plot(t_min, one.err_enu[:, k], color=colors[m], linewidth=0.8)
+                inside = (f"{np.mean(np.abs(one.err_enu[:, k]) <= band_m[:, k]):.0%} inside"
+                          if np.isfinite(band_m[:, k]).any() else "no one-sigma")
+                ax.text(0.99, 0.95, inside, transform=ax.transAxes, ha="right", va="top", fontsize=8,
+                        bbox={"facecolor": "white", "alpha": 0.7, "linewidth": 0})
+            ax.axhline(0, color="0.5", linewidth=0.6)
+            ax.grid(alpha=0.3)
+            cycle_lines(ax, cycles, labelled=j == 0)
+        reach = [np.abs(v) for v in (band_m, one.err_enu) if v is not None and np.isfinite(v).any()]
+        lim = max((float(np.nanpercentile(v, 99.5)) for v in reach), default=1.0) * 1.15
+        row[0].set_ylim(-lim, lim)
+        row[0].set_ylabel(f"{m}\n[m]")
+    for ax, axis in zip(axes[0], ("east", "north", "up")):
+        ax.set_title(axis, pad=14)
+    for ax in axes[-1]:
+        ax.set_xlabel("t [min]")
+    fig.legend([Patch(color="0.5", alpha=0.35, linewidth=0), Line2D([], [], color="0.2", linewidth=0.8)],
+               [f"±{N_SIGMA}σ: the estimate's own one-sigma (sd_pos_e/n/u)", "error (estimate - truth)"],
+               loc="outside upper left", fontsize=8, ncols=2)
     return fig
 
 
@@ -145,8 +202,9 @@ def cycle_plot(stats: dict[str, list[dict]], colors: dict[str, tuple]) -> Figure
         ax.set_ylabel(f"RMSE {axis} [m]")
         ax.grid(alpha=0.3, axis="y", which="both")
     cycles = sorted({r["cycle"] for rows in stats.values() for r in rows})
-    axes[-1].set_xticks(cycles, [f"cycle {c}" for c in cycles])
-    axes[0].legend(fontsize=8, ncols=min(len(stats), 4))
+    axes[-1].set_xticks(cycles, [cycle_label(c) for c in cycles])
+    axes[-1].set_xlabel("cutting cycle")
+    outside_legend(fig, axes[0])
     return fig
 
 
@@ -169,7 +227,7 @@ def detector_plot(method: str, table: pa.Table, thresholds: dict[str, float] | N
         ax.set_ylabel(name.replace("_", "-"))
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="upper right")
-        _cycle_lines(ax, cycles)
+        cycle_lines(ax, cycles)
     axes[-1].set_xlabel("t [min]")
     return fig
 
@@ -187,7 +245,7 @@ def pan_line(truth_pans: pa.Table, truth_cycles: pa.Table) -> tuple[list[str], n
     along_en *= np.sign(np.einsum("ck,ck->c", p_en[:, -1] - p_en[:, 0], along_en))[:, None]
     wall_en = np.column_stack([along_en[:, 1], -along_en[:, 0]])  # x = y rotated -90 deg about up
     along_m = np.einsum("cpk,ck->cp", d_en, along_en)
-    labels = ["installed"] + [f"cycle {c}" for c in column(truth_cycles, "cycle").astype(int)]
+    labels = ["installed"] + [f"after {cycle_label(c)}" for c in column(truth_cycles, "cycle").astype(int)]
     return labels, along_m - along_m[:, :1], np.einsum("cpk,ck->cp", d_en, wall_en)
 
 
@@ -196,13 +254,15 @@ def pan_line_plot(labels: list[str], along_m: np.ndarray, lateral_m: np.ndarray)
     fig = Figure(figsize=(13, 5), layout="constrained")
     ax = fig.subplots()
     viridis = colormaps["viridis"](np.linspace(0, 0.9, len(labels)))
-    for label, a, lat, c in zip(labels, along_m, lateral_m, viridis):
-        ax.plot(a, lat * 1e3, ".-", color=c, markersize=3, linewidth=1, label=label)
+    step = -(-len(labels) // LEGEND_ENTRIES)
+    for k, (label, a, lat, c) in enumerate(zip(labels, along_m, lateral_m, viridis)):
+        named = k % step == 0 or k == len(labels) - 1
+        ax.plot(a, lat * 1e3, ".-", color=c, markersize=3, linewidth=1, label=label if named else "_nolegend_")
     ax.axhline(0, color="0.5", linewidth=0.8)
     ax.set_xlabel("along the face from the headgate [m]")
     ax.set_ylabel("lateral deviation, + towards the coal wall [mm]")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, ncols=min(len(labels), 6))
+    outside_legend(fig, ax)
     return fig
 
 
@@ -229,10 +289,47 @@ def pressure_plot(pressure: pa.Table, cycles: pa.Table | None, set_mpa: float | 
                 if value is not None:
                     ax.axhline(value, color="0.4", linestyle="--", linewidth=0.8)
                     ax.annotate(what, (tm[0], value), fontsize=8, va="bottom")
-        _cycle_lines(ax, cycles)
+        cycle_lines(ax, cycles)
         ax.set_ylabel(f"{label} [MPa]")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8, loc="upper right")
+    axes[-1].set_xlabel("t [min]")
+    return fig
+
+
+def support_grid(t: np.ndarray, support: np.ndarray, value: np.ndarray, n_bins: int
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """(edges [s] (B + 1,), grid (S, B)): readings binned in time, the mean of each support's readings in each of
+    at most n_bins equal bins (NaN where it has none)."""
+    n_sup = int(support.max()) + 1
+    n_bins = max(min(n_bins, np.unique(t).size), 1)
+    edges = np.linspace(t.min(), t.max(), n_bins + 1)
+    cell = np.clip(np.searchsorted(edges, t, side="right") - 1, 0, n_bins - 1) + n_bins * support
+    count = np.bincount(cell, minlength=n_sup * n_bins)
+    with np.errstate(invalid="ignore"):
+        grid = np.bincount(cell, value, minlength=n_sup * n_bins) / count
+    return edges, grid.reshape(n_sup, n_bins)
+
+
+def support_plot(streams: dict[str, tuple[pa.Table, str, str, str]], cycles: pa.Table | None) -> Figure:
+    """Heat maps support x time [min], one per reading: `streams` maps a title to (table, value column, valid
+    column, colour bar label); readings flagged invalid are left out; the colours span the readings' 5th percentile
+    (below: the darkest, a lowered leg, a closed ram) to their largest."""
+    fig = Figure(figsize=(13, 0.8 + 2.6 * len(streams)), layout="constrained")
+    axes = fig.subplots(len(streams), 1, sharex=True, squeeze=False)[:, 0]
+    for ax, (title, (table, name, valid, label)) in zip(axes, streams.items()):
+        ok = column(table, valid) > 0
+        support = column(table, "support").astype(int)[ok]
+        edges, grid = support_grid(column(table, "t")[ok], support, column(table, name)[ok], SUPPORT_COLUMNS)
+        image = ax.imshow(grid, aspect="auto", origin="lower", interpolation="nearest", cmap="viridis",
+                          vmin=np.nanpercentile(grid, 5), extent=(edges[0] / 60, edges[-1] / 60, -0.5,
+                                                                  grid.shape[0] - 0.5))
+        fig.colorbar(image, ax=ax, label=label, extend="min")
+        cycle_lines(ax, cycles)
+        ax.set_xlim(edges[0] / 60, edges[-1] / 60)
+        ax.set_title(title, loc="left", fontsize=10, pad=12)
+        ax.set_ylabel("support (0: headgate)")
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     axes[-1].set_xlabel("t [min]")
     return fig
 
@@ -244,19 +341,19 @@ def face_line_plot(truth_pans: pa.Table, truth_cycles: pa.Table, azimuth_rad: fl
     pans = {name: column(truth_pans, name) for name in ("t", "pan", "p_t_e", "p_t_n", "p_t_u")}
     n_pans = int(pans["pan"].max()) + 1
     drift = face_drift(pans, column(truth_cycles, "t_end"), n_pans, azimuth_rad)
-    cycle = np.arange(1, drift.t.size + 1)
+    cycle = column(truth_cycles, "cycle")
     fig = Figure(figsize=(13, 7 if alignment is not None else 4), layout="constrained")
     axes = fig.subplots(2 if alignment is not None else 1, 1, squeeze=False)[:, 0]
     ax = axes[0]
     ax.plot(cycle, drift.straightness_rms * 1e3, "o-", color="C0", markersize=3, label="straightness RMS")
     ax.plot(cycle, drift.straightness_max * 1e3, "s--", color="C0", markersize=3, alpha=0.6, label="straightness max")
     ax.set_xlabel("cutting cycle (at its end)")
+    cycle_axis(ax.xaxis)
     ax.set_ylabel("deviation from the best-fit line [mm]")
     creep = ax.twinx()
     creep.plot(cycle, drift.creep * 1e3, "^-", color="C3", markersize=3, label="creep (mean pan)")
     creep.set_ylabel("creep, + towards the tailgate [mm]", color="C3")
     ax.grid(alpha=0.3)
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     fig.legend(fontsize=8, loc="outside upper right", ncols=3)
     if alignment is not None:
         grid = np.zeros((int(column(alignment, "cycle").max()) + 1, int(column(alignment, "support").max()) + 1))
@@ -264,9 +361,9 @@ def face_line_plot(truth_pans: pa.Table, truth_cycles: pa.Table, azimuth_rad: fl
             column(alignment, "offset") * 1e3)
         lim = max(float(np.abs(grid).max()), 1.0)
         image = axes[1].imshow(grid, aspect="auto", cmap="RdBu_r", vmin=-lim, vmax=lim, interpolation="nearest",
-                               extent=(-0.5, grid.shape[1] - 0.5, grid.shape[0] + 0.5, 0.5))
+                               extent=(-0.5, grid.shape[1] - 0.5, grid.shape[0] - 0.5, -0.5))
         axes[1].set_xlabel("support (from the headgate)")
         axes[1].set_ylabel("cutting cycle")
-        axes[1].yaxis.set_major_locator(MaxNLocator(integer=True))
+        cycle_axis(axes[1].yaxis)
         fig.colorbar(image, ax=axes[1], label="push offset [mm]")
     return fig

@@ -14,6 +14,7 @@ from estimators.io.logformat import (
     ESTIMATE_DETECTORS,
     ESTIMATES_DIR,
     PRESSURE,
+    PUSHRAM,
     STREAMS,
     Stream,
     estimate_path,
@@ -42,6 +43,8 @@ class RunData:
     """The supports' pressure readings (PRESSURE), when the log has them."""
     alignment: pa.Table | None = None
     """The offsets the supports' pushes applied (ALIGNMENT), when the log has them."""
+    pushram: pa.Table | None = None
+    """The supports' push-ram stroke readings (PUSHRAM), when the log has them."""
     notes: list[str] = field(default_factory=list)
     """What the report leaves out and why."""
 
@@ -71,8 +74,8 @@ def load_run(run_dir: Path) -> RunData:
     data = RunData(run_dir, load_face_scenario(scenario) if scenario.is_file() else None,
                    read_metrics(run_dir), truth, estimates,
                    {m: read_estimate(run_dir, m, ESTIMATE_DETECTORS) for m in _methods(run_dir, ESTIMATE_DETECTORS)},
-                   read_stream(run_dir, PRESSURE) if (run_dir / PRESSURE.filename).is_file() else None,
-                   read_stream(run_dir, ALIGNMENT) if (run_dir / ALIGNMENT.filename).is_file() else None)
+                   *(read_stream(run_dir, s) if (run_dir / s.filename).is_file() else None
+                     for s in (PRESSURE, ALIGNMENT, PUSHRAM)))
     missing = [STREAMS[name].filename for name in TRUTH_NAMES if name not in truth]
     if missing:
         data.notes.append(f"no {', '.join(missing)} (a run without truth, e.g. imported): left out "
@@ -84,6 +87,6 @@ def load_run(run_dir: Path) -> RunData:
         data.notes.append(f"no estimates in {ESTIMATES_DIR}/: left out every estimator plot "
                           f"(`longwall estimate {run_dir}` writes them)")
     if data.scenario is None:
-        data.notes.append("no scenario.toml: the top view's origin is the first position in the run, and the "
-                          "detector thresholds are left out")
+        data.notes.append("no scenario.toml: the top view's origin is the first position in the run; the "
+                          "detector thresholds and the figures in the face frame (no face azimuth) are left out")
     return data

@@ -1,5 +1,7 @@
-"""`longwall report DIR`: the page and its PNG files from a default run (rendered in headless Chromium), the pan line's
-straightness, a run without truth, and directories with nothing to report."""
+"""`longwall report DIR`: the page and its PNG files from a default run (rendered in headless Chromium), the error
+plots' sigma bands, the face-frame plan view and profile with their stated exaggeration, the cycle labels as the CLI
+prints them, the supports' heat maps, the pan line's straightness, a run without truth, and directories with nothing
+to report."""
 
 from __future__ import annotations
 
@@ -14,19 +16,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 from matplotlib.image import imread
+from scipy.spatial import cKDTree
 
 import twin
 from estimators.io.logformat import ESTIMATE_DETECTORS, read_estimate, write_estimate
-from estimators.io.metrics import column
+from estimators.io.metrics import column, columns, cycle_label
 from twin.cli import default_scenario, main
+from twin.pipeline.estimate import format_estimators
 from twin.view.report import REPORT_DIR, REPORT_HTML, build_report
-from twin.view.report_figures import pan_line
+from twin.view.report_face import MAX_METHODS, PLAN, PROFILE, cuts, section_plot, sections
+from twin.view.report_figures import N_SIGMA, colors_for, error_plot, error_series, pan_line, support_grid
+from twin.view.run_data import load_run
 
 pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
 CHROMIUM = Path("/usr/bin/chromium")
-FIGURES = ("top_view.png", "errors.png", "cycle_errors.png", "detectors_fkf_rail.png", "pan_line.png",
-           "pressures.png", "face_line.png")
+FIGURES = ("top_view.png", "plan_view.png", "profile.png", "errors.png", "cycle_errors.png",
+           "detectors_fkf_rail.png", "supports.png", "pressures.png", "face_line.png", "pan_line.png")
 
 
 @pytest.fixture(scope="module")
@@ -89,6 +95,134 @@ def test_header_table_shows_each_method_and_its_metrics(page, run_dir):
     assert "max |lateral deviation| [mm]" in text
 
 
+@pytest.fixture(scope="module")
+def run(run_dir):
+    return load_run(run_dir)
+
+
+def _fill_band(ax) -> np.ndarray:
+    """(K, 2) the upper edge (t, y) of the first fill_between of an axes (its polygon: start, lower edge forward,
+    end, upper edge backward)."""
+    fill = next(c for c in ax.collections if type(c).__name__ == "FillBetweenPolyCollection")
+    vertices = fill.get_paths()[0].vertices
+    k = (vertices.shape[0] - 3) // 2
+    return vertices[k + 2:2 * k + 2][::-1]
+
+
+def test_error_bands_are_each_estimates_own_sigma(run, run_dir):
+    series = error_series(run)
+    fig = error_plot(series, run.truth["truth_cycles"], colors_for(list(run.estimates)))
+    axes = np.reshape(fig.axes, (len(series), 3))
+    banded = 0
+    for row, (method, one) in zip(axes, series.items()):
+        est = read_estimate(run_dir, method)
+        at = np.searchsorted(column(est, "t"), one.t)
+        np.testing.assert_array_equal(column(est, "t")[at], one.t)
+        sd_enu = columns(est, "sd_pos")[at]
+        if not np.isfinite(sd_enu).any():  # dead reckoning carries no sigma: no band, said in the panel
+            assert not any(c.get_paths() for ax in row for c in ax.collections[:1])
+            assert all("no one-sigma" in [t.get_text() for t in ax.texts] for ax in row)
+            continue
+        banded += 1
+        for k, ax in enumerate(row):
+            upper = _fill_band(ax)
+            np.testing.assert_allclose(upper[:, 0], one.t / 60)
+            np.testing.assert_allclose(upper[:, 1], N_SIGMA * sd_enu[:, k])
+            err = ax.lines[0].get_ydata()
+            inside = np.mean(np.abs(err) <= N_SIGMA * sd_enu[:, k])
+            assert f"{inside:.0%} inside" in [t.get_text() for t in ax.texts]
+    assert banded >= 4  # the filters and smoothers
+
+
+def test_error_bands_without_truth_are_the_sigma_alone(run):
+    run.truth, truth = {}, run.truth
+    try:
+        series = error_series(run)
+    finally:
+        run.truth = truth
+    fig = error_plot(series, None, colors_for(list(run.estimates)))
+    one = series["kf_cpoem"]
+    assert one.err_enu is None
+    row = np.reshape(fig.axes, (len(series), 3))[list(series).index("kf_cpoem")]
+    for k, ax in enumerate(row):
+        assert not ax.lines[1:]  # the zero line only
+        np.testing.assert_allclose(_fill_band(ax)[:, 1], N_SIGMA * one.sd_enu[:, k])
+
+
+def _shown(fig) -> list[str]:
+    return [t.get_text() for t in fig.legends[0].get_texts()]
+
+
+@pytest.mark.parametrize("axis, word, least", [(PLAN, "lateral", 10), (PROFILE, "vertical", 2)])
+def test_face_frame_figure_states_its_exaggeration_and_draws_the_best_methods(run, run_dir, page, axis, word, least):
+    estimators = json.loads((run_dir / "metrics.json").read_text())["estimators"]
+    sep = {m: e["cycles"][-1]["sep"] for m, e in estimators.items()}
+    best = sorted(sep, key=sep.get)[:MAX_METHODS]
+    drawn = cuts(run)
+    assert [c.label.split(":")[0] for c in drawn] == ["A1", "A2"]
+    fig, factor = section_plot(drawn, sections(run, best, drawn), colors_for(list(run.estimates)), axis, "target")
+    fig.draw_without_rendering()
+    assert factor >= least  # across the 70 m face: centimetres of the face line, 2 m of the seam's rise
+    width_in, height_in = fig.get_size_inches()
+    for ax in fig.axes:
+        assert ax.get_aspect() == factor and f"({word} x{factor})" in ax.get_ylabel()
+        box = ax.get_position()
+        shown = (box.height * height_in) / (box.width * width_in)  # drawn height per drawn width
+        np.testing.assert_allclose(shown, factor * np.ptp(ax.get_ylim()) / np.ptp(ax.get_xlim()), rtol=1e-6)
+    assert {m for m in _shown(fig) if m in sep} == set(best) and "dr" not in _shown(fig)
+    assert "truth" in _shown(fig) and ("target" in _shown(fig)) == (axis == PLAN)
+    # the best estimate's line is its own face-frame columns (p_f_*), its band its sd_pos turned into the face frame
+    est = read_estimate(run_dir, best[0])
+    p_f = columns(est, "p_f", "xyz")
+    azimuth = np.radians(run.scenario.face.azimuth_deg)
+    sd = (np.hypot(np.cos(azimuth) * column(est, "sd_pos_e"), np.sin(azimuth) * column(est, "sd_pos_n"))
+          if axis == PLAN else column(est, "sd_pos_u"))
+    line = next(line for line in fig.axes[0].lines if line.get_label() == best[0])
+    distance, rows = cKDTree(p_f[:, [1, axis]]).query(np.column_stack([line.get_xdata(), line.get_ydata()]))
+    assert distance.max() < 1e-6 and rows.size > 1000
+    assert np.all((column(est, "t")[rows] >= drawn[0].t0) & (column(est, "t")[rows] <= drawn[0].t1))
+    np.testing.assert_allclose(_fill_band(fig.axes[0])[:, 1], p_f[rows, axis] + sd[rows], atol=1e-6)
+    name = "plan_view.png" if axis == PLAN else "profile.png"
+    assert f"exaggerated x{factor}" in page.read_text().split(f'href="{name}"')[0].rsplit("<figcaption>", 1)[1]
+
+
+def test_aligned_run_draws_the_alignment_systems_target(run):
+    scn = run.scenario
+    run.scenario = scn.model_copy(update={"alignment": scn.alignment.model_copy(update={"mode": "truth"})})
+    try:
+        drawn = cuts(run)
+        parts = sections(run, [], drawn)
+    finally:
+        run.scenario = scn
+    first = parts[0]
+    assert first.target_yx.shape[0] == scn.face.pan_count // scn.supports.pans_per_support  # one point per shield
+    np.testing.assert_allclose(np.diff(first.target_yx[:, 1], 2), 0, atol=1e-9)  # a straight line
+    truth_x = np.interp(first.target_yx[:, 0], first.truth[:, 1], first.truth[:, 0])
+    assert np.sqrt(np.mean((truth_x - first.target_yx[:, 1]) ** 2)) < 0.05  # fitted to the true cut
+
+
+def test_cycle_labels_match_the_cli(page, run_dir):
+    printed = format_estimators(json.loads((run_dir / "metrics.json").read_text())["estimators"])
+    header = next(line for line in printed.splitlines() if line.startswith("method") and "all" in line)
+    labels = header.split()[1:-1]
+    assert labels == ["A1", "A2"] == [cycle_label(k) for k in range(2)]
+    text = page.read_text()
+    assert "".join(f"<th>{label}</th>" for label in labels) + "<th>all</th>" in text
+    assert all(f"<td>after {label}</td>" in text for label in labels)  # the pan line table
+    assert "cycle 0" not in text and "cycle 1" not in text
+
+
+def test_support_grid_is_the_mean_of_each_supports_readings_per_bin():
+    t = np.array([0.0, 0.0, 1.0, 1.0, 2.0, 3.0, 3.0])
+    support = np.array([0, 1, 0, 0, 1, 0, 1])
+    value = np.array([1.0, 10.0, 3.0, 5.0, 20.0, 7.0, 30.0])
+    edges, grid = support_grid(t, support, value, 2)
+    np.testing.assert_allclose(edges, [0.0, 1.5, 3.0])
+    np.testing.assert_allclose(grid, [[3.0, 7.0], [10.0, 25.0]])
+    _, fine = support_grid(t, support, value, 100)  # no more bins than distinct times
+    assert fine.shape == (2, 4) and np.isnan(fine[1, 1]) and fine[0, 1] == 4.0
+
+
 def test_page_renders_in_headless_chromium(page, tmp_path):
     if not CHROMIUM.is_file():
         if os.environ.get("CI"):
@@ -114,7 +248,7 @@ def test_pan_line_recovers_lateral_offsets_from_a_straight_line():
             "p_t_e": np.r_[p_en[:, 0], p_en[:, 0] + wall_en[0]], "p_t_n": np.r_[p_en[:, 1], p_en[:, 1] + wall_en[1]]}
     cycles = {"t_end": np.array([40.0, 60.0]), "cycle": np.array([0, 1])}
     labels, along, lateral = pan_line(pans, cycles)
-    assert labels == ["installed", "cycle 0", "cycle 1"]
+    assert labels == ["installed", "after A1", "after A2"]
     np.testing.assert_allclose(along, np.broadcast_to(u_m, (3, n)), atol=1e-9)
     np.testing.assert_allclose(lateral, np.broadcast_to(lateral_m, (3, n)), atol=1e-9)
 
@@ -124,7 +258,8 @@ def test_run_without_truth_builds_and_says_what_is_left_out(run_dir, tmp_path):
     shutil.copytree(run_dir, copy, ignore=shutil.ignore_patterns("truth_*", "*.rrd", REPORT_DIR))
     text = build_report(copy).read_text()
     written = {p.name for p in (copy / REPORT_DIR).glob("*.png")}
-    assert written == {"top_view.png", "cycle_errors.png", "detectors_fkf_rail.png", "pressures.png"}
+    assert written == {"top_view.png", "plan_view.png", "profile.png", "sigma.png", "cycle_errors.png",
+                       "detectors_fkf_rail.png", "supports.png", "pressures.png"}
     assert "truth_shearer.parquet" in text and "truth_pans.parquet" in text
     assert "left out" in text and "errors against time" in text and "straightness" in text
 
