@@ -197,7 +197,8 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
 
     def run_twin(staging: Path) -> None:
         try:
-            taps = LiveTaps(lambda rows: chunks.put(("shearer", rows)), lambda rows: chunks.put(("supports", rows)))
+            taps = LiveTaps(lambda rows: chunks.put(("shearer", rows)),
+                            lambda rows, t_final: chunks.put(("supports", rows)))
             stream_twin(scn, staging, sensors, offsets=fas, live=taps)
             (staging / "scenario.toml").write_text(scenario_to_toml(scn))
             chunks.put(("done", None))

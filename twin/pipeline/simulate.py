@@ -49,15 +49,23 @@ ShearerSink = Callable[[dict[str, np.ndarray]], None]
 """Takes the truth_shearer columns of the next stretch of the run, in time order (a streaming run's consumer)."""
 
 
+SensorSink = Callable[[str, dict[str, np.ndarray], float], None]
+"""Takes a sensor stream's next rows as they are drawn: (logformat stream name, columns, the time before which the
+stream's rows are all drawn now; inf at its end)."""
+
+
 @dataclass(frozen=True)
 class LiveTaps:
     """What a live consumer (twin.opcua.server) sees of a run as the twin makes it: the truth_shearer chunks as they
-    are handed over, and after each cycle's face events the truth_supports rows recorded since the last (a row per
-    move). With taps, every finished chunk is handed over before a cycle's offsets are asked for, so that a consumer
-    that steers the face has seen the shear before it."""
+    are handed over; after each cycle's face events the truth_supports rows recorded since the last (a row per move)
+    and the time before which no more rows will come (the last event's start: later rows are all at or after it);
+    and, from a streaming run with sensors (twin.pipeline.twin_stream), sensor trial 0's rows as they are drawn, the
+    rows its Parquet files get. With taps, every finished chunk is handed over before a cycle's offsets are asked
+    for, so that a consumer that steers the face has seen the shear before it."""
 
     shearer: ShearerSink
-    supports: Callable[[dict[str, np.ndarray]], None]
+    supports: Callable[[dict[str, np.ndarray], float], None]
+    sensors: SensorSink | None = None
 
 
 @dataclass
@@ -334,7 +342,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
                     break
             report("face", (plan.cycle + 1) / len(timeline.cycles))
             if live is not None:
-                live.supports(concat_rows(recorder.sup_rows[supports_told:]))
+                live.supports(concat_rows(recorder.sup_rows[supports_told:]), legs_t)
                 supports_told = len(recorder.sup_rows)
             last = plan.cycle == len(timeline.cycles) - 1
             # Chunk k ends in the reversal stop after cycle k, before cycle k+1's first push.

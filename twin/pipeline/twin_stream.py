@@ -5,10 +5,11 @@ twin.pipeline.simulate hands over the shearer truth a ride chunk (a cycle) at a 
 TruthChunks with their halos (twin.sensors.chunks), draws the shearer's sensor streams for each
 (twin.sensors.streams.ShearerSensors, which carries the sensors' state), and appends truth and readings to their
 Parquet files in fixed row groups (estimators.io.logformat.StreamAppender), so the files' bytes do not depend on
-the chunking. The supports' push-ram and pressure streams are drawn after the face, a span of time at a time
-(twin.sensors.streams.SupportSensors), and appended the same way. What stays in memory for the whole run: the face's
-own tables (pans and supports, a row per move) and the shearer's (t, s), which the support streams read for the
-shearer's place along the face.
+the chunking. The supports' push-ram and pressure streams are drawn a span of time at a time
+(twin.sensors.streams.SupportSensors; SupportDraw), after the face, or with live taps (a served run) as the face's
+rows become final, and appended the same way. What stays in memory for the whole run: the face's own tables (pans
+and supports, a row per move) and the shearer's (t, s), which the support streams read for the shearer's place
+along the face. Live taps get every sensor row the files get, as it is drawn.
 """
 
 from __future__ import annotations
@@ -22,7 +23,16 @@ from twin.config.scenario import Scenario
 from twin.face.drift import OffsetSource
 from twin.face.haulage import Timeline
 from twin.pipeline.alignment_loop import alignment_table
-from twin.pipeline.simulate import LiveTaps, Progress, SimResult, cycles_table, last_truth_time, simulate_stream
+from twin.pipeline.face_recorder import concat_rows
+from twin.pipeline.simulate import (
+    LiveTaps,
+    Progress,
+    SensorSink,
+    SimResult,
+    cycles_table,
+    last_truth_time,
+    simulate_stream,
+)
 from twin.sensors.chunks import ChunkAssembler, TruthChunk, halo_rows
 from twin.sensors.faults import faults_table
 from twin.sensors.streams import ShearerSensors, SupportSensors, support_imu_readings
@@ -33,8 +43,47 @@ SHEARER_STREAMS = ("imu", "odometer", "mag", "survey", "face_survey")
 SENSOR_CHUNK_ROWS = 1 << 18
 """The shearer's truth goes to the sensor models in chunks of at most this many rows (22 min at 200 Hz): their
 intermediate arrays stay small whatever a cycle's length (seed004's 77 min cycles: peak 2.07 -> 1.27 GB)."""
+SUPPORT_STREAMS = ("pushram", "pressure")
+"""The streams drawn from the supports' truth a span of time at a time (SupportDraw)."""
 SUPPORT_TRUTH = ("t", "s")
 """The shearer truth columns the support streams read (held for the whole run)."""
+
+
+class SupportDraw:
+    """Sensor trial 0's push-ram and pressure streams drawn a span of time at a time, handed to `write` (a
+    SensorSink): `until` draws every sample before t_end from the truth_supports rows `add`ed so far (final before
+    it), `finish` the rest from the run's whole table. Only each support's latest row before the drawn time and the
+    rows after it are held (twin.sensors.clock.true_at reads no more)."""
+
+    def __init__(self, scn: Scenario, write: SensorSink):
+        self.sensors, self.write = SupportSensors(scn, 0), write
+        self.rows: dict[str, np.ndarray] | None = None
+        self.t_drawn = 0.0
+
+    def add(self, rows: dict[str, np.ndarray]) -> None:
+        if rows["t"].size:
+            self.rows = rows if self.rows is None else concat_rows([self.rows, rows])
+
+    def until(self, t_end: float, shearer: dict[str, np.ndarray]) -> None:
+        if self.rows is not None and t_end > self.t_drawn:
+            self._draw(t_end, False, self.rows, shearer)
+            t, sup = self.rows["t"], self.rows["support"]
+            before = t < t_end  # rows sorted by (t, support): each support's latest row before t_end is its last
+            rows_before = np.flatnonzero(before)
+            sup_before = sup[rows_before]
+            latest = rows_before[sup_before.size - 1 - np.unique(sup_before[::-1], return_index=True)[1]]
+            keep = np.concatenate([np.sort(latest), np.flatnonzero(~before)])
+            self.rows = {k: v[keep] for k, v in self.rows.items()}
+
+    def finish(self, supports: dict[str, np.ndarray], shearer: dict[str, np.ndarray]) -> None:
+        self._draw(float(shearer["t"][-1]), True, supports, shearer)
+
+    def _draw(self, t_end: float, last: bool, supports: dict[str, np.ndarray], shearer: dict[str, np.ndarray]) -> None:
+        for t0, t1, end in self.sensors.spans(t_end, self.t_drawn, last):
+            readings = self.sensors.step(t0, t1, end, supports, shearer)
+            for name in ("pushram", "pressure"):
+                self.write(name, readings[name], np.inf if end else t1)
+        self.t_drawn = t_end
 
 
 def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Progress | None = None,
@@ -49,30 +98,53 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
     timeline = Timeline(scn)
     cycles = cycles_table(timeline)
     shearer_sensors = ShearerSensors(scn, 0, cycles, last_truth_time(scn, timeline)) if sensors else None
-    names = ("truth_shearer", *(SHEARER_STREAMS if sensors else ()))
+    names = ("truth_shearer", *((*SHEARER_STREAMS, *SUPPORT_STREAMS) if sensors else ()))
     appenders = {name: StreamAppender(run_dir, STREAMS[name]) for name in names}
     assembler = ChunkAssembler(halo_rows(scn))
     stats = ShearerStats()
     held = {k: [] for k in SUPPORT_TRUTH}
 
+    def write(name: str, cols: dict[str, np.ndarray], until: float) -> None:
+        appenders[name].append(cols)
+        if live is not None and live.sensors is not None:
+            live.sensors(name, cols, until)
+
     def take(chunk: TruthChunk) -> None:
         appenders["truth_shearer"].append(chunk.rows)
         stats.update(chunk.rows)
-        for k in SUPPORT_TRUTH:
-            held[k].append(chunk.rows[k])
         if shearer_sensors is not None:
             for name, cols in shearer_sensors.step(chunk).items():
-                appenders[name].append(cols)
+                write(name, cols, np.inf if chunk.last else chunk.t_end)
 
     def sink(rows: dict[str, np.ndarray]) -> None:
+        for k in SUPPORT_TRUTH:
+            held[k].append(rows[k])
         for a in range(0, rows["t"].size, chunk_rows):
             for chunk in assembler.push({k: v[a:a + chunk_rows] for k, v in rows.items()}):
                 take(chunk)
 
+    def shearer_held() -> dict[str, np.ndarray]:
+        for k in SUPPORT_TRUTH:
+            held[k] = [np.concatenate(held[k])]
+        return {k: v[0] for k, v in held.items()}
+
+    supports_draw = SupportDraw(scn, write) if sensors else None
+    taps = live
+    if live is not None and supports_draw is not None:
+        def face_rows(rows: dict[str, np.ndarray], t_final: float) -> None:
+            live.supports(rows, t_final)
+            supports_draw.add(rows)
+            if held["t"]:
+                shearer = shearer_held()
+                supports_draw.until(min(t_final, float(shearer["t"][-1])), shearer)
+
+        taps = LiveTaps(live.shearer, face_rows, live.sensors)
     try:
-        result = simulate_stream(scn, sink, progress, offsets, live)
+        result = simulate_stream(scn, sink, progress, offsets, taps)
         for chunk in assembler.finish():
             take(chunk)
+        if supports_draw is not None:
+            supports_draw.finish(result.tables["truth_supports"], shearer_held())
     finally:
         for appender in appenders.values():
             appender.close()
@@ -80,18 +152,11 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
         write_stream(run_dir, STREAMS[name], cols)
     write_stream(run_dir, ALIGNMENT, alignment_table(scn, cycles["t"], result.offsets, result.alignment))
     if sensors:
-        shearer = {k: np.concatenate(v) for k, v in held.items()}
-        supports = result.tables["truth_supports"]
-        support_sensors = SupportSensors(scn, 0)
-        with StreamAppender(run_dir, STREAMS["pushram"]) as pushram, \
-                StreamAppender(run_dir, STREAMS["pressure"]) as pressure:
-            for t0, t1, last in support_sensors.spans(float(shearer["t"][-1])):
-                readings = support_sensors.step(t0, t1, last, supports, shearer)
-                pushram.append(readings["pushram"])
-                pressure.append(readings["pressure"])
         write_stream(run_dir, STREAMS["faults"], faults_table(scn))
-        imu = support_imu_readings(scn, supports, shearer, 0)
+        imu = support_imu_readings(scn, result.tables["truth_supports"], shearer_held(), 0)
         if imu is not None:
             write_stream(run_dir, STREAMS["support_imu"], imu)
+            if live is not None and live.sensors is not None:
+                live.sensors("support_imu", imu, np.inf)
         report("sensors", 1.0)
     return result, stats

@@ -113,10 +113,12 @@ class SupportSensors:
             pushram["extension"] = pushram["extension"] + np.where(window_mask(pushram["t"], fault), short, 0.0)
         return {"pushram": pushram, "pressure": self.pressure.step(clock(self.scn.sensors.pressure.rate_hz), supports)}
 
-    def spans(self, t_end: float) -> list[tuple[float, float, bool]]:
-        """The spans (t0, t1, last) of SUPPORT_BLOCK_S a run to t_end is drawn in."""
-        edges = [*np.arange(0.0, t_end, SUPPORT_BLOCK_S), t_end]
-        return [(a, b, k == len(edges) - 2) for k, (a, b) in enumerate(itertools.pairwise(edges))]
+    def spans(self, t_end: float, t_start: float = 0.0, last: bool = True) -> list[tuple[float, float, bool]]:
+        """The spans (t0, t1, last) of at most SUPPORT_BLOCK_S, on its grid, the run from t_start to t_end is drawn
+        in; `last`: t_end is the run's end (its last span holds it)."""
+        edges = [t_start, *np.arange(SUPPORT_BLOCK_S * (np.floor(t_start / SUPPORT_BLOCK_S) + 1), t_end,
+                                     SUPPORT_BLOCK_S), t_end]
+        return [(a, b, last and k == len(edges) - 2) for k, (a, b) in enumerate(itertools.pairwise(edges))]
 
 
 def support_streams(scn: Scenario, truth: dict[str, dict[str, np.ndarray]], trial: int = 0

@@ -57,3 +57,38 @@ def test_streamed_run_holds_what_the_whole_run_in_memory_gives(streamed):
                 np.testing.assert_array_equal(got, np.asarray(values), err_msg=f"{name}.{key}")
             else:
                 assert list(got) == list(values), f"{name}.{key}"
+
+
+def test_live_taps_get_the_files_rows_as_they_are_drawn(streamed, tmp_path):
+    """A served run (live taps, twin.opcua.server): the files are the bytes of a run without taps; the sensor rows
+    tapped, joined, are each file's rows; the push-ram rows come as the face's rows become final (before the
+    run's last shearer chunk), each tap's rows before the time it says the stream is drawn to."""
+    from twin.pipeline.simulate import LiveTaps
+
+    scn, (by_cycle, _) = streamed
+    tapped: dict[str, list] = {}
+    shearer_chunks = [0]
+    pushram_before_last_chunk = [0]
+
+    def sensors(name, cols, until):
+        assert np.all(cols["t"] < until), name
+        tapped.setdefault(name, []).append(cols)
+        if name == "pushram" and shearer_chunks[0] < 2:
+            pushram_before_last_chunk[0] += cols["t"].size
+
+    def shearer(rows):
+        shearer_chunks[0] += 1
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(lf, "ROW_GROUP_ROWS", 100_000)
+        stream_twin(scn, tmp_path, chunk_rows=20_000, live=LiveTaps(shearer, lambda rows, t_final: None, sensors))
+    for path in by_cycle.glob("*.parquet"):
+        assert (tmp_path / path.name).read_bytes() == path.read_bytes(), path.name
+    assert pushram_before_last_chunk[0] > 0
+    assert set(tapped) == {*SHEARER_STREAMS, "pushram", "pressure"} | (
+        {"support_imu"} if scn.sensors.support_imu.supports else set())
+    for name, parts in tapped.items():
+        table = pq.read_table(by_cycle / lf.STREAMS[name].filename)
+        for key in parts[0]:
+            np.testing.assert_array_equal(np.concatenate([p[key] for p in parts]), table.column(key).to_numpy(),
+                                          err_msg=f"{name}.{key}")
