@@ -1,7 +1,9 @@
 """Benchmark: `longwall serve` publishing the default scenario on OPC UA as fast as it runs (issue 27's target: at
 least 50x real time), with an asyncua client subscribed to the shearer's position and every shield's ram stroke the
-whole time (the load of a face automation system watching it). Prints the simulated time published, the wall time,
-the factor of real time, the publications and the data changes the client received.
+whole time (the load of a face automation system watching it): once with the truth only (--twin-only), once with the
+sensor streams published in blocks and `longwall record` recording them (the whole run held for it, --history).
+Prints, for each, the simulated time published, the wall time, the factor of real time, the publications, the data
+changes the client received and the rows recorded.
 
 Run: python benchmarks/bench_serve.py [--cycles N] [--publish-rate HZ]
 """
@@ -52,7 +54,8 @@ async def watch(port: int, server: subprocess.Popen) -> int:
             nodes.append(await rss.get_child([f"{ns}:{shield_name(k)}", f"{ns}:RamStroke"]))
         sub = await client.create_subscription(100, counter)
         await sub.subscribe_data_change(nodes)
-        while server.poll() is None:
+        state = await longwall.get_child(f"{ns}:State")
+        while server.poll() is None and await state.read_value() != "Finished":
             await asyncio.sleep(0.5)
     except Exception:  # the server ended under the client: what it received counts
         pass
@@ -64,25 +67,39 @@ async def watch(port: int, server: subprocess.Popen) -> int:
     return counter.changes
 
 
+def serve_once(cycles: int, publish_rate: float, sensors: bool) -> None:
+    """Serve (and with `sensors` record) once; print the figures."""
+    port = free_port()
+    endpoint = f"opc.tcp://127.0.0.1:{port}"
+    with tempfile.TemporaryDirectory(prefix="bench-serve-") as tmp:
+        server = subprocess.Popen([sys.executable, "-m", "twin.cli", "serve", "--speed", "max", "--cycles",
+                                   str(cycles), "--publish-rate", str(publish_rate), "--endpoint", endpoint,
+                                   "--out", f"{tmp}/served", *(["--history", "1e6"] if sensors else ["--twin-only"])],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        recorder = subprocess.Popen([sys.executable, "-m", "twin.cli", "record", "--opcua", endpoint, "--out",
+                                     f"{tmp}/recorded"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                    text=True) if sensors else None
+        changes = asyncio.run(watch(port, server))
+        out, err = server.communicate()
+        recorded = recorder.communicate() if recorder else None
+    if server.returncode:
+        sys.exit(f"longwall serve failed: {err.strip().splitlines()[-1] if err.strip() else server.returncode}")
+    line = out.strip().splitlines()[-1]
+    factor = float(line.split("(")[1].split("x")[0])
+    print(f"{'with the sensor streams' if sensors else 'truth only'}: {line}")
+    print(f"  real-time factor {factor:.0f}x against the target {TARGET_X:.0f}x: "
+          f"{'met' if factor >= TARGET_X else 'not met'}; the client received {changes} data changes")
+    if recorded is not None:
+        print(f"  longwall record: {(recorded[0] or recorded[1]).strip().splitlines()[-1]}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cycles", type=int, default=2)
     parser.add_argument("--publish-rate", type=float, default=10.0, metavar="HZ")
     args = parser.parse_args()
-    port = free_port()
-    with tempfile.TemporaryDirectory(prefix="bench-serve-") as tmp:
-        server = subprocess.Popen([sys.executable, "-m", "twin.cli", "serve", "--speed", "max", "--cycles",
-                                   str(args.cycles), "--publish-rate", str(args.publish_rate), "--endpoint",
-                                   f"opc.tcp://127.0.0.1:{port}", "--out", f"{tmp}/served", "--twin-only"],
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-        changes = asyncio.run(watch(port, server))
-        out, err = server.communicate()
-    if server.returncode:
-        sys.exit(f"longwall serve failed: {err.strip().splitlines()[-1] if err.strip() else server.returncode}")
-    print(out.strip().splitlines()[-1])
-    factor = float(out.strip().splitlines()[-1].split("(")[1].split("x")[0])
-    print(f"real-time factor {factor:.0f}x against the target {TARGET_X:.0f}x: {'met' if factor >= TARGET_X else 'not met'}; "
-          f"the client received {changes} data changes")
+    for sensors in (False, True):
+        serve_once(args.cycles, args.publish_rate, sensors)
 
 
 if __name__ == "__main__":

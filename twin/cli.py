@@ -170,6 +170,14 @@ def main(argv: list[str] | None = None) -> int:
     p_srv.add_argument("--cycles", type=int, metavar="N", help="override the number of cutting cycles")
     p_srv.add_argument("--force", action="store_true", help="replace an existing non-empty run directory")
     p_srv.add_argument("--twin-only", action="store_true", help="truth only, no sensor streams")
+    p_srv.add_argument("--history", type=float, default=None, metavar="S",
+                       help="simulated time of sensor blocks held for a client that reconnects (default 60)")
+    p_rec = sub.add_parser("record", help="record an OPC UA server (longwall serve) into a run directory, no truth")
+    p_rec.add_argument("--opcua", required=True, metavar="ENDPOINT", help="opc.tcp://HOST:PORT of the server")
+    p_rec.add_argument("--out", type=Path, required=True, help="run directory to create")
+    p_rec.add_argument("--duration", type=float, metavar="S",
+                       help="record the run's first S seconds of simulated time (default: until the run finishes)")
+    p_rec.add_argument("--force", action="store_true", help="replace an existing non-empty run directory")
     try:
         args = parser.parse_args(argv)
         if args.command == "view" and args.port is not None and not args.web:
@@ -213,10 +221,14 @@ def _command(args: argparse.Namespace) -> int:
     elif args.command == "serve":
         served = api.serve(args.scenario or default_scenario(), args.out, args.seed, args.cycles,
                            endpoint=args.endpoint, speed=args.speed, publish_hz=args.publish_rate, user=args.user,
-                           force=args.force, sensors=not args.twin_only,
+                           force=args.force, sensors=not args.twin_only, history_s=args.history,
                            ready=lambda: print(f"serving on {args.endpoint} (Ctrl-C stops it)", flush=True))
         print(f"published {served['simulated_s']:.0f} s of the face in {served['wall_s']:.1f} s "
               f"({served['simulated_s'] / served['wall_s']:.0f}x real time, {served['ticks']} publications)")
+    elif args.command == "record":
+        report = api.record(args.opcua, args.out, args.duration, force=args.force)
+        from twin.opcua.recorder import summary  # the opcua extra is there: api.record said so otherwise
+        print(summary(report, args.out))
     return 0
 
 

@@ -13,7 +13,7 @@ PASSWORD_ENV = "LONGWALL_OPCUA_PASSWORD"
 
 
 class ServeError(ValueError):
-    """A serve request that cannot be met (one line: what, where, how to fix)."""
+    """A serve or record request that cannot be met (one line: what, where, how to fix)."""
 
 
 def parse_endpoint(endpoint: str) -> tuple[str, int]:

@@ -13,13 +13,30 @@ Each shield: RamStroke [m], RamPressure and LegPressure [MPa], Advance (from whe
 FaceAlignmentSystem: Offsets (one per shield, positive towards the coal wall [m]) and SequenceNumber, written by an
 external face alignment system: the roof support system applies a set on the next shear once its SequenceNumber
 is new; AppliedSequenceNumber is the set in force and Status says what became of the last one written.
+
+Sensors: one object per sensor stream of the sensor log (twin.opcua.blocks.SENSOR_NODES: Sensors/Imu, ...), its
+last block as one array variable per column (the log's names and units, estimators.io.logformat; Units lists them),
+SequenceNumber (the block's, 1 for the first), FirstRow (its first row's index in the stream) and CompleteUntil
+(every row before this simulated time is published; inf at the stream's end). Sensors/ReadBlocks(Stream,
+FromSequence) returns a stream's blocks the server still holds from FromSequence on (a ring buffer of the last
+ones): Sequences, FirstRows, RowCounts, CompleteUntil per block and Columns (one array per column, the blocks'
+rows joined) - what a client that reconnects missed; an answer that starts after FromSequence says blocks were
+lost.
+
+Run: State ("Running", then "Finished" once every block is published) and Scenario (the run's scenario TOML, what
+the estimators read their configuration from).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
+import numpy as np
 from asyncua import Node, Server, ua
+
+from estimators.io.logformat import Stream
+from twin.opcua.blocks import Block
 
 NAMESPACE = "urn:longwall-twin:opc40561"
 """The namespace of the twin's nodes."""
@@ -32,9 +49,51 @@ HAULAGE_STATES = ("STOPPED", "CUTTING", "RETURN", "SUMPING", "CUT_OUT")
 """The truth's phase codes (twin.face.haulage) by name."""
 
 
+VARIANT_TYPES = {"f8": ua.VariantType.Double, "i8": ua.VariantType.Int64, "i4": ua.VariantType.Int32,
+                 "i1": ua.VariantType.SByte}
+"""The OPC UA type of each logformat column type (the values go bit for bit)."""
+STATE_RUNNING, STATE_FINISHED = "Running", "Finished"
+READ_BLOCKS_OUTPUTS = (("Sequences", ua.VariantType.UInt32), ("FirstRows", ua.VariantType.UInt64),
+                       ("RowCounts", ua.VariantType.UInt32), ("CompleteUntil", ua.VariantType.Double),
+                       ("Columns", ua.VariantType.Variant))
+
+
+def column_variant(values: np.ndarray, dtype: str) -> ua.Variant:
+    """A log column as an OPC UA array."""
+    return ua.Variant(values.tolist(), VARIANT_TYPES[dtype])
+
+
+def column_values(values: list, dtype: str) -> np.ndarray:
+    """An OPC UA array back as a log column."""
+    return np.array(values if values is not None else [], dtype=np.dtype(dtype))
+
+
+def blocks_variants(stream: Stream, blocks: list[Block]) -> list[ua.Variant]:
+    """ReadBlocks' answer for `blocks` of `stream` (READ_BLOCKS_OUTPUTS)."""
+    def joined(name: str) -> np.ndarray:
+        return np.concatenate([b.columns[name] for b in blocks]) if blocks else np.zeros(0)
+
+    return [ua.Variant([b.sequence for b in blocks], ua.VariantType.UInt32),
+            ua.Variant([b.first_row for b in blocks], ua.VariantType.UInt64),
+            ua.Variant([b.rows for b in blocks], ua.VariantType.UInt32),
+            ua.Variant([b.complete_until for b in blocks], ua.VariantType.Double),
+            ua.Variant([column_variant(joined(c.name).astype(c.dtype), c.dtype) for c in stream.columns],
+                       ua.VariantType.Variant)]
+
+
 def shield_name(k: int) -> str:
     """Shield k's browse name: Shield001 for the headgate's first."""
     return f"Shield{k + 1:03d}"
+
+
+@dataclass
+class SensorNodes:
+    """A sensor stream's block nodes (module docstring)."""
+
+    columns: dict[str, Node]
+    sequence: Node
+    first_row: Node
+    complete_until: Node
 
 
 @dataclass
@@ -47,9 +106,49 @@ class FaceNodes:
     sequence: Node
     applied_sequence: Node
     status: Node
+    sensors: dict[str, SensorNodes]
+    state: Node
 
 
-async def build(server: Server, n_shields: int) -> FaceNodes:
+ReadBlocks = Callable[[str, int], list[ua.Variant]]
+"""(browse name of a stream, FromSequence) -> ReadBlocks' output arguments (blocks_variants)."""
+
+
+def _argument(name: str, vtype: ua.VariantType, array: bool, doc: str) -> ua.Argument:
+    return ua.Argument(Name=name, DataType=ua.NodeId(vtype.value), ValueRank=1 if array else -1,
+                       ArrayDimensions=[], Description=ua.LocalizedText(doc))
+
+
+async def _sensors(ns: int, longwall: Node, streams: dict[str, Stream], read_blocks: ReadBlocks
+                   ) -> dict[str, SensorNodes]:
+    """Longwall/Sensors: an object per stream (`streams`: browse name -> its logformat Stream) and ReadBlocks."""
+    sensors = await longwall.add_object(ns, "Sensors")
+    out = {}
+    for name, stream in streams.items():
+        obj = await sensors.add_object(ns, name)
+        await obj.add_property(ns, "Units", ua.Variant([c.unit for c in stream.columns], ua.VariantType.String))
+        columns = {c.name: await obj.add_variable(ns, c.name, column_variant(np.zeros(0), c.dtype))
+                   for c in stream.columns}
+        out[name] = SensorNodes(columns, await obj.add_variable(ns, "SequenceNumber", ua.Variant(0, ua.VariantType.UInt32)),
+                                await obj.add_variable(ns, "FirstRow", ua.Variant(0, ua.VariantType.UInt64)),
+                                await obj.add_variable(ns, "CompleteUntil", 0.0))
+
+    def call(parent, stream: ua.Variant, from_sequence: ua.Variant) -> list[ua.Variant]:
+        if stream.Value not in streams:
+            raise ua.UaStatusCodeError(ua.StatusCodes.BadInvalidArgument)
+        return read_blocks(stream.Value, int(from_sequence.Value))
+
+    await sensors.add_method(
+        ns, "ReadBlocks", call,
+        [_argument("Stream", ua.VariantType.String, False, f"a stream's browse name ({', '.join(streams)})"),
+         _argument("FromSequence", ua.VariantType.UInt32, False, "the first block's SequenceNumber wanted")],
+        [_argument(name, vtype, True, "per block" if name != "Columns" else "one array per column, rows joined")
+         for name, vtype in READ_BLOCKS_OUTPUTS])
+    return out
+
+
+async def build(server: Server, n_shields: int, streams: dict[str, Stream], read_blocks: ReadBlocks,
+                scenario_toml: str) -> FaceNodes:
     """The Longwall object and everything under it (module docstring)."""
     ns = await server.register_namespace(NAMESPACE)
     longwall = await server.nodes.objects.add_object(ns, "Longwall")
@@ -67,4 +166,7 @@ async def build(server: Server, n_shields: int) -> FaceNodes:
     status = await fas.add_variable(ns, "Status", "no offsets written yet")
     await offsets.set_writable()
     await sequence.set_writable()
-    return FaceNodes(shearer, shields, offsets, sequence, applied, status)
+    sensors = await _sensors(ns, longwall, streams, read_blocks)
+    state = await longwall.add_variable(ns, "State", STATE_RUNNING)
+    await longwall.add_variable(ns, "Scenario", scenario_toml)
+    return FaceNodes(shearer, shields, offsets, sequence, applied, status, sensors, state)

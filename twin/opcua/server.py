@@ -5,8 +5,13 @@ simulated time; an external face alignment system's offsets, written to FaceAlig
 SequenceNumber, are applied by the twin's roof support system on the next shear (FasInput, through the face's
 per-cycle offset input, twin.face.drift.OffsetSource).
 
-Memory is bounded: the twin hands its chunks (a cycle of shearer truth, a cycle's support rows) through a queue of
-QUEUE_CHUNKS, so it runs at most that far ahead of what is published.
+The sensor streams (sensor trial 0, the rows its run directory's Parquet files get) are published in blocks, one
+per stream per publication with rows (twin.opcua.blocks), the last `history_s` of simulated time of them held for
+ReadBlocks. When the run ends, State says Finished and the server stays up while clients are connected (at least
+MIN_LINGER_S, at most LINGER_S), so that a recorder fetches the last blocks.
+
+Memory is bounded: the twin hands its chunks (a cycle of shearer truth, a cycle's support rows, sensor rows of
+SENSOR_CHUNK_S) through a queue of QUEUE_CHUNKS, so it runs at most that far ahead of what is published.
 
 Access: anonymous on a loopback address only; binding any other address needs a user (its password from the
 environment variable PASSWORD_ENV), checked by the server's user manager, and is refused without one, in one line.
@@ -31,7 +36,17 @@ from twin.config.push import check_offsets, offset_limits
 from twin.config.scenario import Scenario, scenario_to_toml
 from twin.face.layout import support_stations
 from twin.opcua.access import PASSWORD_ENV, ServeError, check_access, parse_endpoint
-from twin.opcua.address_space import HAULAGE_STATES, FaceNodes, build
+from estimators.io.logformat import STREAMS
+from twin.opcua.address_space import (
+    HAULAGE_STATES,
+    STATE_FINISHED,
+    FaceNodes,
+    SensorNodes,
+    blocks_variants,
+    build,
+    column_variant,
+)
+from twin.opcua.blocks import HISTORY_S, SENSOR_NODES, BlockStream
 from twin.pipeline.rundir import atomic_run_dir, check_target
 from twin.pipeline.simulate import LiveTaps
 
@@ -39,6 +54,12 @@ QUEUE_CHUNKS = 4
 """Chunks the twin may run ahead of the publisher."""
 PUBLISH_HZ = 10.0
 """Default publication rate [Hz of simulated time]."""
+SENSOR_CHUNK_S = 60.0
+"""The shearer's truth goes to the sensor models this much at a time (their rows wait no longer for a cycle's end)."""
+LINGER_S = 30.0
+"""After the run, the server stays up at most this long [s of wall time] while clients are connected."""
+MIN_LINGER_S = 5.0
+"""... and at least this long, for a recorder reconnecting just then."""
 
 
 class _PasswordUsers(UserManager):
@@ -107,8 +128,11 @@ class FasInput:
 class Publisher:
     """Writes the twin's truth to the nodes at `publish_hz` of simulated time, paced at `speed` times real time."""
 
-    def __init__(self, nodes: FaceNodes, fas: FasInput, speed: float, publish_hz: float):
-        self.nodes, self.fas, self.speed, self.publish_hz = nodes, fas, speed, publish_hz
+    def __init__(self, server: Server, nodes: FaceNodes, fas: FasInput, speed: float, publish_hz: float,
+                 sensors: dict[str, BlockStream]):
+        self.server, self.nodes, self.fas, self.speed, self.publish_hz = server, nodes, fas, speed, publish_hz
+        self.sensors = sensors  # browse name -> its blocks
+        self.complete_until = {name: 0.0 for name in sensors}  # as last written
         self.supports: list[dict[str, np.ndarray]] = []  # rows not yet published, in time order
         self.start: tuple[float, float] | None = None  # (simulated, wall) time of the first row
         self.last_tick = -math.inf
@@ -131,11 +155,42 @@ class Publisher:
             for name, value in values.items():
                 await self.nodes.shearer[name].write_value(value)
             await self._shields(float(t[i]))
+            await self._blocks(float(t[i]))
             self.ticks += 1
             await asyncio.sleep(0)  # the clients' requests are served between publications
         if t.size:
             self.last_tick = float(tick[-1])
         self.fas.published()
+
+    def add_rows(self, name: str, columns: dict[str, np.ndarray], made_until: float) -> None:
+        """A sensor stream's rows as the twin drew them (logformat name), published when their time comes."""
+        if SENSOR_NODES[name] in self.sensors:
+            self.sensors[SENSOR_NODES[name]].add(columns, made_until)
+
+    async def finish(self) -> None:
+        """The run is over: every row left goes in a last block, and State says Finished."""
+        for stream in self.sensors.values():
+            stream.made_until = math.inf
+        await self._blocks(math.inf)
+        await self.nodes.state.write_value(STATE_FINISHED)
+
+    async def _blocks(self, t: float) -> None:
+        """Each sensor stream's block of the rows up to t, if it has any; how far each is published."""
+        for name, stream in self.sensors.items():
+            nodes: SensorNodes = self.nodes.sensors[name]
+            block = stream.publish(t)
+            if block is not None:
+                for column in stream.stream.columns:
+                    await self._write(nodes.columns[column.name],
+                                      column_variant(block.columns[column.name], column.dtype))
+                await self._write(nodes.first_row, ua.Variant(block.first_row, ua.VariantType.UInt64))
+                await self._write(nodes.sequence, ua.Variant(block.sequence, ua.VariantType.UInt32))
+            if stream.complete_until != self.complete_until[name]:
+                self.complete_until[name] = stream.complete_until
+                await self._write(nodes.complete_until, ua.Variant(stream.complete_until, ua.VariantType.Double))
+
+    async def _write(self, node, value: ua.Variant) -> None:
+        await self.server.write_attribute_value(node.nodeid, ua.DataValue(value))
 
     async def _pace(self, t: float) -> None:
         if self.start is None:
@@ -170,17 +225,29 @@ class Publisher:
             self.shown = shown
 
 
+async def _linger(server: Server) -> None:
+    """Stay up while clients are connected (a recorder fetching the last blocks), at least MIN_LINGER_S and at most
+    LINGER_S."""
+    start = time.perf_counter()
+    while time.perf_counter() - start < LINGER_S and (
+            time.perf_counter() - start < MIN_LINGER_S or server.bserver is not None and server.bserver.clients):
+        await asyncio.sleep(0.1)
+
+
 async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
                 publish_hz: float = PUBLISH_HZ, user: str | None = None, force: bool = False, sensors: bool = True,
-                ready=None) -> dict:
-    """Serve `scn` on `endpoint` until its run ends (the run directory `out` written as it goes); `ready()` is called
-    once the server listens. Returns what was published: simulated time, ticks, wall time."""
+                ready=None, history_s: float = HISTORY_S) -> dict:
+    """Serve `scn` on `endpoint` until its run ends (the run directory `out` written as it goes), each sensor
+    stream's last `history_s` of blocks held for ReadBlocks; `ready()` is called once the server listens. Returns
+    what was published: simulated time, ticks, wall time."""
     from twin.pipeline.twin_stream import stream_twin
 
     host, port = parse_endpoint(endpoint)
     check_access(host, user)
     if not speed > 0:
         raise ServeError(f"--speed {speed:g}: must be above 0 (inf: as fast as the twin runs)")
+    if not history_s > 0:
+        raise ServeError(f"--history {history_s:g}: must be above 0 s (the simulated time of blocks held)")
     check_target(out, force)
     server = Server(user_manager=_PasswordUsers(user, os.environ[PASSWORD_ENV]) if user else None)
     await server.init()
@@ -188,9 +255,17 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
     server.set_server_name(f"longwall-twin {scn.name}")
     server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
     server.set_identity_tokens([ua.UserNameIdentityToken] if user else [ua.AnonymousIdentityToken])
-    nodes = await build(server, support_stations(scn).size)
+    history = max(1, math.ceil(history_s * publish_hz))
+    streams = {browse: BlockStream(STREAMS[name], history) for name, browse in SENSOR_NODES.items()
+               if sensors and (name != "support_imu" or scn.sensors.support_imu.supports)}
+
+    def read_blocks(name: str, from_sequence: int) -> list[ua.Variant]:
+        return blocks_variants(streams[name].stream, streams[name].read(from_sequence))
+
+    nodes = await build(server, support_stations(scn).size, {k: v.stream for k, v in streams.items()}, read_blocks,
+                        scenario_to_toml(scn))
     fas = FasInput(scn, server, nodes)
-    publisher = Publisher(nodes, fas, speed, publish_hz)
+    publisher = Publisher(server, nodes, fas, speed, publish_hz, streams)
     chunks: queue.Queue = queue.Queue(maxsize=QUEUE_CHUNKS)
     loop = asyncio.get_running_loop()
     start = time.perf_counter()
@@ -198,8 +273,10 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
     def run_twin(staging: Path) -> None:
         try:
             taps = LiveTaps(lambda rows: chunks.put(("shearer", rows)),
-                            lambda rows, t_final: chunks.put(("supports", rows)))
-            stream_twin(scn, staging, sensors, offsets=fas, live=taps)
+                            lambda rows, t_final: chunks.put(("supports", rows)),
+                            lambda name, rows, until: chunks.put(("sensors", (name, rows, until))))
+            stream_twin(scn, staging, sensors, chunk_rows=math.ceil(SENSOR_CHUNK_S * scn.rates.truth_hz),
+                        offsets=fas, live=taps)
             (staging / "scenario.toml").write_text(scenario_to_toml(scn))
             chunks.put(("done", None))
         except BaseException as err:  # handed to the publisher, which raises it
@@ -228,14 +305,19 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
                 elif kind == "supports":
                     if item["t"].size:
                         publisher.supports.append(item)
+                elif kind == "sensors":
+                    publisher.add_rows(*item)
                 elif kind == "error":
                     raise item
                 else:
                     break
             twin.join()
+            await publisher.finish()
+        wall_s = time.perf_counter() - start
+        await _linger(server)
     finally:
         fas.stop()
         await server.stop()
     t = publisher.start
-    return {"ticks": publisher.ticks, "wall_s": time.perf_counter() - start,
+    return {"ticks": publisher.ticks, "wall_s": wall_s,
             "simulated_s": publisher.last_tick / publish_hz - (t[0] if t else 0.0)}

@@ -150,16 +150,19 @@ def _loaded(scenario: str | Path | Scenario | Experiment | Turntable, seed: int 
 
 def serve(scenario: str | Path | Scenario, out: str | Path | None = None, seed: int | None = None,
           cycles: int | None = None, *, endpoint: str | None = None, speed: float = 1.0, publish_hz: float | None = None,
-          user: str | None = None, force: bool = False, sensors: bool = True, ready=None) -> dict:
+          user: str | None = None, force: bool = False, sensors: bool = True, ready=None,
+          history_s: float | None = None) -> dict:
     """Serve a face scenario on OPC UA (twin.opcua.server; needs the opcua extra) until its run ends, the run
     directory (truth, sensor trial 0, the offsets applied) written to `out` (default runs/NAME-seedN-served) as it
-    goes. Returns the publication's figures."""
+    goes; each sensor stream's last `history_s` of simulated time (default twin.opcua.blocks.HISTORY_S) is held for
+    a client that reconnects. Returns the publication's figures."""
     import asyncio
 
     from twin.opcua.access import DEFAULT_ENDPOINT, ServeError, check_access, parse_endpoint
 
     check_access(parse_endpoint(endpoint or DEFAULT_ENDPOINT)[0], user)
     try:
+        from twin.opcua.blocks import HISTORY_S
         from twin.opcua.server import PUBLISH_HZ
         from twin.opcua.server import serve as serve_face
     except ModuleNotFoundError as err:
@@ -178,7 +181,28 @@ def serve(scenario: str | Path | Scenario, out: str | Path | None = None, seed: 
     check_resources(source, estimate_resources(scenario, 1, sensors, 1))
     out = Path(out) if out is not None else default_run_dir(f"{name}-served", scenario.seed)
     return asyncio.run(serve_face(scenario, out, endpoint or DEFAULT_ENDPOINT, speed, publish_hz or PUBLISH_HZ, user,
-                                  force, sensors, ready))
+                                  force, sensors, ready, HISTORY_S if history_s is None else history_s))
+
+
+def record(endpoint: str, out: str | Path, duration_s: float | None = None, *, force: bool = False) -> dict:
+    """Record the OPC UA server at `endpoint` (`longwall serve`'s model; needs the opcua extra) into the run directory
+    `out`, without truth, until its run finishes or `duration_s` of simulated time (twin.opcua.recorder). Returns
+    what was recorded (rows per stream, reconnects, gaps)."""
+    import asyncio
+
+    from twin.opcua.access import ServeError, parse_endpoint
+
+    parse_endpoint(endpoint)
+    try:
+        from twin.opcua.recorder import Recorder
+    except ModuleNotFoundError as err:
+        raise ServeError(f"longwall record needs {err.name}: install the opcua extra (pip install -e \".[opcua]\")"
+                         ) from None
+
+    async def run() -> dict:
+        return await Recorder(endpoint, Path(out), duration_s, force).run()
+
+    return asyncio.run(run())
 
 
 def check_trials(trials: int, workers: int, ray_address: str | None,

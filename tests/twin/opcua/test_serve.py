@@ -4,7 +4,6 @@ client, and who may connect."""
 from __future__ import annotations
 
 import asyncio
-import os
 import subprocess
 import sys
 
@@ -20,18 +19,6 @@ pytestmark = pytest.mark.slow  # the served run: over 3 s of the full suite
 
 OFFSET_M = 0.01
 """Each shield's offset the test's face alignment system writes."""
-
-
-@pytest.fixture(scope="module")
-def asyncua():
-    """asyncua, skipped only when it is not installed outside CI."""
-    try:
-        import asyncua
-    except ImportError:
-        if os.environ.get("CI"):
-            raise
-        pytest.skip('asyncua is not installed (pip install -e ".[opcua]")')
-    return asyncua
 
 
 def test_a_non_loopback_bind_without_credentials_is_refused(capsys, tmp_path):
