@@ -76,6 +76,8 @@ def serve_once(cycles: int, publish_rate: float, sensors: bool) -> None:
                                    str(cycles), "--publish-rate", str(publish_rate), "--endpoint", endpoint,
                                    "--out", f"{tmp}/served", *(["--history", "1e6"] if sensors else ["--twin-only"])],
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        if sensors:
+            server.stdout.readline()  # "serving on ...": the recorder connects to a server that listens
         recorder = subprocess.Popen([sys.executable, "-m", "twin.cli", "record", "--opcua", endpoint, "--out",
                                      f"{tmp}/recorded"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                     text=True) if sensors else None
