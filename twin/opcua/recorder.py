@@ -36,6 +36,9 @@ RECONNECT_S = 30.0
 """How long a dropped connection is tried again [s of wall time] before the recording is given up."""
 POLL_S = 0.5
 """Longest wait between fetches when no change is notified [s]."""
+REQUEST_TIMEOUT_S = 30.0
+"""How long a request may wait for its answer [s]: a server publishing at full speed answers late (a shorter timeout
+took for a drop reconnects the recorder over and over); a dropped connection is seen at once."""
 QUEUE_SIZE = 100
 """Data changes the server queues per monitored SequenceNumber between the subscription's publications."""
 LOST = (ConnectionError, OSError, asyncio.TimeoutError, ua.UaError)
@@ -79,7 +82,7 @@ class Recorder:
 
     async def _connect(self) -> None:
         """Connect, find the model's nodes and subscribe; ServeError (one line) when there is no such server."""
-        client = Client(self.endpoint, timeout=4)
+        client = Client(self.endpoint, timeout=REQUEST_TIMEOUT_S)
         logging.getLogger("asyncua").setLevel(logging.CRITICAL)  # a failed connect is said in one line, by the caller
         await client.connect()
         self.client = client
