@@ -199,6 +199,17 @@ def _scale_pan(body: mujoco.MjsBody, prefix: str, length: float) -> None:
             site.pos = [0, half, 0]
 
 
+def _scale_support(body: mujoco.MjsBody, prefix: str, pan_length: float) -> None:
+    """A support's base and canopy 0.9 of a pan length wide (the gap between neighbours)."""
+    half = 0.45 * pan_length
+    _geom(body, f"{prefix}base").size = [1.5, half, 0.25]
+    _geom(body.first_body(), f"{prefix}canopy").size = [2.0, half, 0.1]
+
+
+def _geom(body: mujoco.MjsBody, name: str) -> mujoco.MjsGeom:
+    return next(geom for geom in body.geoms if geom.name == name)
+
+
 def _add_pans(spec: mujoco.MjSpec, scn: Scenario, quat_tf: np.ndarray, first: int, count: int, anchors: bool) -> None:
     """Pans first..first+count-1 and their connectors (twin.face.connectors); with `anchors`, the connectors to the
     mocap anchors standing in for the pans beyond a window."""
@@ -261,10 +272,8 @@ def build_face_spec(scn: Scenario, band: FloorBand, first: int, count: int, anch
     for j in np.flatnonzero((stations >= first) & (stations < first + count)):
         i = stations[j]
         y_station = (i + 0.5) * f.pan_length_m
-        body = spec.worldbody.add_frame(pos=mat_tf @ [0.0, y_station, 0.0], quat=quat_tf).attach_body(
-            _piece_copy("support").body("support"), f"sup{j}_", "")
-        body.first_body().geoms[0].size = [2.0, 0.45 * f.pan_length_m, 0.1]
-        body.geoms[0].size = [1.5, 0.45 * f.pan_length_m, 0.25]
+        _scale_support(spec.worldbody.add_frame(pos=mat_tf @ [0.0, y_station, 0.0], quat=quat_tf).attach_body(
+            _piece_copy("support").body("support"), f"sup{j}_", ""), f"sup{j}_", f.pan_length_m)
         ram = spec.add_tendon(name=f"ram{j}")
         ram.wrap_site(f"sup{j}_ram")
         ram.wrap_site(f"pan{i}_ram")
@@ -338,10 +347,27 @@ def build_ride_spec(scn: Scenario) -> mujoco.MjSpec:
     spec.equality("suspension").solref = weld_solref(sh.suspension_frequency_hz, sh.suspension_damping_ratio, dt)
     body = spec.body("shearer")
     half = sh.length_m / 2
-    body.geoms[0].size = [0.6, half - 1.0, 0.5]
-    for geom in body.geoms[1:]:
-        geom.pos = [geom.pos[0], np.sign(geom.pos[1]) * (half - 0.4), geom.pos[2]]
+    _geom(body, "body").size = [0.6, half - 1.0, 0.5]
+    for geom in body.geoms:  # the drums' hubs 0.4 m in from the machine's ends, the arms reaching to them
+        inset = {"drum": 0.4, "arm_": 0.9}.get(geom.name[:4])
+        if inset is not None:
+            geom.pos = [geom.pos[0], np.sign(geom.pos[1]) * (half - inset), geom.pos[2]]
     for site in body.sites:
         if site.name.startswith("shoe"):
             site.pos = [0.0, np.sign(site.pos[1]) * sh.shoe_spacing_m / 2, -sh.body_height_m]
     return spec
+
+
+def piece_model(scn: Scenario, name: str) -> mujoco.MjModel:
+    """The MJCF piece `name` ("pan", "support" or "shearer") alone, sized for the scenario as the face and ride models
+    use it, compiled: its bodies' geoms in their body frames (for drawing: twin.view.geometry)."""
+    if name == "shearer":
+        return build_ride_spec(scn).compile()
+    spec = _piece_copy(name)
+    if name == "pan":
+        _scale_pan(spec.body("pan"), "", scn.face.pan_length_m)
+    elif name == "support":
+        _scale_support(spec.body("support"), "", scn.face.pan_length_m)
+    else:
+        raise ValueError(f"piece_model: no MJCF piece '{name}' (pan, support, shearer)")
+    return spec.compile()
