@@ -15,7 +15,9 @@ the truth point; attitude the psi-angle phi, C_b^n(true) = (I + [phi x]) C_b^n(e
                                       (one strip without truth), within PATH_TOLERANCE_M of every estimate
 * `world/estimates/METHOD/position`   Points3D, the estimated body point in t at the record rate, after each
                                       MARKER_STEP_M of travel
-* `plots/errors/METHOD/{east,north,up}`               Scalars, position error [m]
+* `plan/estimates/METHOD/{path,position}`  the same in the plan view (twin.view.plan)
+* `plots/errors/METHOD/{east,north,up,horizontal}`    Scalars, position error [m]; horizontal: its length in the
+                                                      level plane
 * `plots/attitude_errors/METHOD/{e,n,u}`              Scalars, attitude error phi [deg]
 * `plots/sigma/METHOD/position/{east,north,up}`       Scalars, +- one-sigma of the position [m]
 * `plots/sigma/METHOD/attitude/{e,n,u}`               Scalars, +- one-sigma of the attitude [deg]
@@ -62,18 +64,19 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import rerun as rr
-import rerun.blueprint as rrb
 
 from estimators.io.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT, NONORTH_AXES
 from estimators.io.metrics import attitude_errors, column, columns, position_errors
 from estimators.nav import earth
 from estimators.shearer.federated_filter import MAG_DISTURBED, MAG_GATED, MAG_USED
+from estimators.shearer.methods import METHODS
 from twin.config.imu_grades import DEG, DEG_PER_H, MG
 from twin.config.scenario import Scenario
 from twin.pipeline.support_estimate import ANGLES, FLAG_NAMES, SupportAttitude
-from twin.view.recording import path_strips, run_recording_id
+from twin.view import plan
+from twin.view.recording import run_recording_id
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
-from twin.view.rerun_columns import decimate, marker_rows, series, time_column
+from twin.view.rerun_columns import decimate, marker_rows, path_strips, series, time_column
 from twin.view.rrd_stream import recording_id, recording_stream
 
 POSITION_AXES = ("east", "north", "up")
@@ -88,7 +91,10 @@ STATE_GROUPS = {  # state column prefix: (axes, SI value per display unit, displ
 FLAG_SERIES = (("position fix", FLAG_POSITION), ("ZUPT", FLAG_ZUPT), ("skipped", FLAG_SKIPPED))
 MAG_SERIES = (("used", MAG_USED), ("disturbed", MAG_DISTURBED), ("gated", MAG_GATED))
 SUBFILTERS = ("odometer", "aiding")
-_PALETTE = np.array([[40, 160, 240], [60, 200, 90], [200, 80, 220], [240, 200, 40], [120, 120, 255]], np.uint8)
+METHOD_RGB = dict(zip(METHODS, np.array([[150, 150, 150], [60, 200, 90], [200, 80, 220], [240, 200, 40],
+                                          [40, 120, 240], [0, 200, 200], [255, 130, 170], [150, 100, 50],
+                                          [120, 80, 255]], np.uint8)))
+"""Each method's colour in the 3-D and plan views (the truth's is twin.view.recording.TRUTH_RGB)."""
 
 
 def _names(group: str) -> list[str]:
@@ -131,11 +137,15 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method:
     rec.log(f"world/estimates/{method}/position", rr.Points3D.from_fields(radii=0.15, colors=color), static=True)
     rec.send_columns(f"world/estimates/{method}/position", indexes=[time_column(t_all[moved])],
                      columns=rr.Points3D.columns(positions=p_all[moved].astype(np.float32)))
+    plan.log_path(rec, scn, f"{plan.PLAN_ROOT}/estimates/{method}", t_all, p_all,
+                  np.zeros(t_all.size, np.int64) if cycle is None else cycle, moved, rate_hz, color)
     sub, t = plot_rows(table, rate_hz)
 
     if truth_shearer is not None:
         _, err = position_errors(sub, truth_shearer)
         _, phi = attitude_errors(sub, truth_shearer)
+        series(rec, f"plots/errors/{method}/horizontal", t, np.hypot(err[:, 0], err[:, 1])[:, None],
+               [f"{method} [m]"], rate_hz=rate_hz)
         for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
             series(rec, f"plots/errors/{method}/{axis}", t, err[:, i:i + 1], [f"{method} {axis} [m]"],
                    rate_hz=rate_hz)
@@ -230,58 +240,10 @@ def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, table: p
     rec.log(f"world/estimates/{method}/rail", rr.Points3D(p_t, radii=0.08, colors=[240, 120, 40]), static=True)
 
 
-def estimate_views(methods: list[str], state_methods: list[str], fusion_methods: list[str] = (),
-                   detector_methods: list[str] = (), truth: bool = True) -> tuple[rrb.View, ...]:
-    """Time-series views of the Estimates tab: each error axis over all methods with their sigma bands (without
-    `truth`: the bands alone), each group of sensor states, the flags, and the fusion of federated filters."""
-    views = []
-    error = "error" if truth else "one-sigma"
-    for axis in POSITION_AXES:
-        views.append(rrb.TimeSeriesView(
-            name=f"Position {error} {axis} [m]", origin="/",
-            contents=[f"plots/errors/{m}/{axis}" for m in methods] + [f"plots/sigma/{m}/position/{axis}"
-                                                                       for m in methods]))
-    for a in ATTITUDE_AXES:
-        views.append(rrb.TimeSeriesView(
-            name=f"Attitude {error} phi_{a} [deg]", origin="/",
-            contents=[f"plots/attitude_errors/{m}/{a}" for m in methods] + [f"plots/sigma/{m}/attitude/{a}"
-                                                                             for m in methods]))
-    for group, (_, _, unit) in STATE_GROUPS.items() if state_methods else ():
-        views.append(rrb.TimeSeriesView(
-            name=f"{group} [{unit}]", origin="/",
-            contents=[f"plots/states/{m}/{group}" for m in state_methods] + [f"plots/sigma/{m}/{group}"
-                                                                              for m in state_methods]))
-    views.append(rrb.TimeSeriesView(name="Position fixes, ZUPTs, skipped", origin="plots/flags"))
-    for part, title in (("beta", "Information sharing"), ("r_yaw", "Magnetometer yaw noise sd [deg]"),
-                        ("yaw_innovation", "Yaw innovation [deg]"), ("magnetometer", "Magnetometer readings"),
-                        ("subfilter_errors", "Sub-filter position errors [m]" if truth else
-                         "Sub-filter offsets from the global estimate [m]")) if fusion_methods else ():
-        views.append(rrb.TimeSeriesView(name=title, origin="/",
-                                        contents=[f"plots/fusion/{m}/{part}/**" for m in fusion_methods]))
-    for part, title in (("residual", "Residual chi-square"), ("dual_state", "Dual-state chi-square"),
-                        ("fsprt", "Fading SPRT"), ("isolated", "Rail model isolated")) if detector_methods else ():
-        views.append(rrb.TimeSeriesView(name=title, origin="/",
-                                        contents=[f"plots/detectors/{m}/{part}/**" for m in detector_methods]))
-    return tuple(views)
-
-
 # The supports' canopy attitude (issue 8).
 SUPPORT_PLOT_RATE_HZ = 2.0
 """Largest rate of the supports' plots: a canopy moves over seconds (an advance, the shearer's pass), and a face has
 many units."""
-
-
-def support_attitude_views(supports: bool) -> tuple[rrb.View, ...]:
-    """Views of the supports' canopy attitude (none without `supports`): each angle and its error over all
-    supports and methods, ours' magnetometer flags beside the shearer's field, the GD-UKF objective."""
-    if not supports:
-        return ()
-    root = "plots/support_attitude"
-    return (*(rrb.TimeSeriesView(name=f"Support {a} [deg]", origin=f"{root}/angles/{a}") for a in ANGLES),
-            *(rrb.TimeSeriesView(name=f"Support {a} error [deg]", origin=f"{root}/errors/{a}") for a in ANGLES),
-            rrb.TimeSeriesView(name="Support magnetometer: ours' flags, shearer's field / peak",
-                               origin=f"{root}/magnetometer"),
-            rrb.BarChartView(name="GD-UKF objective per iteration [deg]", origin=f"{root}/gd_objective"))
 
 
 def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, rate_hz: float | None) -> None:
@@ -345,8 +307,8 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
         if run_id is None:  # no run.rrd to merge with: this recording is the whole view
             rec.send_recording_name(scn.name)
             rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
-        for k, (method, table) in enumerate(estimates.items()):
-            _log_estimate(rec, scn, truth_shearer, method, table, rate_hz, _PALETTE[k % len(_PALETTE)])
+        for method, table in estimates.items():
+            _log_estimate(rec, scn, truth_shearer, method, table, rate_hz, METHOD_RGB.get(method, METHOD_RGB["dr"]))
         for method, table in states.items():
             _log_states(rec, method, table, states_truth, rate_hz)
         for method, table in fusion.items():

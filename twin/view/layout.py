@@ -3,10 +3,11 @@ built from what the directory holds.
 
 It is built from what the directory holds, not stored in it: rerun-sdk 0.41 gives a blueprint a random store id
 (and chunk and row ids from the clock), so a blueprint in the .rrd would make two runs of the same scenario and
-seed differ (twin.view.rrd_stream). A face run gets the run's layout (twin.view.recording.blueprint) with an
-"Estimates" tab of the estimators found in estimates/ (twin.view.estimate_recording: each method's errors, or
-sigmas without truth, its sensor states, fusion and detectors, the supports' canopy attitude); a SINS experiment
-one time-series view per group and quantity of its errors.parquet (twin.papers.sins_rundir).
+seed differ (twin.view.rrd_stream). A face run gets twin.view.blueprint's layout for what it holds: truth or not, the
+face alignment loop or not, the estimators found in estimates/ (their errors, or sigmas without truth, sensor states,
+fusion, detectors, the supports' canopy attitude), the 3-D eye and the plan's bounds from its face (the pans, or
+without truth the first estimate shown); a SINS experiment one time-series view per group and quantity of its
+errors.parquet (twin.papers.sins_rundir).
 """
 
 from __future__ import annotations
@@ -25,14 +26,17 @@ import urllib.parse
 import urllib.request
 from pathlib import Path
 
+import numpy as np
 import pyarrow.parquet as pq
 import rerun.blueprint as rrb
 
 from estimators.io.logformat import ESTIMATES_DIR
 from estimators.shearer.methods import METHODS
 from twin.config.experiments import EXPERIMENT_KIND
-from twin.view.estimate_recording import estimate_views, support_attitude_views
-from twin.view.recording import ESTIMATES_RRD, RUN_RRD, blueprint
+from twin.config.scenario import load_face_scenario
+from twin.view import plan
+from twin.view.blueprint import HIDDEN_METHODS, RunContents, face_blueprint, face_eye
+from twin.view.recording import ESTIMATES_RRD, RUN_RRD
 from twin.view.rerun_columns import APPLICATION_ID
 
 SUFFIXES = ("states", "fusion", "detectors")
@@ -62,10 +66,31 @@ def run_blueprint(run_dir: Path) -> rrb.Blueprint:
     names = {p.stem for p in folder.glob("*.parquet")} if folder.is_dir() else set()
     methods = [m for m in METHODS if m in names]
     by_suffix = {suffix: [m for m in methods if f"{m}_{suffix}" in names] for suffix in SUFFIXES}
-    views = estimate_views(methods, by_suffix["states"], by_suffix["fusion"], by_suffix["detectors"],
-                           (run_dir / "truth_shearer.parquet").is_file()) if methods else ()
-    supports = any(name.endswith("_support_attitude") for name in names)
-    return blueprint(views + support_attitude_views(supports))
+    scenario = run_dir / "scenario.toml"
+    scn = load_face_scenario(scenario) if scenario.is_file() else None
+    truth = (run_dir / "truth_shearer.parquet").is_file()
+    framed = _face_points(run_dir, methods) if scn is not None else None
+    eye, plan_bounds = None, None
+    if framed is not None:
+        eye = face_eye(framed, np.radians(scn.face.azimuth_deg))
+        plan_bounds = (plan.plan_bounds(scn) if truth
+                       else plan.bounds_of(plan.plotted(plan.face_coordinates(scn, framed, 0))))
+    return face_blueprint(RunContents(
+        truth=truth, alignment=scn is not None and scn.alignment.mode != "none", methods=methods,
+        state_methods=by_suffix["states"], fusion_methods=by_suffix["fusion"], detector_methods=by_suffix["detectors"],
+        support_attitude=any(name.endswith("_support_attitude") for name in names), eye=eye, plan_bounds=plan_bounds))
+
+
+def _face_points(run_dir: Path, methods: list[str]) -> np.ndarray | None:
+    """Points in t that frame the face: the pans' positions (truth_pans), or without truth the path of the first
+    method not hidden by default (twin.view.blueprint.HIDDEN_METHODS); None without either."""
+    pans = run_dir / "truth_pans.parquet"
+    shown = [m for m in methods if m not in HIDDEN_METHODS]
+    path = pans if pans.is_file() else (run_dir / ESTIMATES_DIR / f"{shown[0]}.parquet" if shown else None)
+    if path is None:
+        return None
+    table = pq.read_table(path, columns=["p_t_e", "p_t_n", "p_t_u"])
+    return np.column_stack([table.column(c).to_numpy() for c in ("p_t_e", "p_t_n", "p_t_u")])
 
 
 def blueprint_file(run_dir: Path) -> Path:

@@ -8,11 +8,13 @@ tables' `p_t_*` columns.
 Entities (fixed names, checked by tests):
 
 * `world/floor`             static Mesh3D of the floor
-* `world/pans`              Boxes3D, one per pan, at every pan-update time (colour: horizontal bend vs limit)
-* `world/supports`          Boxes3D, one per support, at every support-update time (colour: set / lowered)
+* `world/pans/{boxes,spheres}`         every pan's geoms of the MJCF piece (trough, rack, feet) at every pan-update
+                                        time (twin.view.geometry; the trough's colour: horizontal bend vs limit)
+* `world/supports/{boxes,cylinders}`   every support's geoms (base, leg cylinders; canopy, leg columns on the leg
+                                        slide) at every support-update time (a lowered support's canopy orange)
 * `world/rams`              LineStrips3D, support point to support point + ram * advance direction
 * `world/shearer`           Transform3D (t <- body) at the record rate, as either end of the body moves MARKER_STEP_M;
-                            static children `body`, `drums`
+                            static children `boxes` (body, ranging arms), `cylinders` (drums): the MJCF piece's geoms
 * `world/shearer_path`      static LineStrips3D of the path, one strip per cycle, within PATH_TOLERANCE_M of every
                             sample (stops and reversals kept)
 * `plots/shearer_speed`     Scalars, horizontal ground speed [m/s]
@@ -23,6 +25,8 @@ Entities (fixed names, checked by tests):
                             its best-fit straight line [mm, + towards the coal wall] (estimators.face.straightness)
 * `face/straightness_mm`, `face/creep_mm`   Scalars at the same times: straightness RMS and max; creep of the pans'
                             mean and of the tailgate drive frame since the start [mm, + towards the tailgate]
+* `plan/...`                the plan view in the face frame: axes, pan line, target line (face alignment runs), true
+                            path (twin.view.plan)
 * `sensors/...`, `alignment/...`, `faults/...`   the sensor streams (twin.view.sensor_recording)
 
 Time series are cut to what a person can see at the record rate (twin.view.rerun_columns.visible_rows; every sample
@@ -37,24 +41,24 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 import rerun as rr
-import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
 from estimators.face.straightness import face_drift, line_deviation, pan_lines
 from estimators.nav.earth import mat_en
 from estimators.nav.rotations import mat_to_quat, quat_mul, quat_rotate
 from twin.config.scenario import Scenario
-from twin.face.layout import PAN_HEIGHT_M, PAN_WIDTH_M, SUPPORT_BASE_LENGTH_M
+from twin.face.model import piece_model
+from twin.view import plan
+from twin.view.geometry import BodyGeoms, body_geoms, log_body, send_bodies
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
 from twin.view.rerun_columns import (
-    PATH_TOLERANCE_M,
     Blocks,
     col,
     column_of,
     decimate,
     latest_rows,
-    line_rows,
     marker_rows,
+    path_strips,
     send_bar_chart,
     series,
     take_rows,
@@ -69,17 +73,12 @@ RUN_RRD = "run.rrd"
 ESTIMATES_RRD = "estimates.rrd"
 """The estimators' recording beside run.rrd: same application and recording id, so the viewer merges the two."""
 
-SHEARER_WIDTH_M = 1.2
-"""Body extent across the face (body x) of the drawn shearer."""
-SHEARER_HEIGHT_M = 1.0
-"""Body height of the drawn shearer; its underside sits on the running line."""
-DRUM_RADIUS_M = 0.9
-
+TRUTH_RGB = np.array([240, 120, 40], np.uint8)
+"""Colour of the true shearer path (3-D and plan)."""
 SUPPORT_FRAME_HZ = 1.0
 """Most support states a second of run time in the recording: a ram at 0.1-0.3 m/s moves 0.1-0.3 m between two."""
 _GREY = np.array([150, 150, 150], float)
 _RED = np.array([230, 30, 30], float)
-_SET_RGBA = np.array([70, 110, 170, 255], np.uint8)
 _LOWERED_RGBA = np.array([240, 160, 40, 255], np.uint8)
 
 
@@ -88,10 +87,10 @@ def _advance_axis(scn: Scenario) -> np.ndarray:
     return np.array([np.cos(a), -np.sin(a), 0.0])
 
 
-def _face_quat_xyzw(scn: Scenario) -> np.ndarray:
+def _face_quat_wxyz(scn: Scenario) -> np.ndarray:
     """Rotation of the face frame F in t: about z by -azimuth."""
     half = -0.5 * np.radians(scn.face.azimuth_deg)
-    return np.array([0.0, 0.0, np.sin(half), np.cos(half)], np.float32)
+    return np.array([np.cos(half), 0.0, 0.0, np.sin(half)])
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -118,7 +117,10 @@ def _log_floor(rec: rr.RecordingStream, floor_mesh: tuple[np.ndarray, np.ndarray
             static=True)
 
 
-def _log_pans(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table) -> None:
+def _log_pans(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table, cycles: pa.Table | None,
+              pan: BodyGeoms) -> None:
+    """Every pan's geoms (the MJCF piece's) at each pan-update time, the trough coloured by its horizontal bend against
+    the limit (grey to red), the bend per chute, and the pan line in the plan view."""
     if pans.num_rows == 0:
         return
     times, _, rows = latest_rows(col(pans, "t"), col(pans, "pan"))
@@ -128,24 +130,12 @@ def _log_pans(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table) -> None:
     bend_h = col(pans, "bend_h")[rows]
     bend_v = col(pans, "bend_v")[rows]
 
-    z_axis = quat_rotate(q, np.array([0.0, 0.0, 1.0]))
-    centres = p - 0.5 * PAN_HEIGHT_M * z_axis
     limit = np.radians(scn.face.bend_limit_horizontal_deg)
     ratio = np.clip(np.nan_to_num(np.abs(bend_h), nan=0.0) / limit, 0.0, 1.0)[..., None]
-    rgb = ((1 - ratio) * _GREY + ratio * _RED).astype(np.uint8)
-    half = np.array([0.5 * PAN_WIDTH_M, 0.5 * scn.face.pan_length_m, 0.5 * PAN_HEIGHT_M], np.float32)
-
-    rec.send_columns(
-        "world/pans",
-        indexes=[time_column(times)],
-        columns=rr.Boxes3D.columns(
-            half_sizes=np.broadcast_to(half, (n_t * n_p, 3)),
-            centers=centres.reshape(-1, 3).astype(np.float32),
-            quaternions=xyzw(q).reshape(-1, 4),
-            colors=rgb.reshape(-1, 3),
-        ).partition(np.full(n_t, n_p)),
-    )
-    rec.log("world/pans", rr.Boxes3D.from_fields(fill_mode="solid"), static=True)
+    colors = np.array(np.broadcast_to(pan.rgba, (n_t, n_p, len(pan), 4)))
+    colors[:, :, pan.index("trough"), :3] = ((1 - ratio) * _GREY + ratio * _RED).astype(np.uint8)
+    send_bodies(rec, "world/pans", times, [(pan, p, q)], colors)
+    plan.send_pan_line(rec, scn, times, p, _cycle_starts(cycles))
     # Per-chute bends: drop the last pan (no next pan, NaN).
     chutes_h = np.nan_to_num(np.degrees(bend_h[:, :-1]), nan=0.0)
     chutes_v = np.nan_to_num(np.degrees(bend_v[:, :-1]), nan=0.0)
@@ -154,9 +144,15 @@ def _log_pans(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table) -> None:
         send_bar_chart(rec, "plots/bend_vertical_deg", times, chutes_v)
 
 
-def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table, rate_hz: float | None) -> None:
-    """Every support's state at each time one changes, at most SUPPORT_FRAME_HZ (the last state of each interval,
-    so that an event's end shows at once; every time at FULL rate)."""
+def _cycle_starts(cycles: pa.Table | None) -> np.ndarray | None:
+    return None if cycles is None or cycles.num_rows == 0 else col(cycles, "t")
+
+
+def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table, rate_hz: float | None,
+                  base: BodyGeoms, canopy_body: BodyGeoms) -> None:
+    """Every support's geoms (the MJCF piece's base and canopy bodies; a lowered support's canopy in orange) and ram at
+    each time one changes, at most SUPPORT_FRAME_HZ (the last state of each interval, so that an event's end shows at
+    once; every time at FULL rate)."""
     if supports.num_rows == 0:
         return
     times, _, rows = latest_rows(col(supports, "t"), col(supports, "support"))
@@ -171,23 +167,15 @@ def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table, ra
     is_set = col(supports, "set")[rows] != 0
     x_t = _advance_axis(scn)
 
-    centres = p - 0.5 * SUPPORT_BASE_LENGTH_M * x_t + (0.5 * canopy)[..., None] * np.array([0.0, 0.0, 1.0])
-    half = np.empty((n_t, n_s, 3))
-    half[..., 0] = 0.5 * SUPPORT_BASE_LENGTH_M
-    half[..., 1] = 0.5 * 0.9 * scn.face.pan_length_m
-    half[..., 2] = 0.5 * canopy
-    colors = np.where(is_set[..., None], _SET_RGBA, _LOWERED_RGBA)
+    # The support body stands in F; its canopy body rides the leg slide (z) from its place on the base.
+    q_tf = np.broadcast_to(_face_quat_wxyz(scn), (n_t, n_s, 4))
+    canopy_f = canopy_body.body_pos + canopy[..., None] * np.array([0.0, 0.0, 1.0])
+    p_canopy = p + quat_rotate(q_tf, canopy_f)
+    colors = np.array(np.broadcast_to(np.concatenate([base.rgba, canopy_body.rgba]),
+                                      (n_t, n_s, len(base) + len(canopy_body), 4)))
+    colors[~is_set, len(base) + canopy_body.index("canopy")] = _LOWERED_RGBA
+    send_bodies(rec, "world/supports", times, [(base, p, q_tf), (canopy_body, p_canopy, q_tf)], colors)
     lengths = np.full(n_t, n_s)
-    rec.send_columns(
-        "world/supports",
-        indexes=[time_column(times)],
-        columns=rr.Boxes3D.columns(
-            half_sizes=half.reshape(-1, 3).astype(np.float32),
-            centers=centres.reshape(-1, 3).astype(np.float32),
-            quaternions=np.broadcast_to(_face_quat_xyzw(scn), (n_t * n_s, 4)),
-            colors=colors.reshape(-1, 4),
-        ).partition(lengths),
-    )
     strips = np.stack([p, p + ram[..., None] * x_t], axis=2)  # (n_t, n_s, 2, 3)
     rec.send_columns(
         "world/rams",
@@ -198,22 +186,6 @@ def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table, ra
     send_bar_chart(rec, "plots/ram_length", times, ram)
 
 
-def path_strips(t: np.ndarray, p: np.ndarray, cycle: np.ndarray | None, rate_hz: float | None) -> list[np.ndarray]:
-    """A path (K, 3) as float32 strips, one per cycle (one without `cycle`), each without the samples it passes within
-    PATH_TOLERANCE_M of (the line through the others, in time: stops and reversals are kept); every sample at FULL
-    rate."""
-    if cycle is None:
-        cycle = np.zeros(t.size, np.int64)
-    order = np.argsort(cycle, kind="stable")
-    _, starts = np.unique(cycle[order], return_index=True)
-    strips = []
-    for rows in np.split(order, starts[1:]):
-        if rate_hz is not FULL:
-            rows = rows[line_rows(t[rows], p[rows], PATH_TOLERANCE_M)]
-        strips.append(p[rows].astype(np.float32))
-    return strips
-
-
 SHEARER_COLUMNS = ("t", "lat", "lon", "p_t_e", "p_t_n", "p_t_u", "q_nb_w", "q_nb_x", "q_nb_y", "q_nb_z", "v_n_e", "v_n_n",
                    "cycle")
 """The truth_shearer columns the recording draws (a run reads only these back from its Parquet)."""
@@ -221,21 +193,11 @@ BLOCK_STREAMS = ("truth_shearer", "imu", "pushram", "pressure")
 """The streams write_recording takes in blocks (a run reads them back a row group at a time)."""
 
 
-def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_hz: float | None) -> None:
-    sh = scn.shearer
-    body_z = 0.5 * SHEARER_HEIGHT_M - sh.body_height_m  # underside on the running line
-    rec.log("world/shearer/body", rr.Boxes3D(
-        half_sizes=[0.5 * SHEARER_WIDTH_M, 0.5 * sh.length_m, 0.5 * SHEARER_HEIGHT_M],
-        centers=[0.0, 0.0, body_z], colors=[230, 200, 40], fill_mode="solid"), static=True)
-    drum_len = scn.face.web_depth_m
-    drum_x = 0.5 * SHEARER_WIDTH_M + 0.5 * drum_len
-    drum_z = DRUM_RADIUS_M - sh.body_height_m - PAN_HEIGHT_M  # drums reach the floor
-    s45 = np.sqrt(0.5)
-    rec.log("world/shearer/drums", rr.Cylinders3D(
-        lengths=[drum_len, drum_len], radii=[DRUM_RADIUS_M, DRUM_RADIUS_M],
-        centers=[[drum_x, -0.5 * sh.length_m, drum_z], [drum_x, 0.5 * sh.length_m, drum_z]],
-        quaternions=[[0.0, s45, 0.0, s45]] * 2,  # cylinder axis z -> body x (towards the coal wall)
-        colors=[[120, 120, 130], [120, 120, 130]], fill_mode="solid"), static=True)
+def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_hz: float | None,
+                 body: BodyGeoms) -> None:
+    """The shearer's geoms (the MJCF piece's, static in its body frame) under its pose, its path (3-D and plan) and
+    speed."""
+    log_body(rec, "world/shearer", body)
     t_all = column_of(shearer, "t")
     if t_all.size == 0:
         return
@@ -249,13 +211,15 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_h
     c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(col(sub, "lat"), col(sub, "lon"))
     q_tb = quat_mul(mat_to_quat(c_nt), vec(sub, "q_nb", "wxyz"))
     # Logged as either end of the drawn body moves MARKER_STEP_M (travel or turn).
-    half = quat_rotate(q_tb, np.array([0.0, 0.5 * sh.length_m, 0.0]))
+    half = quat_rotate(q_tb, np.array([0.0, 0.5 * scn.shearer.length_m, 0.0]))
     moved = marker_rows(t, np.hstack([p - half, p + half]), rate_hz)
     rec.send_columns("world/shearer", indexes=[time_column(t[moved])],
                      columns=rr.Transform3D.columns(translation=p[moved].astype(np.float32),
                                                     quaternion=xyzw(q_tb[moved])))
-    rec.log("world/shearer_path", rr.LineStrips3D(path_strips(t_all, p_all, column_of(shearer, "cycle"), rate_hz),
-                                                  radii=0.03, colors=[240, 120, 40]), static=True)
+    cycle_all = column_of(shearer, "cycle")
+    rec.log("world/shearer_path", rr.LineStrips3D(path_strips(t_all, p_all, cycle_all, rate_hz),
+                                                  radii=0.03, colors=TRUTH_RGB), static=True)
+    plan.log_path(rec, scn, f"{plan.PLAN_ROOT}/truth", t_all, p_all, cycle_all, keep[moved], rate_hz, TRUTH_RGB)
 
     speed = np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n"))
     series(rec, "plots/shearer_speed", t, speed[:, None], ["horizontal speed [m/s]"], rate_hz=rate_hz)
@@ -264,49 +228,21 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_h
 
 def _log_face_line(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table, cycles: pa.Table) -> None:
     """The pan line at the start and at each cycle's end (truth_cycles' t_end) as its deviation per pan from its
-    best-fit straight line (the straightness metric's reference, and the face alignment's straight target), with
-    straightness and creep at those times (estimators.face.straightness)."""
+    best-fit straight line (the straightness metric's reference, and the face alignment's straight target, drawn in
+    the plan view of a face alignment run), with straightness and creep at those times
+    (estimators.face.straightness)."""
     columns = {name: col(pans, name) for name in ("t", "pan", "p_t_e", "p_t_n", "p_t_u")}
     times = np.concatenate([[float(columns["t"].min())], col(cycles, "t_end")])
     n_pans, azimuth = int(columns["pan"].max()) + 1, np.radians(scn.face.azimuth_deg)
     lines = pan_lines(columns, times, n_pans, azimuth)
     send_bar_chart(rec, "face/pan_line_mm", times, line_deviation(lines[..., 0], lines[..., 1]) * 1e3)
+    if scn.alignment.mode != "none":
+        plan.send_target_line(rec, scn, columns, times, col(cycles, "t"))
     drift = face_drift(columns, times, n_pans, azimuth)
     series(rec, "face/straightness_mm", times, np.column_stack([drift.straightness_rms, drift.straightness_max]) * 1e3,
            ["straightness RMS", "straightness max"])
     series(rec, "face/creep_mm", times, np.column_stack([drift.creep, drift.creep_tailgate]) * 1e3,
            ["creep, mean pan", "creep, tailgate drive frame"])
-
-
-def blueprint(estimate_views: tuple[rrb.View, ...] = ()) -> rrb.Blueprint:
-    """3-D face view taking most of the window, plots in a column on the right (the estimators' plots, when
-    given, in a second tab of that column)."""
-    twin_plots = rrb.Vertical(
-        rrb.TimeSeriesView(name="Shearer speed [m/s]", origin="plots/shearer_speed"),
-        rrb.TimeSeriesView(name="Cycle", origin="plots/cycle"),
-        rrb.BarChartView(name="Horizontal bend per chute [deg]", origin="plots/bend_horizontal_deg"),
-        rrb.BarChartView(name="Vertical bend per chute [deg]", origin="plots/bend_vertical_deg"),
-        rrb.BarChartView(name="Ram length [m]", origin="plots/ram_length"),
-        rrb.BarChartView(name="Leg pressure per support [MPa]", origin="sensors/pressure/leg_bars"),
-        rrb.BarChartView(name="Ram pressure per support [MPa]", origin="sensors/pressure/ram_bars"),
-        rrb.BarChartView(name="Pan line from its best-fit line per pan [mm], at cycle ends", origin="face/pan_line_mm"),
-        rrb.TimeSeriesView(name="Straightness and creep [mm]", origin="face",
-                           contents=["face/straightness_mm", "face/creep_mm"]),
-        rrb.BarChartView(name="Push offsets per support [mm]", origin="alignment/offsets_mm"),
-        rrb.TimeSeriesView(name="Sensors", origin="sensors",
-                           contents=["sensors/**", "- sensors/pressure/leg_bars", "- sensors/pressure/ram_bars"]),
-        rrb.TimeSeriesView(name="Fault windows", origin="faults"),
-        name="Twin",
-    )
-    plots = rrb.Tabs(twin_plots, rrb.Vertical(*estimate_views, name="Estimates")) if estimate_views else twin_plots
-    return rrb.Blueprint(
-        rrb.Horizontal(
-            rrb.Spatial3DView(name="Face", origin="world", contents="world/**"),
-            plots,
-            column_shares=[3, 1],
-        ),
-        collapse_panels=True,
-    )
 
 
 # --------------------------------------------------------------------------------------------------------------
@@ -333,11 +269,15 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, Blocks],
         rec.send_recording_name(scn.name)
         rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         _log_floor(rec, floor_mesh)
-        _log_pans(rec, scn, truth["truth_pans"])
-        _log_supports(rec, scn, truth["truth_supports"], rate_hz)
-        _log_shearer(rec, scn, truth["truth_shearer"], rate_hz)
-        if truth.get("truth_cycles") is not None and truth["truth_cycles"].num_rows:
-            _log_face_line(rec, scn, truth["truth_pans"], truth["truth_cycles"])
+        plan.log_axes(rec, scn)
+        cycles = truth.get("truth_cycles")
+        support = piece_model(scn, "support")
+        _log_pans(rec, scn, truth["truth_pans"], cycles, body_geoms(piece_model(scn, "pan"), "pan"))
+        _log_supports(rec, scn, truth["truth_supports"], rate_hz, body_geoms(support, "support"),
+                      body_geoms(support, "canopy"))
+        _log_shearer(rec, scn, truth["truth_shearer"], rate_hz, body_geoms(piece_model(scn, "shearer"), "shearer"))
+        if cycles is not None and cycles.num_rows:
+            _log_face_line(rec, scn, truth["truth_pans"], cycles)
         log_sensors(rec, sensors or {}, rate_hz)
 
 

@@ -158,6 +158,22 @@ def marker_rows(t: np.ndarray, p: np.ndarray, rate_hz: float | None) -> np.ndarr
     return keep[decimate(travelled, 1.0 / MARKER_STEP_M)]
 
 
+def path_strips(t: np.ndarray, p: np.ndarray, cycle: np.ndarray | None, rate_hz: float | None) -> list[np.ndarray]:
+    """A path (K, 3) as float32 strips, one per cycle (one without `cycle`), each without the samples it passes within
+    PATH_TOLERANCE_M of (the line through the others, in time: stops and reversals are kept); every sample at FULL
+    rate."""
+    if cycle is None:
+        cycle = np.zeros(t.size, np.int64)
+    order = np.argsort(cycle, kind="stable")
+    _, starts = np.unique(cycle[order], return_index=True)
+    strips = []
+    for rows in np.split(order, starts[1:]):
+        if rate_hz is not FULL:
+            rows = rows[line_rows(t[rows], p[rows], PATH_TOLERANCE_M)]
+        strips.append(p[rows].astype(np.float32))
+    return strips
+
+
 def mean_rate(data: Blocks, columns: list[str], rate_hz: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Means of increments (the stream's `columns`) per second at about rate_hz: sums over runs of `step` rows / their
     duration, `step` the record interval in median sample intervals (each sample at FULL rate); (times at the runs'

@@ -107,16 +107,20 @@ def test_entities_and_times(recording):
     assert reader.blueprints() == []  # the layout is handed to the viewer (twin.view.layout), not stored
     chunks = reader.stream().to_chunks()
     entities = {c.entity_path for c in chunks}
-    expected = {"/world/floor", "/world/pans", "/world/supports", "/world/rams", "/world/shearer",
-                "/world/shearer/body", "/world/shearer/drums", "/world/shearer_path", "/plots/shearer_speed",
-                "/plots/cycle", "/plots/bend_horizontal_deg", "/plots/bend_vertical_deg", "/plots/ram_length"}
+    expected = {"/world/floor", "/world/pans/boxes", "/world/pans/spheres", "/world/supports/boxes",
+                "/world/supports/cylinders", "/world/rams", "/world/shearer", "/world/shearer/boxes",
+                "/world/shearer/cylinders", "/world/shearer_path", "/plots/shearer_speed", "/plots/cycle",
+                "/plots/bend_horizontal_deg", "/plots/bend_vertical_deg", "/plots/ram_length", "/plan/axes", "/plan/pans",
+                "/plan/truth/path", "/plan/truth/position"}
     assert expected <= entities, expected - entities
-    for entity in ("/world/floor", "/world/shearer/body", "/world/shearer/drums", "/world/shearer_path"):
+    for entity in ("/world/floor", "/world/shearer/boxes", "/world/shearer/cylinders", "/world/shearer_path",
+                   "/plan/axes"):
         assert all(c.is_static for c in chunks if c.entity_path == entity)
 
-    np.testing.assert_allclose(_sim_times(chunks, "/world/pans"), [0.0, 10.0, 20.0])
-    np.testing.assert_allclose(_sim_times(chunks, "/plots/bend_horizontal_deg"), [0.0, 10.0, 20.0])
-    np.testing.assert_allclose(_sim_times(chunks, "/world/supports"), [0.0, 15.0, 25.0])
+    for entity in ("/world/pans/boxes", "/world/pans/spheres", "/plan/pans", "/plots/bend_horizontal_deg"):
+        np.testing.assert_allclose(_sim_times(chunks, entity), [0.0, 10.0, 20.0])
+    np.testing.assert_allclose(_sim_times(chunks, "/world/supports/cylinders"), [0.0, 15.0, 25.0])
+    np.testing.assert_allclose(_sim_times(chunks, "/plan/truth/path"), [0.0, 2.5])  # each cycle's path at its start
     np.testing.assert_allclose(_sim_times(chunks, "/plots/ram_length"), [0.0, 15.0, 25.0])
     shearer_t = _sim_times(chunks, "/world/shearer")
     # 5 s at 200 Hz at 0.13 m/s: on the 10 Hz grid, a row as each MARKER_STEP_M (0.05 m) of travel is passed (the
@@ -140,18 +144,68 @@ def test_record_rate_of_the_run_recording(tmp_path, rate_hz, shearer_rows):
     assert _sim_times(chunks, "/plots/shearer_speed").size == (1000 if rate_hz is None else 2)  # a flat line
 
 
-def test_pan_boxes_forward_filled(recording):
-    """Every pan-update time carries all 4 pans even though only 2 changed; bends drop the last pan."""
+def _instances(chunks, entity: str, component: str) -> list:
+    """Each temporal row's instances of `component` of `entity`, in time order."""
+    rows = []
+    for chunk in chunks:
+        if chunk.entity_path == entity and not chunk.is_static:
+            batch = chunk.to_record_batch()
+            times = batch.column(TIMELINE).cast(pa.int64()).to_numpy()
+            rows += [(t, x) for t, x in zip(times, batch.column(component).to_pylist()) if x is not None]
+    return [x for _, x in sorted(rows, key=lambda row: row[0])]
+
+
+def _static(chunks, entity: str, component: str) -> np.ndarray:
+    (values,) = [x for c in chunks if c.entity_path == entity and c.is_static
+                 for x in c.to_record_batch().column(component).to_pylist() if x is not None]
+    return np.asarray(values, float)
+
+
+def test_the_mjcf_geoms_of_every_body(recording):
+    """Pans, supports and the shearer are drawn with every geom of their MJCF piece's bodies, by type (boxes,
+    cylinders, spheres): every pan- and support-update time carries all 4 pans' and supports' geoms even though only
+    some changed; the shearer's, static in its frame, have the compiled piece's sizes and places."""
+    import mujoco
+
+    from twin.face.model import piece_model
+
+    scn = Scenario.model_construct(name="test", face=Face(azimuth_deg=30.0))
     chunks = RrdReader(recording).stream().to_chunks()
-    for entity, component, per_row in (("/world/pans", "Boxes3D:centers", 4),
-                                       ("/world/supports", "Boxes3D:half_sizes", 4),
-                                       ("/world/rams", "LineStrips3D:strips", 4)):
-        lengths = []
-        for chunk in chunks:
-            if chunk.entity_path == entity and not chunk.is_static:
-                batch = chunk.to_record_batch()
-                lengths += [len(x) for x in batch.column(component).to_pylist() if x is not None]
-        assert lengths == [per_row] * 3, entity
+    kinds = {"boxes": mujoco.mjtGeom.mjGEOM_BOX, "cylinders": mujoco.mjtGeom.mjGEOM_CYLINDER,
+             "spheres": mujoco.mjtGeom.mjGEOM_SPHERE}
+    archetype = {"boxes": "Boxes3D", "cylinders": "Cylinders3D", "spheres": "Ellipsoids3D"}
+    for piece, bodies, entity in (("pan", ("pan",), "/world/pans"), ("support", ("support", "canopy"), "/world/supports")):
+        model = piece_model(scn, piece)
+        ids = [model.body(b).id for b in bodies]
+        for shape, kind in kinds.items():
+            per_body = int(np.isin(model.geom_bodyid[model.geom_type == kind], ids).sum())
+            rows = _instances(chunks, f"{entity}/{shape}", f"{archetype[shape]}:centers")
+            assert [len(x) for x in rows] == ([4 * per_body] * 3 if per_body else []), (entity, shape)
+    # A pan's trough: its body origin (the running line) less the geom's offset, the pans standing level in t.
+    pan = piece_model(scn, "pan")
+    trough = pan.geom("trough")
+    boxes = np.asarray(_instances(chunks, "/world/pans/boxes", "Boxes3D:centers")[0], float)
+    assert boxes.shape == (8, 3)
+    truth = synthetic_truth()["truth_pans"]
+    first = truth.column("p_t_u").to_numpy()[0]
+    np.testing.assert_allclose(boxes[0, 2], first + trough.pos[2], atol=1e-3)  # the pans' yaw keeps z
+
+    model = piece_model(scn, "shearer")
+    body = model.body("shearer").id
+    assert model.body_geomnum[body] == 5  # body, two ranging arms, two drums
+    drums = model.geom_type == mujoco.mjtGeom.mjGEOM_CYLINDER
+    np.testing.assert_allclose(_static(chunks, "/world/shearer/cylinders", "Cylinders3D:radii"),
+                               model.geom_size[drums, 0])
+    np.testing.assert_allclose(_static(chunks, "/world/shearer/cylinders", "Cylinders3D:centers"),
+                               model.geom_pos[drums], atol=1e-6)
+    np.testing.assert_allclose(_static(chunks, "/world/shearer/boxes", "Boxes3D:half_sizes"),
+                               model.geom_size[model.geom_type == mujoco.mjtGeom.mjGEOM_BOX], atol=1e-6)
+    lengths = []
+    for chunk in chunks:
+        if chunk.entity_path == "/world/rams" and not chunk.is_static:
+            lengths += [len(x) for x in chunk.to_record_batch().column("LineStrips3D:strips").to_pylist()
+                        if x is not None]
+    assert lengths == [4] * 3
     bars = []
     for chunk in chunks:
         if chunk.entity_path == "/plots/bend_horizontal_deg" and not chunk.is_static:
@@ -268,3 +322,21 @@ def test_the_long_streams_in_blocks_give_the_recording_of_whole_tables(tmp_path)
     assert len(whole) == len(blocks) > 20
     for (entity_a, a), (entity_b, b) in zip(whole, blocks):
         assert entity_a == entity_b and a.equals(b), entity_a
+
+
+def test_the_plan_view_in_the_face_frame(recording):
+    """The plan's true path: along the face (y_F) across, -PLAN_SCALE times the advance (x_F) less one web depth a
+    cycle up (a 2-D view's y points down): the synthetic shearer (e 0.5, n 5 + 0.13 t at azimuth 30 deg) by hand."""
+    from twin.view.plan import PLAN_SCALE
+
+    chunks = RrdReader(recording).stream().to_chunks()
+    strips = _instances(chunks, "/plan/truth/path", "LineStrips2D:strips")
+    assert len(strips) == 2  # a strip per cycle
+    a, web = np.radians(30.0), Face().web_depth_m
+    for k, (strip,) in enumerate(strips):
+        t0 = 2.5 * k
+        e, n = 0.5, 5.0 + 0.13 * t0
+        x_f, y_f = e * np.cos(a) - n * np.sin(a), e * np.sin(a) + n * np.cos(a)
+        np.testing.assert_allclose(strip[0], [y_f, -PLAN_SCALE * (x_f - web * k)], rtol=1e-5, atol=1e-4)
+    # The pan line at every pan-update time, one point per pan.
+    assert [len(s[0]) for s in _instances(chunks, "/plan/pans", "LineStrips2D:strips")] == [4] * 3

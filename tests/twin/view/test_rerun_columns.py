@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from twin.view.record_rate import FULL, parse_record_rate, rate_label
-from twin.view.recording import path_strips
 from twin.view.rerun_columns import (
     BAND_ROWS,
     LINE_TOLERANCE,
@@ -16,6 +15,7 @@ from twin.view.rerun_columns import (
     PATH_TOLERANCE_M,
     line_rows,
     marker_rows,
+    path_strips,
     visible_rows,
 )
 
