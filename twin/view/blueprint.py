@@ -49,6 +49,8 @@ class RunContents:
     """The 3-D view's eye, framed on the face (face_eye)."""
     plan_bounds: tuple[list[float], list[float]] | None = None
     """The plan view's x and y ranges (twin.view.plan.plan_bounds); None: no plan view (no scenario)."""
+    streams: frozenset[str] | None = None
+    """The sensor streams with rows (run_dir/STREAM.parquet): the Sensors tab plots these (None: every one)."""
 
 
 def face_eye(p_t: np.ndarray, azimuth_rad: float) -> rrb.EyeControls3D:
@@ -128,25 +130,29 @@ def _face_line_tab(c: RunContents) -> rrb.Container:
 
 
 SENSOR_VIEWS = (
-    ("Accelerometer, shearer [m/s^2]", ["sensors/imu/accel"]),
-    ("Gyroscope, shearer [rad/s]", ["sensors/imu/gyro"]),
-    ("Magnetometer, shearer [uT]", ["sensors/mag"]),
-    ("Odometer distance [m]", ["sensors/odometer/**"]),
-    ("Accelerometers, supports [m/s^2]", ["sensors/support_imu/*/accel"]),
-    ("Gyroscopes, supports [rad/s]", ["sensors/support_imu/*/gyro"]),
-    ("Lowest leg and highest ram pressure [MPa]", ["sensors/pressure/extremes"]),
-    ("Fault windows (active = 1)", ["faults/**"]),
+    ("Accelerometer, shearer [m/s^2]", ["sensors/imu/accel"], "imu"),
+    ("Gyroscope, shearer [rad/s]", ["sensors/imu/gyro"], "imu"),
+    ("Magnetometer, shearer [uT]", ["sensors/mag"], "mag"),
+    ("Odometer distance [m]", ["sensors/odometer/**"], "odometer"),
+    ("Accelerometers, supports [m/s^2]", ["sensors/support_imu/*/accel"], "support_imu"),
+    ("Gyroscopes, supports [rad/s]", ["sensors/support_imu/*/gyro"], "support_imu"),
+    ("Lowest leg and highest ram pressure [MPa]", ["sensors/pressure/extremes"], "pressure"),
+    ("Fault windows (active = 1)", ["faults/**"], "faults"),
 )
-"""The Sensors tab's time-series views, one quantity and unit each: (name, contents)."""
-SENSOR_BARS = (("Push-ram extension per support [m]", "sensors/pushram"),
-               ("Leg pressure per support [MPa]", "sensors/pressure/leg_bars"),
-               ("Ram pressure per support [MPa]", "sensors/pressure/ram_bars"))
+"""The Sensors tab's time-series views, one quantity and unit each: (name, contents, the stream they come from)."""
+SENSOR_BARS = (("Push-ram extension per support [m]", "sensors/pushram", "pushram"),
+               ("Leg pressure per support [MPa]", "sensors/pressure/leg_bars", "pressure"),
+               ("Ram pressure per support [MPa]", "sensors/pressure/ram_bars", "pressure"))
 
 
-def _sensors_tab() -> rrb.Container:
-    return rrb.Grid(*(_plot(name, contents) for name, contents in SENSOR_VIEWS),
-                    *(rrb.BarChartView(name=name, origin=origin) for name, origin in SENSOR_BARS),
-                    grid_columns=4, name="Sensors")
+def _sensors_tab(c: RunContents) -> rrb.Container:
+    """The plots of the streams the run holds (all without `c.streams`)."""
+    def held(stream: str) -> bool:
+        return c.streams is None or stream in c.streams
+
+    return rrb.Grid(*(_plot(name, contents) for name, contents, stream in SENSOR_VIEWS if held(stream)),
+                    *(rrb.BarChartView(name=name, origin=origin) for name, origin, stream in SENSOR_BARS
+                      if held(stream)), grid_columns=4, name="Sensors")
 
 
 def estimate_tabs(c: RunContents) -> list[rrb.Container]:
@@ -202,6 +208,6 @@ def face_blueprint(c: RunContents) -> rrb.Blueprint:
     """The layout of a face run's recordings (module docstring)."""
     tabs = [_face_tab(c)]
     if c.truth:
-        tabs += [_face_line_tab(c), _sensors_tab()]
+        tabs += [_face_line_tab(c), _sensors_tab(c)]
     tabs += estimate_tabs(c)
     return rrb.Blueprint(rrb.Tabs(*tabs, active_tab=0), collapse_panels=True)

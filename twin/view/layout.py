@@ -78,7 +78,16 @@ def run_blueprint(run_dir: Path) -> rrb.Blueprint:
     return face_blueprint(RunContents(
         truth=truth, alignment=scn is not None and scn.alignment.mode != "none", methods=methods,
         state_methods=by_suffix["states"], fusion_methods=by_suffix["fusion"], detector_methods=by_suffix["detectors"],
-        support_attitude=any(name.endswith("_support_attitude") for name in names), eye=eye, plan_bounds=plan_bounds))
+        support_attitude=any(name.endswith("_support_attitude") for name in names), eye=eye, plan_bounds=plan_bounds,
+        streams=frozenset(p.stem for p in run_dir.glob("*.parquet") if _rows(p))))
+
+
+def _rows(path: Path) -> int:
+    """Rows of a Parquet file (0 if it cannot be read: the viewer shows what can)."""
+    try:
+        return pq.read_metadata(path).num_rows
+    except (OSError, ValueError):  # pyarrow's ArrowInvalid is a ValueError
+        return 0
 
 
 def _face_points(run_dir: Path, methods: list[str]) -> np.ndarray | None:

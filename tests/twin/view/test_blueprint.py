@@ -49,6 +49,9 @@ def _default(**kw) -> RunContents:
 def test_a_run_with_truth_has_the_face_the_sensors_and_a_tab_per_estimated_quantity():
     tabs = _tabs(face_blueprint(_default()))
     assert list(tabs)[:3] == ["Face", "Face line", "Sensors"]
+    held = _tabs(face_blueprint(_default(streams=frozenset({"imu", "mag", "odometer", "pressure", "pushram"}))))
+    sensors = [str(v.name) for v in _views(held["Sensors"])]  # no support units, no faults: no empty plots for them
+    assert len(sensors) == 8 and not any("supports" in n or "Fault" in n for n in sensors)
     assert {"Horizontal error", "Position error", "Attitude error", "Position one-sigma", "Sensor states",
             "Flags"} <= set(tabs)
     names = [str(v.name) for v in _views(tabs["Face"])]
@@ -109,7 +112,8 @@ def test_the_layout_saved_for_the_viewer(tmp_path):
     (tmp_path / "scenario.toml").write_text(scenario_to_toml(capped("default")))
     pq.write_table(pa.table({"p_t_e": [0.0, 38.5], "p_t_n": [0.0, 66.7], "p_t_u": [30.0, 32.0]}),
                    tmp_path / "truth_pans.parquet")
-    pq.write_table(pa.table({"t": [0.0]}), tmp_path / "truth_shearer.parquet")
+    for stream in ("truth_shearer", "imu"):
+        pq.write_table(pa.table({"t": [0.0]}), tmp_path / f"{stream}.parquet")
     (tmp_path / "estimates").mkdir()
     for m in METHODS:
         pq.write_table(pa.table({"t": [0.0]}), tmp_path / "estimates" / f"{m}.parquet")
@@ -163,7 +167,7 @@ def test_each_sensor_plot_holds_one_unit(sensor_units):
     accelerometer, gyroscope and magnetometer of the shearer each have a plot."""
     assert {"sensors/imu/accel", "sensors/imu/gyro", "sensors/mag"} <= set(sensor_units)
     shown = 0
-    for name, contents in SENSOR_VIEWS:
+    for name, contents, _ in SENSOR_VIEWS:
         entities = [e for e in sensor_units if any(_matches(p, e) for p in contents)]
         units = set().union(*(sensor_units[e] for e in entities)) if entities else set()
         assert len(units) <= 1, (name, units)
@@ -171,5 +175,5 @@ def test_each_sensor_plot_holds_one_unit(sensor_units):
             assert f"[{units.pop()}]" in name, name
         shown += bool(entities)
     assert shown >= 4
-    covered = {e for e in sensor_units if any(_matches(p, e) for _, c in SENSOR_VIEWS for p in c)}
+    covered = {e for e in sensor_units if any(_matches(p, e) for _, c, _ in SENSOR_VIEWS for p in c)}
     assert covered == set(sensor_units) - {e for e in sensor_units if not e.startswith(("sensors/", "faults/"))}
