@@ -342,15 +342,21 @@ class FaceSimulator:
             held[self.stations[ix.supports[pushing]] - ix.pans[0]] = False
         win.model.dof_frictionloss[ix.pan_dof[:, :2]] = np.where(held, AFC_HOLD_N, 0.0)[:, None]
 
+    def load_at_rest(self, win: Window, state: FaceState, first: int) -> tuple[np.ndarray, np.ndarray]:
+        """Load window `win` with the state's pans from `first` on and their supports, set against the roof at time 0
+        and gripping the floor by their legs' load (nothing moving); returns the window's pans and supports."""
+        pans, sups = self._load(win, state, first)
+        RoofLimits(self, win, state, sups, 0.0)
+        self._set_supports(win, np.zeros(win.index.supports.size, bool))
+        return pans, sups
+
     def settle(self, state: FaceState) -> None:
         """Let the whole face come to rest on the floor at time 0, window by window from the headgate."""
         win = self.windows[-1]
         n = self.scn.face.pan_count
         starts = list(range(0, max(1, n - win.count + 1), max(1, win.count // 2))) + [n - win.count]
         for first in starts:
-            pans, sups = self._load(win, state, first)
-            RoofLimits(self, win, state, sups, 0.0)
-            self._set_supports(win, np.zeros(win.index.supports.size, bool))
+            pans, sups = self.load_at_rest(win, state, first)
             mujoco.mj_step(win.model, win.data, nstep=2 * SETTLE_STEPS)
             self._store(win, state, pans, sups, 0.0)
 

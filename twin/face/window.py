@@ -131,7 +131,13 @@ class Window:
     @classmethod
     def compile(cls, scn: Scenario, floor: Floor, count: int) -> "Window":
         band = FloorBand.for_window(scn, floor, count)
-        model = build_face_spec(scn, band, 0, count, anchors=True).compile()
+        return cls.of_spec(scn, band, count, build_face_spec(scn, band, 0, count, anchors=True))
+
+    @classmethod
+    def of_spec(cls, scn: Scenario, band: FloorBand, count: int, spec: mujoco.MjSpec) -> "Window":
+        """The window compiled from `spec`: build_face_spec's of `count` pans on `band`, with anchors, and whatever
+        a caller added to it (twin.face.export: the shearer, lights and a camera)."""
+        model = spec.compile()
         index = index_face_model(model, scn, 0, count)
         pan_body = np.array([model.body(f"pan{i}_pan").id for i in index.pans], int)
         sup_body = np.array([model.body(f"sup{j}_support").id for j in index.supports], int)

@@ -26,6 +26,7 @@ from twin.face.pushadvance import PushAdvanceController
 from twin.face.ride import PanVersion, ride_targets_t, shoe_pans, simulate_ride
 from twin.face.simulator import WINDOW_MARGIN_PANS, FaceSimulator
 from twin.face.truth import shearer_truth
+from twin.face.window import FaceState
 from twin.pipeline.alignment_loop import AlignmentLoop
 from twin.pipeline.face_recorder import FaceRecorder, concat_rows, split_columns
 from twin.sensors.clock import sample_times
@@ -147,6 +148,17 @@ def cycles_table(timeline: Timeline) -> dict[str, np.ndarray]:
                for key in ("t_cut_end", "t_sump_end", "t_push_end", "t_end", "s_sump")}}
 
 
+def settled_face(scn: Scenario) -> tuple[FaceSimulator, FaceState]:
+    """The face a run starts from: the face simulator over the run's windows (on the scenario's floor) and the pans
+    laid on the floor with their supports set behind them, settled."""
+    rng = np.random.default_rng(scn.seed)
+    floor = Floor.from_scenario(scn, rng)
+    sim = FaceSimulator(scn, floor, window_sizes(scn))
+    state = sim.initial_supports(initial_pans(scn, floor, rng), PushAdvanceController(scn).support_lag_m())
+    sim.settle(state)
+    return sim, state
+
+
 def simulate(scn: Scenario, progress: Progress | None = None, offsets: OffsetSource | None = None) -> SimResult:
     """Run the twin for a scenario: the face events, the shearer ride and the truth, all tables in memory."""
     pieces: list[dict[str, np.ndarray]] = []
@@ -162,14 +174,10 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     `offsets` is the roof support system's per-cycle input (twin.face.drift.OffsetSource), added to the scenario's;
     `live` taps the run as it goes (LiveTaps)."""
     report = progress or (lambda stage, frac: None)
-    rng = np.random.default_rng(scn.seed)
     frame = FaceFrame(np.radians(scn.face.azimuth_deg))
-    floor = Floor.from_scenario(scn, rng)
     timeline = Timeline(scn)
-    sim = FaceSimulator(scn, floor, window_sizes(scn))
+    sim, state = settled_face(scn)
     ctrl = PushAdvanceController(scn)
-    state = sim.initial_supports(initial_pans(scn, floor, rng), ctrl.support_lag_m())
-    sim.settle(state)
     pan_x0, sup_x0 = state.pans[sim.stations, 0].copy(), state.sup_x.copy()
     strokes = StrokeControl(scn, state.ram) if scn.supports.push.control == "stroke" else None
     applied: list[np.ndarray] = []
@@ -361,5 +369,5 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     recorder.record_legs(timeline.duration, state)
     pans_tab, sups_tab = recorder.tables()
     tables = {lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab, lf.TRUTH_CYCLES.name: cycles_table(timeline)}
-    return SimResult(tables, FloorGrid.from_scenario(scn, floor), frame, timeline.duration, events, np.array(applied),
+    return SimResult(tables, FloorGrid.from_scenario(scn, sim.floor), frame, timeline.duration, events, np.array(applied),
                      [] if loop is None else loop.published, [] if loop is None else loop.path_errors)
