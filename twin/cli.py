@@ -20,6 +20,7 @@ from estimators.io.csvio import export_csv
 from estimators.io.logformat import LogError
 from estimators.shearer.config import PositioningError
 from twin.config.scenario import ScenarioError
+from twin.face.export_target import DEFAULT_WIDTH_PX, ExportError, check_width
 from twin.opcua.access import DEFAULT_ENDPOINT, PASSWORD_ENV, ServeError
 from twin.pipeline import api
 from twin.pipeline.api import default_scenario
@@ -68,6 +69,18 @@ def tcp_port(text: str) -> int:
     if not 1 <= port <= 65535:
         raise argparse.ArgumentTypeError(f"{text!r} is not a port (1..65535)")
     return port
+
+
+def image_width(text: str) -> int:
+    """--width's value: pixels within WIDTH_RANGE_PX; anything else is a usage error (one line)."""
+    try:
+        width = int(text)
+        check_width(width)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a width in pixels") from None
+    except ExportError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+    return width
 
 
 RECORD_RATE_HELP = ("rate of the time series and the replay in the Rerun recording%s [Hz] "
@@ -178,17 +191,29 @@ def main(argv: list[str] | None = None) -> int:
     p_rec.add_argument("--duration", type=float, metavar="S",
                        help="record the run's first S seconds of simulated time (default: until the run finishes)")
     p_rec.add_argument("--force", action="store_true", help="replace an existing non-empty run directory")
+    p_mod = sub.add_parser("model", help="the assembled face (pans, supports, floor, shearer) as MJCF, or rendered")
+    p_mod.add_argument("scenario", nargs="?", type=Path, help="scenario TOML (default: the shipped default.toml)")
+    p_mod.add_argument("--xml", type=Path, metavar="FILE",
+                       help="write the MuJoCo model (python -m mujoco.viewer --mjcf FILE opens it)")
+    p_mod.add_argument("--png", type=Path, metavar="FILE", help="render it offscreen (no display needed: EGL)")
+    p_mod.add_argument("--width", type=image_width, default=None,
+                       help=f"the render's width in pixels, 16:9 (default {DEFAULT_WIDTH_PX})")
+    p_mod.add_argument("--seed", type=int, help="override the scenario's random seed")
     try:
         args = parser.parse_args(argv)
         if args.command == "view" and args.port is not None and not args.web:
             parser.error("--port is the web viewer's: add --web")
+        if args.command == "model" and args.xml is None and args.png is None:
+            parser.error("model: give --xml FILE, --png FILE or both")
+        if args.command == "model" and args.width is not None and args.png is None:
+            parser.error("--width is the render's: add --png FILE")
     except SystemExit as done:  # --help, or a usage error (one line)
         return done.code
     try:
         with sigterm_as_interrupt():
             return _command(args)
     except (ScenarioError, RunDirError, LogError, PositioningError, FileNotFoundError, MonteCarloError,
-            ServeError) as err:
+            ServeError, ExportError) as err:
         print(f"longwall: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt as err:
@@ -229,6 +254,11 @@ def _command(args: argparse.Namespace) -> int:
         report = api.record(args.opcua, args.out, args.duration, force=args.force)
         from twin.opcua.recorder import summary  # the opcua extra is there: api.record said so otherwise
         print(summary(report, args.out))
+    elif args.command == "model":
+        written = api.model(args.scenario or default_scenario(), args.xml, args.png,
+                            args.width or DEFAULT_WIDTH_PX, args.seed)
+        for path, size in written.items():
+            print(f"{path} ({size / 1e3:.0f} kB)")
     return 0
 
 

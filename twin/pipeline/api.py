@@ -42,6 +42,8 @@ from twin.config.scenario import (
     scenario_to_toml,
 )
 from twin.config.turntable import Turntable
+from twin.face.export_target import DEFAULT_WIDTH_PX
+from twin.pipeline.face_model import write_face_model
 from twin.pipeline.malloc import hold_mmap_threshold
 from twin.pipeline.rundir import (
     TIMING,
@@ -203,6 +205,16 @@ def record(endpoint: str, out: str | Path, duration_s: float | None = None, *, f
         return await Recorder(endpoint, Path(out), duration_s, force).run()
 
     return asyncio.run(run())
+
+
+def model(scenario: str | Path | Scenario, xml: str | Path | None = None, png: str | Path | None = None,
+          width: int = DEFAULT_WIDTH_PX, seed: int | None = None) -> dict[Path, int]:
+    """A face scenario's face as its run starts, written as one MJCF file `xml` and/or rendered to the PNG file `png`,
+    `width` pixels wide (twin.pipeline.face_model). Returns each file written and its size [bytes]."""
+    source, scenario, _ = _loaded(scenario, seed, None)
+    if not isinstance(scenario, Scenario):
+        raise ScenarioError(f"{source}: an experiment has no face to export; give a face scenario")
+    return write_face_model(scenario, xml, png, width)
 
 
 def check_trials(trials: int, workers: int, ray_address: str | None,
