@@ -6,8 +6,10 @@
 * without truth (an imported log, estimates.rrd alone): "Face" with the estimated paths, and the estimates' one-sigma
   and states.
 
-HIDDEN_METHODS are hidden in every view (their entities' visibility off, so a user turns them on in the blueprint
-panel): dead reckoning drifts tens of metres off the face, where it would set the plots' scales. The 3-D eye and the
+HIDDEN_METHODS, and with truth every method whose error over the run is more than OFF_FACE_SEP times the best's
+(`hidden_methods`), are hidden in every view (their entities' visibility off, so a user turns them on in the
+blueprint panel): dead reckoning drifts tens of metres off the face, and a filter without fixes metres across it at
+the plan's x20, where they would set the plots' scales and cross the plan. The 3-D eye and the
 plan's bounds are set from the run's face, so no estimate off it moves them. Entities as twin.view.recording,
 twin.view.sensor_recording, twin.view.estimate_recording and twin.view.plan log them.
 """
@@ -25,6 +27,8 @@ from twin.view.estimate_recording import ATTITUDE_AXES, POSITION_AXES, STATE_GRO
 
 HIDDEN_METHODS = ("dr",)
 """Methods hidden by default (dead reckoning: no aiding, tens of metres off by the end of a run)."""
+OFF_FACE_SEP = 3.0
+"""With truth, a method whose SEP over the run exceeds this many times the best method's is hidden by default."""
 WHOLE_RUN = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
                                                   end=rrb.TimeRangeBoundary.infinite()))
 """A plot's time axis over the whole run (not a window about the time cursor)."""
@@ -51,6 +55,16 @@ class RunContents:
     """The plan view's x and y ranges (twin.view.plan.plan_bounds); None: no plan view (no scenario)."""
     streams: frozenset[str] | None = None
     """The sensor streams with rows (run_dir/STREAM.parquet): the Sensors tab plots these (None: every one)."""
+    hidden: frozenset[str] = frozenset(HIDDEN_METHODS)
+    """Methods hidden by default (hidden_methods)."""
+
+
+def hidden_methods(methods: list[str], sep_m: dict[str, float]) -> frozenset[str]:
+    """HIDDEN_METHODS and the methods whose SEP over the run (`sep_m`, metrics.json's; none without truth) is over
+    OFF_FACE_SEP times the best's."""
+    scored = {m: v for m, v in sep_m.items() if m in methods and m not in HIDDEN_METHODS and np.isfinite(v)}
+    best = min(scored.values(), default=np.inf)
+    return frozenset(HIDDEN_METHODS) | {m for m, v in scored.items() if v > OFF_FACE_SEP * best}
 
 
 def face_eye(p_t: np.ndarray, azimuth_rad: float) -> rrb.EyeControls3D:
@@ -66,35 +80,37 @@ def face_eye(p_t: np.ndarray, azimuth_rad: float) -> rrb.EyeControls3D:
     return rrb.EyeControls3D(kind=rrb.Eye3DKind.Orbital, position=eye, look_target=centre, eye_up=[0.0, 0.0, 1.0])
 
 
-def _hidden(paths: list[str]) -> dict[str, rrb.EntityBehavior]:
-    """Visibility off for the entities of HIDDEN_METHODS among `paths` (and their parents up to the method)."""
+def _hidden(paths: list[str], hidden: frozenset[str]) -> dict[str, rrb.EntityBehavior]:
+    """Visibility off for the entities of the `hidden` methods among `paths` (and their parents up to the method)."""
     out = {}
     for path in paths:
         parts = path.rstrip("/*").split("/")
         for k, part in enumerate(parts):
-            if part in HIDDEN_METHODS:
+            if part in hidden:
                 out["/".join(parts[:k + 1])] = rrb.EntityBehavior(visible=False)
                 out["/".join(parts)] = rrb.EntityBehavior(visible=False)
     return out
 
 
-def _plot(name: str, contents: list[str] | str, legend: bool = True) -> rrb.TimeSeriesView:
-    """A time-series view of `contents` over the whole run, HIDDEN_METHODS hidden, legend at LEGEND (or none)."""
+def _plot(name: str, contents: list[str] | str, legend: bool = True,
+          hidden: frozenset[str] = frozenset()) -> rrb.TimeSeriesView:
+    """A time-series view of `contents` over the whole run, the `hidden` methods hidden, legend at LEGEND (or none)."""
     paths = [contents] if isinstance(contents, str) else contents
-    return rrb.TimeSeriesView(name=name, origin="/", contents=contents, overrides=_hidden(paths), axis_x=WHOLE_RUN,
+    return rrb.TimeSeriesView(name=name, origin="/", contents=contents, overrides=_hidden(paths, hidden),
+                              axis_x=WHOLE_RUN,
                               plot_legend=LEGEND if legend else rrb.PlotLegend(visible=False))
 
 
 def face_views(c: RunContents) -> tuple[rrb.Spatial3DView, rrb.Spatial2DView | None]:
-    """The 3-D face view and the plan view, HIDDEN_METHODS hidden."""
+    """The 3-D face view and the plan view, the hidden methods hidden."""
     world = [f"world/estimates/{m}/{part}" for m in c.methods for part in ("path", "position", "rail")]
-    face = rrb.Spatial3DView(name="Face", origin="world", contents="world/**", overrides=_hidden(world),
+    face = rrb.Spatial3DView(name="Face", origin="world", contents="world/**", overrides=_hidden(world, c.hidden),
                              eye_controls=c.eye)
     if c.plan_bounds is None:
         return face, None
     flat = [f"{plan.PLAN_ROOT}/estimates/{m}/{part}" for m in c.methods for part in ("path", "position")]
     x_range, y_range = c.plan_bounds
-    return face, rrb.Spatial2DView(name=plan.PLAN_NAME, origin=plan.PLAN_ROOT, overrides=_hidden(flat),
+    return face, rrb.Spatial2DView(name=plan.PLAN_NAME, origin=plan.PLAN_ROOT, overrides=_hidden(flat, c.hidden),
                                    visual_bounds=rrb.VisualBounds2D(x_range=x_range, y_range=y_range))
 
 
@@ -159,29 +175,33 @@ def estimate_tabs(c: RunContents) -> list[rrb.Container]:
     """The estimates, one tab per quantity with every method overlaid: with truth the horizontal, east/north/up and
     attitude errors, without their one-sigma; the sensor states, the flags, fusion, detectors, the supports."""
     m, tabs = c.methods, []
+
+    def plot(name: str, contents: list[str]) -> rrb.TimeSeriesView:
+        return _plot(name, contents, hidden=c.hidden)
+
     if not m:
         return tabs
     if c.truth:
-        tabs.append(rrb.Vertical(_plot("Horizontal position error [m]", [f"plots/errors/{k}/horizontal" for k in m]),
+        tabs.append(rrb.Vertical(plot("Horizontal position error [m]", [f"plots/errors/{k}/horizontal" for k in m]),
                                  name="Horizontal error"))
-        tabs.append(rrb.Vertical(*(_plot(f"Position error {a} [m]", [f"plots/errors/{k}/{a}" for k in m])
+        tabs.append(rrb.Vertical(*(plot(f"Position error {a} [m]", [f"plots/errors/{k}/{a}" for k in m])
                                    for a in POSITION_AXES), name="Position error"))
-        tabs.append(rrb.Vertical(*(_plot(f"Attitude error phi_{a} [deg]", [f"plots/attitude_errors/{k}/{a}"
+        tabs.append(rrb.Vertical(*(plot(f"Attitude error phi_{a} [deg]", [f"plots/attitude_errors/{k}/{a}"
                                                                              for k in m])
                                    for a in ATTITUDE_AXES), name="Attitude error"))
-    tabs.append(rrb.Vertical(*(_plot(f"Position one-sigma {a} [m]", [f"plots/sigma/{k}/position/{a}" for k in m])
+    tabs.append(rrb.Vertical(*(plot(f"Position one-sigma {a} [m]", [f"plots/sigma/{k}/position/{a}" for k in m])
                                for a in POSITION_AXES), name="Position one-sigma"))
-    tabs.append(rrb.Vertical(*(_plot(f"Attitude one-sigma phi_{a} [deg]", [f"plots/sigma/{k}/attitude/{a}"
+    tabs.append(rrb.Vertical(*(plot(f"Attitude one-sigma phi_{a} [deg]", [f"plots/sigma/{k}/attitude/{a}"
                                                                               for k in m])
                                for a in ATTITUDE_AXES), name="Attitude one-sigma"))
     if c.state_methods:
-        tabs.append(rrb.Grid(*(_plot(f"{group} [{unit}]", [f"plots/{kind}/{k}/{group}" for k in c.state_methods
+        tabs.append(rrb.Grid(*(plot(f"{group} [{unit}]", [f"plots/{kind}/{k}/{group}" for k in c.state_methods
                                                              for kind in ("states", "sigma")])
                                for group, (_, _, unit) in STATE_GROUPS.items()), name="Sensor states"))
-    tabs.append(rrb.Vertical(_plot("Position fixes, ZUPTs, skipped", [f"plots/flags/{k}" for k in m]),
+    tabs.append(rrb.Vertical(plot("Position fixes, ZUPTs, skipped", [f"plots/flags/{k}" for k in m]),
                              name="Flags"))
     if c.fusion_methods:
-        tabs.append(rrb.Grid(*(_plot(title, [f"plots/fusion/{k}/{part}/**" for k in c.fusion_methods])
+        tabs.append(rrb.Grid(*(plot(title, [f"plots/fusion/{k}/{part}/**" for k in c.fusion_methods])
                                for part, title in (
                                    ("beta", "Information sharing"), ("r_yaw", "Magnetometer yaw noise sd [deg]"),
                                    ("yaw_innovation", "Yaw innovation [deg]"),
@@ -189,7 +209,7 @@ def estimate_tabs(c: RunContents) -> list[rrb.Container]:
                                    ("subfilter_errors", "Sub-filter position errors [m]" if c.truth else
                                     "Sub-filter offsets from the global estimate [m]"))), name="Fusion"))
     if c.detector_methods:
-        tabs.append(rrb.Grid(*(_plot(title, [f"plots/detectors/{k}/{part}/**" for k in c.detector_methods])
+        tabs.append(rrb.Grid(*(plot(title, [f"plots/detectors/{k}/{part}/**" for k in c.detector_methods])
                                for part, title in (("residual", "Residual chi-square"),
                                                    ("dual_state", "Dual-state chi-square"), ("fsprt", "Fading SPRT"),
                                                    ("isolated", "Rail model isolated"))), name="Detectors"))

@@ -35,7 +35,7 @@ from estimators.shearer.methods import METHODS
 from twin.config.experiments import EXPERIMENT_KIND
 from twin.config.scenario import load_face_scenario
 from twin.view import plan
-from twin.view.blueprint import HIDDEN_METHODS, RunContents, face_blueprint, face_eye
+from twin.view.blueprint import HIDDEN_METHODS, RunContents, face_blueprint, face_eye, hidden_methods
 from twin.view.recording import ESTIMATES_RRD, RUN_RRD
 from twin.view.rerun_columns import APPLICATION_ID
 
@@ -79,7 +79,18 @@ def run_blueprint(run_dir: Path) -> rrb.Blueprint:
         truth=truth, alignment=scn is not None and scn.alignment.mode != "none", methods=methods,
         state_methods=by_suffix["states"], fusion_methods=by_suffix["fusion"], detector_methods=by_suffix["detectors"],
         support_attitude=any(name.endswith("_support_attitude") for name in names), eye=eye, plan_bounds=plan_bounds,
-        streams=frozenset(p.stem for p in run_dir.glob("*.parquet") if _rows(p))))
+        streams=frozenset(p.stem for p in run_dir.glob("*.parquet") if _rows(p)),
+        hidden=hidden_methods(methods, _run_sep(run_dir))))
+
+
+def _run_sep(run_dir: Path) -> dict[str, float]:
+    """Each method's SEP over the whole run from metrics.json (none without truth, or without the file)."""
+    try:
+        estimators = json.loads((run_dir / "metrics.json").read_text()).get("estimators", {})
+        return {m: float(e["cycles"][-1]["sep"]) for m, e in estimators.items()
+                if isinstance(e, dict) and e.get("cycles")}
+    except (OSError, ValueError, AttributeError, KeyError, TypeError):
+        return {}
 
 
 def _rows(path: Path) -> int:

@@ -12,7 +12,15 @@ import pytest
 import rerun.blueprint as rrb
 from rerun.chunk import RrdReader
 
-from twin.view.blueprint import HIDDEN_METHODS, SENSOR_VIEWS, RunContents, face_blueprint, face_eye
+from twin.view.blueprint import (
+    HIDDEN_METHODS,
+    OFF_FACE_SEP,
+    SENSOR_VIEWS,
+    RunContents,
+    face_blueprint,
+    face_eye,
+    hidden_methods,
+)
 from twin.view.plan import PLAN_NAME, PLAN_SCALE
 
 pytestmark = pytest.mark.slow  # the sensor units' fixture simulates the default run (about 50 s alone)
@@ -84,6 +92,21 @@ def test_dead_reckoning_is_hidden_and_the_eye_is_on_the_face():
         dr = {p for p in _contents(view) if "/dr/" in p}
         assert dr and dr <= _hidden(view), view.name
     assert HIDDEN_METHODS == ("dr",)
+
+
+def test_a_method_far_off_the_best_is_hidden_too():
+    """With truth, a method whose SEP over the run is over OFF_FACE_SEP times the best's is hidden like dr (in the 3-D
+    view, the plan and the error plots), one just under it is not; without scores only dr is."""
+    sep = {"dr": 40.0, "dr_compensated": 0.2 * OFF_FACE_SEP * 1.01, "kf": 0.2 * OFF_FACE_SEP * 0.99,
+           "kf_cpoem_rts": 0.2}
+    hidden = hidden_methods(METHODS, sep)
+    assert hidden == {"dr", "dr_compensated"} and hidden_methods(METHODS, {}) == set(HIDDEN_METHODS)
+    tabs = _tabs(face_blueprint(_default(hidden=hidden)))
+    face, plan_view = _views(tabs["Face"])[:2]
+    (horizontal,) = _views(tabs["Horizontal error"])
+    for view in (face, plan_view, horizontal):
+        assert any("/dr_compensated" in p for p in _hidden(view)), view.name
+        assert not any("/kf" in p for p in _hidden(view)), view.name
 
 
 def test_each_kind_of_run():
