@@ -21,7 +21,9 @@ from estimators.io.logformat import LogError
 from estimators.shearer.config import PositioningError
 from twin.config.scenario import ScenarioError
 from twin.face.export_target import DEFAULT_WIDTH_PX, ExportError, check_width
+from estimators.shearer.online import ONLINE_METHODS
 from twin.opcua.access import DEFAULT_ENDPOINT, PASSWORD_ENV, ServeError
+from twin.opcua.estimator import DEFAULT_ESTIMATOR, NO_ESTIMATOR
 from twin.pipeline import api
 from twin.pipeline.api import default_scenario
 from twin.pipeline.montecarlo import MonteCarloError
@@ -185,6 +187,9 @@ def main(argv: list[str] | None = None) -> int:
     p_srv.add_argument("--twin-only", action="store_true", help="truth only, no sensor streams")
     p_srv.add_argument("--history", type=float, default=None, metavar="S",
                        help="simulated time of sensor blocks held for a client that reconnects (default 60)")
+    p_srv.add_argument("--estimator", default=DEFAULT_ESTIMATOR, metavar="METHOD",
+                       help=f"shearer positioning method run online and published under Longwall/Estimator "
+                            f"({', '.join(ONLINE_METHODS)}; {NO_ESTIMATOR}: off; default {DEFAULT_ESTIMATOR})")
     p_rec = sub.add_parser("record", help="record an OPC UA server (longwall serve) into a run directory, no truth")
     p_rec.add_argument("--opcua", required=True, metavar="ENDPOINT", help="opc.tcp://HOST:PORT of the server")
     p_rec.add_argument("--out", type=Path, required=True, help="run directory to create")
@@ -247,9 +252,11 @@ def _command(args: argparse.Namespace) -> int:
         served = api.serve(args.scenario or default_scenario(), args.out, args.seed, args.cycles,
                            endpoint=args.endpoint, speed=args.speed, publish_hz=args.publish_rate, user=args.user,
                            force=args.force, sensors=not args.twin_only, history_s=args.history,
+                           estimator=args.estimator,
                            ready=lambda: print(f"serving on {args.endpoint} (Ctrl-C stops it)", flush=True))
         print(f"published {served['simulated_s']:.0f} s of the face in {served['wall_s']:.1f} s "
-              f"({served['simulated_s'] / served['wall_s']:.0f}x real time, {served['ticks']} publications)")
+              f"({served['simulated_s'] / served['wall_s']:.0f}x real time, {served['ticks']} publications, "
+              f"{served['passes']} estimated passes)")
     elif args.command == "record":
         report = api.record(args.opcua, args.out, args.duration, force=args.force)
         from twin.opcua.recorder import summary  # the opcua extra is there: api.record said so otherwise

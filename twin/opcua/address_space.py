@@ -23,6 +23,16 @@ ones): Sequences, FirstRows, RowCounts, CompleteUntil per block and Columns (one
 rows joined) - what a client that reconnects missed; an answer that starts after FromSequence says blocks were
 lost.
 
+Estimator (`longwall serve --estimator METHOD`, twin.opcua.estimator): the shearer positioning method run online
+on the published sensor rows, updated as each pass ends: Method, ShearerPosition (the pass's last row: the face
+frame's x, y, z then the tangent plane's e, n, u [m]; its Axes property names them), ShearerPositionSigma (their
+one-sigma [m]), Time (that row's simulated time [s]), Healthy (the filter kept track over the pass), Passes, and
+the estimated path in blocks, one per pass, as the sensors' (Estimator/Path: the ESTIMATE stream's columns,
+estimators.io.logformat; SequenceNumber, FirstRow, CompleteUntil; Estimator/ReadBlocks(FromSequence) as
+Sensors/ReadBlocks). Its alarms are events of EstimatorAlarmEventType (a BaseEventType with Method,
+SimulationTime [s] and Kind: LostTrack, RailIsolated, EstimatorFailed; Message and Severity) emitted by the
+Estimator object.
+
 Run: State ("Running", then "Finished" once every block is published) and Scenario (the run's scenario TOML, what
 the estimators read their configuration from).
 """
@@ -35,8 +45,9 @@ from dataclasses import dataclass
 import numpy as np
 from asyncua import Node, Server, ua
 
-from estimators.io.logformat import Stream
+from estimators.io.logformat import ESTIMATE, Stream
 from twin.opcua.blocks import Block
+from twin.opcua.estimator import POSITION_AXES
 
 NAMESPACE = "urn:longwall-twin:opc40561"
 """The namespace of the twin's nodes."""
@@ -53,6 +64,10 @@ VARIANT_TYPES = {"f8": ua.VariantType.Double, "i8": ua.VariantType.Int64, "i4": 
                  "i1": ua.VariantType.SByte}
 """The OPC UA type of each logformat column type (the values go bit for bit)."""
 STATE_RUNNING, STATE_FINISHED = "Running", "Finished"
+ALARM_EVENT_TYPE = "EstimatorAlarmEventType"
+ALARM_FIELDS = (("Method", ua.VariantType.String), ("SimulationTime", ua.VariantType.Double),
+                ("Kind", ua.VariantType.String))
+"""The estimator's alarm events: a BaseEventType (Message, Severity, Time: wall clock) with these fields."""
 READ_BLOCKS_OUTPUTS = (("Sequences", ua.VariantType.UInt32), ("FirstRows", ua.VariantType.UInt64),
                        ("RowCounts", ua.VariantType.UInt32), ("CompleteUntil", ua.VariantType.Double),
                        ("Columns", ua.VariantType.Variant))
@@ -97,6 +112,19 @@ class SensorNodes:
 
 
 @dataclass
+class EstimatorNodes:
+    """The estimator's nodes (module docstring) and its alarms' event generator."""
+
+    position: Node
+    sigma: Node
+    time: Node
+    healthy: Node
+    passes: Node
+    path: SensorNodes
+    alarms: object
+
+
+@dataclass
 class FaceNodes:
     """The nodes the server writes and reads."""
 
@@ -108,6 +136,9 @@ class FaceNodes:
     status: Node
     sensors: dict[str, SensorNodes]
     state: Node
+    estimator: EstimatorNodes | None
+
+
 
 
 ReadBlocks = Callable[[str, int], list[ua.Variant]]
@@ -119,37 +150,68 @@ def _argument(name: str, vtype: ua.VariantType, array: bool, doc: str) -> ua.Arg
                        ArrayDimensions=[], Description=ua.LocalizedText(doc))
 
 
+async def _block_nodes(ns: int, obj: Node, stream: Stream) -> SensorNodes:
+    """A stream's block nodes under `obj`: one array per column, Units, SequenceNumber, FirstRow, CompleteUntil."""
+    await obj.add_property(ns, "Units", ua.Variant([c.unit for c in stream.columns], ua.VariantType.String))
+    columns = {c.name: await obj.add_variable(ns, c.name, column_variant(np.zeros(0), c.dtype)) for c in stream.columns}
+    return SensorNodes(columns, await obj.add_variable(ns, "SequenceNumber", ua.Variant(0, ua.VariantType.UInt32)),
+                       await obj.add_variable(ns, "FirstRow", ua.Variant(0, ua.VariantType.UInt64)),
+                       await obj.add_variable(ns, "CompleteUntil", 0.0))
+
+
+async def _add_read_blocks(ns: int, obj: Node, call, inputs: list[ua.Argument]) -> None:
+    """A ReadBlocks method under `obj` (READ_BLOCKS_OUTPUTS), `call(parent, *inputs)` answering it."""
+    await obj.add_method(ns, "ReadBlocks", call, inputs,
+                         [_argument(name, vtype, True, "per block" if name != "Columns" else
+                                    "one array per column, rows joined") for name, vtype in READ_BLOCKS_OUTPUTS])
+
+
+FROM_SEQUENCE = _argument("FromSequence", ua.VariantType.UInt32, False, "the first block's SequenceNumber wanted")
+
+
 async def _sensors(ns: int, longwall: Node, streams: dict[str, Stream], read_blocks: ReadBlocks
                    ) -> dict[str, SensorNodes]:
     """Longwall/Sensors: an object per stream (`streams`: browse name -> its logformat Stream) and ReadBlocks."""
     sensors = await longwall.add_object(ns, "Sensors")
-    out = {}
-    for name, stream in streams.items():
-        obj = await sensors.add_object(ns, name)
-        await obj.add_property(ns, "Units", ua.Variant([c.unit for c in stream.columns], ua.VariantType.String))
-        columns = {c.name: await obj.add_variable(ns, c.name, column_variant(np.zeros(0), c.dtype))
-                   for c in stream.columns}
-        out[name] = SensorNodes(columns, await obj.add_variable(ns, "SequenceNumber", ua.Variant(0, ua.VariantType.UInt32)),
-                                await obj.add_variable(ns, "FirstRow", ua.Variant(0, ua.VariantType.UInt64)),
-                                await obj.add_variable(ns, "CompleteUntil", 0.0))
+    out = {name: await _block_nodes(ns, await sensors.add_object(ns, name), stream) for name, stream in streams.items()}
 
     def call(parent, stream: ua.Variant, from_sequence: ua.Variant) -> list[ua.Variant]:
         if stream.Value not in streams:
             raise ua.UaStatusCodeError(ua.StatusCodes.BadInvalidArgument)
         return read_blocks(stream.Value, int(from_sequence.Value))
 
-    await sensors.add_method(
-        ns, "ReadBlocks", call,
-        [_argument("Stream", ua.VariantType.String, False, f"a stream's browse name ({', '.join(streams)})"),
-         _argument("FromSequence", ua.VariantType.UInt32, False, "the first block's SequenceNumber wanted")],
-        [_argument(name, vtype, True, "per block" if name != "Columns" else "one array per column, rows joined")
-         for name, vtype in READ_BLOCKS_OUTPUTS])
+    await _add_read_blocks(ns, sensors, call, [_argument("Stream", ua.VariantType.String, False,
+                                                         f"a stream's browse name ({', '.join(streams)})"),
+                                               FROM_SEQUENCE])
     return out
 
 
+async def _estimator(server: Server, ns: int, longwall: Node, method: str,
+                     read_blocks: Callable[[int], list[ua.Variant]]) -> EstimatorNodes:
+    """Longwall/Estimator (module docstring) and the alarm event type."""
+    obj = await longwall.add_object(ns, "Estimator")
+    await obj.add_variable(ns, "Method", method)
+    position = await obj.add_variable(ns, "ShearerPosition", ua.Variant([np.nan] * 6, ua.VariantType.Double))
+    sigma = await obj.add_variable(ns, "ShearerPositionSigma", ua.Variant([np.nan] * 6, ua.VariantType.Double))
+    for node in (position, sigma):
+        await node.add_property(ns, "Axes", ua.Variant(list(POSITION_AXES), ua.VariantType.String))
+    nodes = EstimatorNodes(position, sigma, await obj.add_variable(ns, "Time", np.nan),
+                           await obj.add_variable(ns, "Healthy", True),
+                           await obj.add_variable(ns, "Passes", ua.Variant(0, ua.VariantType.UInt32)),
+                           await _block_nodes(ns, await obj.add_object(ns, "Path"), ESTIMATE), None)
+    await _add_read_blocks(ns, obj, lambda parent, from_sequence: read_blocks(int(from_sequence.Value)),
+                           [FROM_SEQUENCE])
+    alarm_type = await server.create_custom_event_type(ns, ALARM_EVENT_TYPE, ua.ObjectIds.BaseEventType,
+                                                       [(name, vtype) for name, vtype in ALARM_FIELDS])
+    nodes.alarms = await server.get_event_generator(alarm_type, obj)
+    return nodes
+
+
 async def build(server: Server, n_shields: int, streams: dict[str, Stream], read_blocks: ReadBlocks,
-                scenario_toml: str) -> FaceNodes:
-    """The Longwall object and everything under it (module docstring)."""
+                scenario_toml: str, estimator: tuple[str, Callable[[int], list[ua.Variant]]] | None = None
+                ) -> FaceNodes:
+    """The Longwall object and everything under it (module docstring); `estimator`: its method and the answer of
+    its ReadBlocks (FromSequence -> blocks_variants), None without one."""
     ns = await server.register_namespace(NAMESPACE)
     longwall = await server.nodes.objects.add_object(ns, "Longwall")
     shearer_obj = await longwall.add_object(ns, "Shearer")
@@ -167,6 +229,7 @@ async def build(server: Server, n_shields: int, streams: dict[str, Stream], read
     await offsets.set_writable()
     await sequence.set_writable()
     sensors = await _sensors(ns, longwall, streams, read_blocks)
+    estimated = await _estimator(server, ns, longwall, *estimator) if estimator is not None else None
     state = await longwall.add_variable(ns, "State", STATE_RUNNING)
     await longwall.add_variable(ns, "Scenario", scenario_toml)
-    return FaceNodes(shearer, shields, offsets, sequence, applied, status, sensors, state)
+    return FaceNodes(shearer, shields, offsets, sequence, applied, status, sensors, state, estimated)

@@ -10,6 +10,10 @@ per stream per publication with rows (twin.opcua.blocks), the last `history_s` o
 ReadBlocks. When the run ends, State says Finished and the server stays up while clients are connected (at least
 MIN_LINGER_S, at most LINGER_S), so that a recorder fetches the last blocks.
 
+The estimator (`estimator`, default kf_cpoem_rts): the same sensor rows, as they reach the publisher, go to the
+method run online in a worker thread (twin.opcua.estimator); each pass is published under Longwall/Estimator once
+the publisher's clock reaches the time it became known (EstimatorPublisher), its alarms as events.
+
 Memory is bounded: the twin hands its chunks (a cycle of shearer truth, a cycle's support rows, sensor rows of
 SENSOR_CHUNK_S) through a queue of QUEUE_CHUNKS, so it runs at most that far ahead of what is published.
 
@@ -36,17 +40,28 @@ from twin.config.push import check_offsets, offset_limits
 from twin.config.scenario import Scenario, scenario_to_toml
 from twin.face.layout import support_stations
 from twin.opcua.access import PASSWORD_ENV, ServeError, check_access, parse_endpoint
-from estimators.io.logformat import STREAMS
+from estimators.io.logformat import ESTIMATE, STREAMS
 from twin.opcua.address_space import (
     HAULAGE_STATES,
     STATE_FINISHED,
+    EstimatorNodes,
     FaceNodes,
     SensorNodes,
     blocks_variants,
     build,
     column_variant,
 )
-from twin.opcua.blocks import HISTORY_S, SENSOR_NODES, BlockStream
+from twin.opcua.blocks import HISTORY_S, SENSOR_NODES, Block, BlockStream
+from twin.opcua.estimator import (
+    DEFAULT_ESTIMATOR,
+    NO_ESTIMATOR,
+    SEVERITY,
+    Alarm,
+    EstimatedPass,
+    EstimatorFeed,
+    check_method,
+    shearer_position,
+)
 from twin.pipeline.rundir import atomic_run_dir, check_target
 from twin.pipeline.simulate import LiveTaps
 
@@ -125,13 +140,83 @@ class FasInput:
         return offsets
 
 
+def server_write(server: Server):
+    """`write(node, variant)`: a node's value set by the server."""
+    async def write(node, value: ua.Variant) -> None:
+        await server.write_attribute_value(node.nodeid, ua.DataValue(value))
+    return write
+
+
+async def write_block(write, nodes: SensorNodes, stream: BlockStream, block: Block) -> None:
+    """A block's columns, FirstRow and SequenceNumber (the last: a client woken by it reads the rest) written with
+    `write(node, variant)`."""
+    for column in stream.stream.columns:
+        await write(nodes.columns[column.name], column_variant(block.columns[column.name], column.dtype))
+    await write(nodes.first_row, ua.Variant(block.first_row, ua.VariantType.UInt64))
+    await write(nodes.sequence, ua.Variant(block.sequence, ua.VariantType.UInt32))
+
+
+class EstimatorPublisher:
+    """The estimator's passes and alarms (twin.opcua.estimator) written to Longwall/Estimator once the publisher's
+    clock reaches the time each became known; its path's blocks (`path`, one per pass) held for ReadBlocks."""
+
+    def __init__(self, write, nodes: EstimatorNodes, feed: EstimatorFeed, history: int, azimuth_rad: float):
+        self.write, self.nodes, self.feed, self.azimuth_rad = write, nodes, feed, azimuth_rad
+        self.path = BlockStream(ESTIMATE, history)
+        self.waiting: list[EstimatedPass | Alarm] = []  # in the order they came
+        self.passes = 0
+
+    async def publish(self, t: float) -> None:
+        """Every pass and alarm known by t (inf: all there are)."""
+        self.waiting += self.feed.take()
+        while self.waiting and (math.isinf(t) or self._known(self.waiting[0]) <= t):
+            item = self.waiting.pop(0)
+            if isinstance(item, Alarm):
+                await self.alarm(item)
+                continue
+            self.path.add(item.columns, float(item.columns["t"][-1]))
+            await write_block(self.write, self.nodes.path, self.path, self.path.publish(math.inf))
+            await self.write(self.nodes.path.complete_until, ua.Variant(self.path.complete_until, ua.VariantType.Double))
+            t_last, position, sigma = shearer_position(item.columns, self.azimuth_rad)
+            self.passes += 1
+            for node, value in ((self.nodes.position, ua.Variant(position.tolist(), ua.VariantType.Double)),
+                                (self.nodes.sigma, ua.Variant(sigma.tolist(), ua.VariantType.Double)),
+                                (self.nodes.time, ua.Variant(t_last, ua.VariantType.Double)),
+                                (self.nodes.healthy, ua.Variant(item.healthy, ua.VariantType.Boolean)),
+                                (self.nodes.passes, ua.Variant(self.passes, ua.VariantType.UInt32))):
+                await self.write(node, value)
+            for alarm in item.alarms:
+                await self.alarm(alarm)
+        if math.isinf(t):
+            self.path.made_until = math.inf
+            await self.write(self.nodes.path.complete_until, ua.Variant(math.inf, ua.VariantType.Double))
+
+    @staticmethod
+    def _known(item: EstimatedPass | Alarm) -> float:
+        return item.t if isinstance(item, Alarm) else item.t_known
+
+    async def alarm(self, alarm: Alarm) -> None:
+        """Emit an alarm as an EstimatorAlarmEventType event of the Estimator object."""
+        await emit_alarm(self.nodes.alarms, self.feed.method, alarm)
+
+
+async def emit_alarm(generator, method: str, alarm: Alarm) -> None:
+    """An alarm as an event of `generator` (address_space.ALARM_EVENT_TYPE's)."""
+    event = generator.event
+    event.Method, event.SimulationTime, event.Kind = method, alarm.t, alarm.kind
+    event.Severity = SEVERITY[alarm.kind]
+    await generator.trigger(message=alarm.message)
+
+
 class Publisher:
     """Writes the twin's truth to the nodes at `publish_hz` of simulated time, paced at `speed` times real time."""
 
     def __init__(self, server: Server, nodes: FaceNodes, fas: FasInput, speed: float, publish_hz: float,
-                 sensors: dict[str, BlockStream]):
+                 sensors: dict[str, BlockStream], estimator: EstimatorPublisher | None = None):
         self.server, self.nodes, self.fas, self.speed, self.publish_hz = server, nodes, fas, speed, publish_hz
         self.sensors = sensors  # browse name -> its blocks
+        self.estimator = estimator
+        self._write = server_write(server)
         self.complete_until = {name: 0.0 for name in sensors}  # as last written
         self.supports: list[dict[str, np.ndarray]] = []  # rows not yet published, in time order
         self.start: tuple[float, float] | None = None  # (simulated, wall) time of the first row
@@ -162,35 +247,38 @@ class Publisher:
             self.last_tick = float(tick[-1])
         self.fas.published()
 
-    def add_rows(self, name: str, columns: dict[str, np.ndarray], made_until: float) -> None:
-        """A sensor stream's rows as the twin drew them (logformat name), published when their time comes."""
+    async def add_rows(self, name: str, columns: dict[str, np.ndarray], made_until: float) -> None:
+        """A sensor stream's rows as the twin drew them (logformat name), published when their time comes, and
+        fed to the estimator."""
         if SENSOR_NODES[name] in self.sensors:
             self.sensors[SENSOR_NODES[name]].add(columns, made_until)
+            if self.estimator is not None:
+                await self.estimator.feed.add(name, columns, made_until)
 
     async def finish(self) -> None:
-        """The run is over: every row left goes in a last block, and State says Finished."""
+        """The run is over: every row left goes in a last block, the estimator's last passes are run, and State
+        says Finished."""
         for stream in self.sensors.values():
             stream.made_until = math.inf
+        if self.estimator is not None:
+            await self.estimator.feed.finish()
         await self._blocks(math.inf)
         await self.nodes.state.write_value(STATE_FINISHED)
 
     async def _blocks(self, t: float) -> None:
-        """Each sensor stream's block of the rows up to t, if it has any; how far each is published."""
+        """Each sensor stream's block of the rows up to t, if it has any; how far each is published; the
+        estimator's passes known by t."""
         for name, stream in self.sensors.items():
             nodes: SensorNodes = self.nodes.sensors[name]
             block = stream.publish(t)
             if block is not None:
-                for column in stream.stream.columns:
-                    await self._write(nodes.columns[column.name],
-                                      column_variant(block.columns[column.name], column.dtype))
-                await self._write(nodes.first_row, ua.Variant(block.first_row, ua.VariantType.UInt64))
-                await self._write(nodes.sequence, ua.Variant(block.sequence, ua.VariantType.UInt32))
+                await write_block(self._write, nodes, stream, block)
             if stream.complete_until != self.complete_until[name]:
                 self.complete_until[name] = stream.complete_until
                 await self._write(nodes.complete_until, ua.Variant(stream.complete_until, ua.VariantType.Double))
+        if self.estimator is not None:
+            await self.estimator.publish(t)
 
-    async def _write(self, node, value: ua.Variant) -> None:
-        await self.server.write_attribute_value(node.nodeid, ua.DataValue(value))
 
     async def _pace(self, t: float) -> None:
         if self.start is None:
@@ -236,14 +324,16 @@ async def _linger(server: Server) -> None:
 
 async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
                 publish_hz: float = PUBLISH_HZ, user: str | None = None, force: bool = False, sensors: bool = True,
-                ready=None, history_s: float = HISTORY_S) -> dict:
+                ready=None, history_s: float = HISTORY_S, estimator: str | None = DEFAULT_ESTIMATOR) -> dict:
     """Serve `scn` on `endpoint` until its run ends (the run directory `out` written as it goes), each sensor
-    stream's last `history_s` of blocks held for ReadBlocks; `ready()` is called once the server listens. Returns
-    what was published: simulated time, ticks, wall time."""
+    stream's last `history_s` of blocks held for ReadBlocks, the shearer positioning method `estimator` (one of
+    ONLINE_METHODS; None: none) run on the sensor rows and published; `ready()` is called once the server listens.
+    Returns what was published: simulated time, ticks, wall time, the estimator's passes."""
     from twin.pipeline.twin_stream import stream_twin
 
     host, port = parse_endpoint(endpoint)
     check_access(host, user)
+    check_method(estimator or NO_ESTIMATOR)
     if not speed > 0:
         raise ServeError(f"--speed {speed:g}: must be above 0 (inf: as fast as the twin runs)")
     if not history_s > 0:
@@ -262,10 +352,20 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
     def read_blocks(name: str, from_sequence: int) -> list[ua.Variant]:
         return blocks_variants(streams[name].stream, streams[name].read(from_sequence))
 
+    method = check_method(estimator or NO_ESTIMATOR) if streams else None
+    estimated: EstimatorPublisher | None = None
+
+    def read_estimates(from_sequence: int) -> list[ua.Variant]:
+        return blocks_variants(ESTIMATE, estimated.path.read(from_sequence))
+
     nodes = await build(server, support_stations(scn).size, {k: v.stream for k, v in streams.items()}, read_blocks,
-                        scenario_to_toml(scn))
+                        scenario_to_toml(scn), (method, read_estimates) if method else None)
+    if method:
+        feed = EstimatorFeed(scn, method, tuple(s.stream.name for s in streams.values()))
+        estimated = EstimatorPublisher(server_write(server), nodes.estimator, feed, history,
+                                       math.radians(scn.face.azimuth_deg))
     fas = FasInput(scn, server, nodes)
-    publisher = Publisher(server, nodes, fas, speed, publish_hz, streams)
+    publisher = Publisher(server, nodes, fas, speed, publish_hz, streams, estimated)
     chunks: queue.Queue = queue.Queue(maxsize=QUEUE_CHUNKS)
     loop = asyncio.get_running_loop()
     start = time.perf_counter()
@@ -306,7 +406,7 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
                     if item["t"].size:
                         publisher.supports.append(item)
                 elif kind == "sensors":
-                    publisher.add_rows(*item)
+                    await publisher.add_rows(*item)
                 elif kind == "error":
                     raise item
                 else:
@@ -319,5 +419,5 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
         fas.stop()
         await server.stop()
     t = publisher.start
-    return {"ticks": publisher.ticks, "wall_s": wall_s,
+    return {"ticks": publisher.ticks, "wall_s": wall_s, "passes": estimated.passes if estimated else 0,
             "simulated_s": publisher.last_tick / publish_hz - (t[0] if t else 0.0)}

@@ -43,6 +43,7 @@ from twin.config.scenario import (
 )
 from twin.config.turntable import Turntable
 from twin.face.export_target import DEFAULT_WIDTH_PX
+from twin.opcua.estimator import DEFAULT_ESTIMATOR, check_method
 from twin.pipeline.face_model import write_face_model
 from twin.pipeline.malloc import hold_mmap_threshold
 from twin.pipeline.rundir import (
@@ -153,16 +154,19 @@ def _loaded(scenario: str | Path | Scenario | Experiment | Turntable, seed: int 
 def serve(scenario: str | Path | Scenario, out: str | Path | None = None, seed: int | None = None,
           cycles: int | None = None, *, endpoint: str | None = None, speed: float = 1.0, publish_hz: float | None = None,
           user: str | None = None, force: bool = False, sensors: bool = True, ready=None,
-          history_s: float | None = None) -> dict:
+          history_s: float | None = None, estimator: str = DEFAULT_ESTIMATOR) -> dict:
     """Serve a face scenario on OPC UA (twin.opcua.server; needs the opcua extra) until its run ends, the run
     directory (truth, sensor trial 0, the offsets applied) written to `out` (default runs/NAME-seedN-served) as it
     goes; each sensor stream's last `history_s` of simulated time (default twin.opcua.blocks.HISTORY_S) is held for
-    a client that reconnects. Returns the publication's figures."""
+    a client that reconnects; the shearer positioning method `estimator` (an online one, or "none") runs on the
+    published sensor rows and its estimate is published (twin.opcua.estimator). Returns the publication's
+    figures."""
     import asyncio
 
     from twin.opcua.access import DEFAULT_ENDPOINT, ServeError, check_access, parse_endpoint
 
     check_access(parse_endpoint(endpoint or DEFAULT_ENDPOINT)[0], user)
+    method = check_method(estimator)
     try:
         from twin.opcua.blocks import HISTORY_S
         from twin.opcua.server import PUBLISH_HZ
@@ -183,7 +187,7 @@ def serve(scenario: str | Path | Scenario, out: str | Path | None = None, seed: 
     check_resources(source, estimate_resources(scenario, 1, sensors, 1))
     out = Path(out) if out is not None else default_run_dir(f"{name}-served", scenario.seed)
     return asyncio.run(serve_face(scenario, out, endpoint or DEFAULT_ENDPOINT, speed, publish_hz or PUBLISH_HZ, user,
-                                  force, sensors, ready, HISTORY_S if history_s is None else history_s))
+                                  force, sensors, ready, HISTORY_S if history_s is None else history_s, method))
 
 
 def record(endpoint: str, out: str | Path, duration_s: float | None = None, *, force: bool = False) -> dict:
