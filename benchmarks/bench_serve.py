@@ -1,9 +1,11 @@
 """Benchmark: `longwall serve` publishing the default scenario on OPC UA as fast as it runs (issue 27's target: at
 least 50x real time), with an asyncua client subscribed to the shearer's position and every shield's ram stroke the
-whole time (the load of a face automation system watching it): once with the truth only (--twin-only), once with the
-sensor streams published in blocks and `longwall record` recording them (the whole run held for it, --history).
-Prints, for each, the simulated time published, the wall time, the factor of real time, the publications, the data
-changes the client received and the rows recorded.
+whole time (the load of a face automation system watching it): once with the truth only (--twin-only), then with
+the sensor streams published in blocks and `longwall record` recording them (the whole run held for it, --history),
+without the estimator (--estimator none) and with it (the default kf_cpoem_rts run online on the published rows,
+its passes published and recorded: everything published). Prints, for each, the simulated time published, the wall
+time, the factor of real time, the publications and estimated passes, the data changes the client received and the
+rows recorded, and the machine's load average before and after (a loaded machine publishes slower).
 
 Run: python benchmarks/bench_serve.py [--cycles N] [--publish-rate HZ]
 """
@@ -12,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import os
 import subprocess
 import sys
 import tempfile
@@ -67,14 +70,16 @@ async def watch(port: int, server: subprocess.Popen) -> int:
     return counter.changes
 
 
-def serve_once(cycles: int, publish_rate: float, sensors: bool) -> None:
-    """Serve (and with `sensors` record) once; print the figures."""
+def serve_once(cycles: int, publish_rate: float, sensors: bool, estimator: str) -> None:
+    """Serve (and with `sensors` record) once, running `estimator`; print the figures."""
+    load = os.getloadavg()[0]
     port = free_port()
     endpoint = f"opc.tcp://127.0.0.1:{port}"
     with tempfile.TemporaryDirectory(prefix="bench-serve-") as tmp:
         server = subprocess.Popen([sys.executable, "-m", "twin.cli", "serve", "--speed", "max", "--cycles",
                                    str(cycles), "--publish-rate", str(publish_rate), "--endpoint", endpoint,
-                                   "--out", f"{tmp}/served", *(["--history", "1e6"] if sensors else ["--twin-only"])],
+                                   "--out", f"{tmp}/served", "--estimator", estimator,
+                                   *(["--history", "1e6"] if sensors else ["--twin-only"])],
                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         if sensors:
             server.stdout.readline()  # "serving on ...": the recorder connects to a server that listens
@@ -88,7 +93,8 @@ def serve_once(cycles: int, publish_rate: float, sensors: bool) -> None:
         sys.exit(f"longwall serve failed: {err.strip().splitlines()[-1] if err.strip() else server.returncode}")
     line = out.strip().splitlines()[-1]
     factor = float(line.split("(")[1].split("x")[0])
-    print(f"{'with the sensor streams' if sensors else 'truth only'}: {line}")
+    what = f"the sensor streams, estimator {estimator}" if sensors else "truth only"
+    print(f"{what} (load average {load:.1f} before, {os.getloadavg()[0]:.1f} after, {os.cpu_count()} cores): {line}")
     print(f"  real-time factor {factor:.0f}x against the target {TARGET_X:.0f}x: "
           f"{'met' if factor >= TARGET_X else 'not met'}; the client received {changes} data changes")
     if recorded is not None:
@@ -100,8 +106,8 @@ def main() -> None:
     parser.add_argument("--cycles", type=int, default=2)
     parser.add_argument("--publish-rate", type=float, default=10.0, metavar="HZ")
     args = parser.parse_args()
-    for sensors in (False, True):
-        serve_once(args.cycles, args.publish_rate, sensors)
+    for sensors, estimator in ((False, "none"), (True, "none"), (True, "kf_cpoem_rts")):
+        serve_once(args.cycles, args.publish_rate, sensors, estimator)
 
 
 if __name__ == "__main__":

@@ -589,12 +589,18 @@ def estimate_path(run_dir: Path, method: str, stream: Stream = ESTIMATE) -> Path
     return Path(run_dir) / ESTIMATES_DIR / f"{method}{_ESTIMATE_SUFFIX[stream.name]}.parquet"
 
 
-def write_estimate(run_dir: Path, method: str, data: dict[str, np.ndarray], stream: Stream = ESTIMATE) -> Path:
+def estimate_file(run_dir: Path, method: str, stream: Stream = ESTIMATE) -> tuple[Path, Stream]:
+    """The folder of estimator `method`'s `stream` file (estimate_path) and the stream named after the file (what
+    write_stream, read_stream and StreamAppender take)."""
     path = estimate_path(run_dir, method, stream)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    return write_stream(path.parent, Stream(path.stem, stream.doc, stream.columns, stream.time_order), make_table(stream, data))
+    return path.parent, Stream(path.stem, stream.doc, stream.columns, stream.time_order)
+
+
+def write_estimate(run_dir: Path, method: str, data: dict[str, np.ndarray], stream: Stream = ESTIMATE) -> Path:
+    folder, named = estimate_file(run_dir, method, stream)
+    folder.mkdir(parents=True, exist_ok=True)
+    return write_stream(folder, named, make_table(stream, data))
 
 
 def read_estimate(run_dir: Path, method: str, stream: Stream = ESTIMATE) -> pa.Table:
-    path = estimate_path(run_dir, method, stream)
-    return read_stream(path.parent, Stream(path.stem, stream.doc, stream.columns, stream.time_order))
+    return read_stream(*estimate_file(run_dir, method, stream))

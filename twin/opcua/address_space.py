@@ -64,6 +64,8 @@ VARIANT_TYPES = {"f8": ua.VariantType.Double, "i8": ua.VariantType.Int64, "i4": 
                  "i1": ua.VariantType.SByte}
 """The OPC UA type of each logformat column type (the values go bit for bit)."""
 STATE_RUNNING, STATE_FINISHED = "Running", "Finished"
+ESTIMATOR = "Estimator"
+"""The estimator's object under Longwall."""
 ALARM_EVENT_TYPE = "EstimatorAlarmEventType"
 ALARM_FIELDS = (("Method", ua.VariantType.String), ("SimulationTime", ua.VariantType.Double),
                 ("Kind", ua.VariantType.String))
@@ -189,7 +191,7 @@ async def _sensors(ns: int, longwall: Node, streams: dict[str, Stream], read_blo
 async def _estimator(server: Server, ns: int, longwall: Node, method: str,
                      read_blocks: Callable[[int], list[ua.Variant]]) -> EstimatorNodes:
     """Longwall/Estimator (module docstring) and the alarm event type."""
-    obj = await longwall.add_object(ns, "Estimator")
+    obj = await longwall.add_object(ns, ESTIMATOR)
     await obj.add_variable(ns, "Method", method)
     position = await obj.add_variable(ns, "ShearerPosition", ua.Variant([np.nan] * 6, ua.VariantType.Double))
     sigma = await obj.add_variable(ns, "ShearerPositionSigma", ua.Variant([np.nan] * 6, ua.VariantType.Double))

@@ -9,8 +9,10 @@ and the blocks published meanwhile are fetched from the server's ring buffer: no
 longer holds them, which is said in one line and recorded in REPORT_FILE (the gap's blocks, rows and times). It ends
 when the server says the run is Finished (every block fetched) or, with a duration, once every stream is published
 past it (rows at or after it are left out). The scenario the server publishes is written as scenario.toml, which
-the estimators read their configuration from. The directory appears only when complete
-(twin.pipeline.rundir.atomic_run_dir).
+the estimators read their configuration from. A server running an estimator (`longwall serve --estimator`) has its
+estimated path recorded too, as estimates/METHOD.parquet, from Estimator/ReadBlocks the same way (a recording with
+a duration ends with the sensor streams; the estimate holds the passes published by then). The directory appears
+only when complete (twin.pipeline.rundir.atomic_run_dir).
 """
 
 from __future__ import annotations
@@ -25,9 +27,9 @@ from pathlib import Path
 from asyncua import Client, ua
 
 from estimators.io.csvio import SCENARIO_FILE
-from estimators.io.logformat import STREAMS, StreamAppender
+from estimators.io.logformat import ESTIMATE, ESTIMATES_DIR, STREAMS, Stream, StreamAppender, estimate_file
 from twin.opcua.access import ServeError, parse_endpoint
-from twin.opcua.address_space import NAMESPACE, STATE_FINISHED, column_values
+from twin.opcua.address_space import ESTIMATOR, NAMESPACE, STATE_FINISHED, column_values
 from twin.opcua.blocks import SENSOR_NODES
 from twin.pipeline.rundir import atomic_run_dir, check_target
 
@@ -49,8 +51,9 @@ LOST = (ConnectionError, OSError, asyncio.TimeoutError, ua.UaError)
 class StreamRecord:
     """One stream's recording: the next block wanted, how far it is published, the gaps lost."""
 
-    name: str  # logformat stream name
+    name: str  # logformat stream name (estimates/METHOD: the estimator's path)
     browse: str
+    stream: Stream
     appender: StreamAppender
     next_sequence: int = 1
     next_row: int = 0
@@ -76,6 +79,7 @@ class Recorder:
         self.finished = False
         self.streams: dict[str, StreamRecord] = {}
         self.nodes: dict[str, object] = {}
+        self.method: str | None = None  # the server's estimator's
 
     def datachange_notification(self, node, val, data) -> None:
         self.changed.set()
@@ -98,14 +102,26 @@ class Recorder:
                       "read": await sensors.get_child(f"{ns}:ReadBlocks")}
         published = {(await n.read_browse_name()).Name: n for n in await sensors.get_children()}
         self.stream_nodes = {}
-        for name, browse in SENSOR_NODES.items():
+
+        async def blocks(browse: str, obj, parent, read, *args) -> None:
+            """A stream's SequenceNumber, CompleteUntil and its ReadBlocks(FromSequence) under `obj`."""
+            self.stream_nodes[browse] = (
+                await obj.get_child(f"{ns}:SequenceNumber"), await obj.get_child(f"{ns}:CompleteUntil"),
+                lambda sequence: parent.call_method(read, *args, ua.Variant(sequence, ua.VariantType.UInt32)))
+
+        for browse in SENSOR_NODES.values():
             if browse in published:
-                obj = published[browse]
-                self.stream_nodes[browse] = (await obj.get_child(f"{ns}:SequenceNumber"),
-                                             await obj.get_child(f"{ns}:CompleteUntil"))
+                await blocks(browse, published[browse], sensors, self.nodes["read"],
+                             ua.Variant(browse, ua.VariantType.String))
+        children = {(await n.read_browse_name()).Name: n for n in await longwall.get_children()}
+        if ESTIMATOR in children:
+            estimator = children[ESTIMATOR]
+            self.method = await (await estimator.get_child(f"{ns}:Method")).read_value()
+            await blocks(ESTIMATOR, await estimator.get_child(f"{ns}:Path"), estimator,
+                         await estimator.get_child(f"{ns}:ReadBlocks"))
         self.changed.set()
         sub = await client.create_subscription(50, self)
-        await sub.subscribe_data_change([s for s, _ in self.stream_nodes.values()] + [self.nodes["state"]],
+        await sub.subscribe_data_change([n[0] for n in self.stream_nodes.values()] + [self.nodes["state"]],
                                         queuesize=QUEUE_SIZE)
 
     async def _reconnect(self) -> None:
@@ -137,15 +153,12 @@ class Recorder:
         """The stream's blocks from the next wanted on, appended; how far it is published."""
         complete = float(await self.stream_nodes[rec.browse][1].read_value())  # before the blocks: they cover it
         while True:
-            sequences, first_rows, counts, until, columns = await self.nodes["sensors"].call_method(
-                self.nodes["read"], ua.Variant(rec.browse, ua.VariantType.String),
-                ua.Variant(rec.next_sequence, ua.VariantType.UInt32))
+            sequences, first_rows, counts, until, columns = await self.stream_nodes[rec.browse][2](rec.next_sequence)
             if not sequences:
                 break
             if sequences[0] > rec.next_sequence:
                 self._gap(rec, sequences[0], first_rows[0])
-            stream = STREAMS[rec.name]
-            rows = {c.name: column_values(v.Value, c.dtype) for c, v in zip(stream.columns, columns)}
+            rows = {c.name: column_values(v.Value, c.dtype) for c, v in zip(rec.stream.columns, columns)}
             if self.duration_s is not None:
                 rows = {k: v[rows["t"] < self.duration_s] for k, v in rows.items()}
             rec.appender.append(rows)
@@ -166,7 +179,7 @@ class Recorder:
         if self.finished:
             return True
         return self.duration_s is not None and all(r.complete_until >= self.duration_s
-                                                   for r in self.streams.values())
+                                                   for r in self.streams.values() if r.browse != ESTIMATOR)
 
     async def run(self) -> dict:
         """Record until the run is Finished or the duration published; what was recorded (REPORT_FILE's)."""
@@ -179,8 +192,14 @@ class Recorder:
         try:
             with atomic_run_dir(self.out, self.force) as staging:
                 scenario = await self.nodes["scenario"].read_value()
-                self.streams = {browse: StreamRecord(name, browse, StreamAppender(staging, STREAMS[name]))
+                self.streams = {browse: StreamRecord(name, browse, STREAMS[name],
+                                                     StreamAppender(staging, STREAMS[name]))
                                 for name, browse in SENSOR_NODES.items() if browse in self.stream_nodes}
+                if ESTIMATOR in self.stream_nodes:
+                    folder, named = estimate_file(staging, self.method)
+                    folder.mkdir()
+                    self.streams[ESTIMATOR] = StreamRecord(f"{ESTIMATES_DIR}/{self.method}", ESTIMATOR, ESTIMATE,
+                                                           StreamAppender(folder, named))
                 try:
                     while not self._done():
                         try:

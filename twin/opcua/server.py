@@ -176,7 +176,8 @@ class EstimatorPublisher:
                 continue
             self.path.add(item.columns, float(item.columns["t"][-1]))
             await write_block(self.write, self.nodes.path, self.path, self.path.publish(math.inf))
-            await self.write(self.nodes.path.complete_until, ua.Variant(self.path.complete_until, ua.VariantType.Double))
+            await self.write(self.nodes.path.complete_until,
+                             ua.Variant(self.path.complete_until, ua.VariantType.Double))
             t_last, position, sigma = shearer_position(item.columns, self.azimuth_rad)
             self.passes += 1
             for node, value in ((self.nodes.position, ua.Variant(position.tolist(), ua.VariantType.Double)),
@@ -196,16 +197,11 @@ class EstimatorPublisher:
         return item.t if isinstance(item, Alarm) else item.t_known
 
     async def alarm(self, alarm: Alarm) -> None:
-        """Emit an alarm as an EstimatorAlarmEventType event of the Estimator object."""
-        await emit_alarm(self.nodes.alarms, self.feed.method, alarm)
-
-
-async def emit_alarm(generator, method: str, alarm: Alarm) -> None:
-    """An alarm as an event of `generator` (address_space.ALARM_EVENT_TYPE's)."""
-    event = generator.event
-    event.Method, event.SimulationTime, event.Kind = method, alarm.t, alarm.kind
-    event.Severity = SEVERITY[alarm.kind]
-    await generator.trigger(message=alarm.message)
+        """An alarm as an event of the Estimator object (address_space.ALARM_EVENT_TYPE's)."""
+        event = self.nodes.alarms.event
+        event.Method, event.SimulationTime, event.Kind = self.feed.method, alarm.t, alarm.kind
+        event.Severity = SEVERITY[alarm.kind]
+        await self.nodes.alarms.trigger(message=alarm.message)
 
 
 class Publisher:

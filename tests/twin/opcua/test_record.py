@@ -95,6 +95,21 @@ def test_a_dropped_connection_loses_no_sample(served_and_recorded):
     _same_rows(tmp / "dropped", tmp / "served")
 
 
+def test_the_served_estimate_is_recorded_whole_across_a_drop(served_and_recorded):
+    """The server's estimator (kf_cpoem_rts, the default) is recorded as estimates/kf_cpoem_rts.parquet by both
+    recorders, the one whose connection dropped included: the same rows, bit for bit, in time order, up to the
+    run's end."""
+    tmp, cli_out, _, (report, _, _) = served_and_recorded
+    got, want = (pq.read_table(tmp / run / "estimates" / "kf_cpoem_rts.parquet") for run in ("dropped", "recorded"))
+    assert got.schema.equals(want.schema, check_metadata=True) and got.num_rows == want.num_rows > 0
+    for column in want.column_names:
+        assert got.column(column).to_numpy().tobytes() == want.column(column).to_numpy().tobytes(), column
+    t = want.column("t").to_numpy()
+    imu_t = pq.read_table(tmp / "served" / "imu.parquet", columns=["t"]).column("t").to_numpy()
+    assert (np.diff(t) > 0).all() and imu_t[-1] - t[-1] < 1.0
+    assert report["rows"]["estimates/kf_cpoem_rts"] == t.size and "estimates/kf_cpoem_rts" in cli_out
+
+
 def test_the_estimators_on_the_recording_give_the_batch_runs_sep(served_and_recorded):
     """kf_cpoem_rts and fkf_rail on the recording (scored against the served run's truth, which the recording does
     not hold) and on the served run itself (the batch run of the scenario and seed): SEP per cycle within 10 %."""
