@@ -12,7 +12,8 @@ all streams cut at one time, as a log cut into consecutive pieces, which gives t
 
 Alarms (`Alarm`): a pass over which the health monitor found the filter lost track (LOST_TRACK); epochs of a pass
 with the rail model isolated by its fault detector (RAIL_ISOLATED, fkf_rail: FLAG_ISOLATED in its rows); the
-estimator stopped by a log it cannot use (FAILED). The supports' hydraulic and push-ram checks
+estimator stopped (FAILED: a log it cannot use, or any failure of its; the rows still coming are drained, so the
+face goes on being served). The supports' hydraulic and push-ram checks
 (estimators.faults) judge a whole log (windows confirmed over the run) and do not run online: they raise none.
 """
 
@@ -149,8 +150,9 @@ class EstimatorFeed:
                 self.made_until[name] = made_until
                 self._feed(min(self.made_until.values()), final=False)
             self._feed(np.inf, final=True)
-        except (PositioningError, ValueError) as err:  # a log the method cannot use: the server goes on
-            self.out.put(Alarm(FAILED, min(self.made_until.values()), f"{self.method} stopped: {err}"))
+        except Exception as err:  # whatever stops the estimator, the face goes on being served: it says why
+            said = err if isinstance(err, PositioningError) else f"{type(err).__name__}: {err}"
+            self.out.put(Alarm(FAILED, min(self.made_until.values()), f"{self.method} stopped: {said}"))
             while self.queue.get() is not None:  # the rest is not read
                 pass
 

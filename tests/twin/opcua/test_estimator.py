@@ -211,3 +211,20 @@ def test_an_unhealthy_pass_is_published_once_known_and_raises_a_lost_track_event
     got = [(e.Kind, e.Method, e.SimulationTime, e.Severity) for e in seen["events"]]
     assert got == [(LOST_TRACK, METHOD, 9.0, 800), (RAIL_ISOLATED, METHOD, 8.0, 600)]
     assert "lost track" in seen["events"][0].Message.Text
+
+
+def test_an_estimator_that_fails_says_so_and_does_not_hold_the_publisher_up():
+    """Rows the method cannot read (IMU rows without their increments): the worker hands over one EstimatorFailed
+    alarm naming the method, and takes every row added after it (more than its queue holds) without blocking."""
+    from twin.opcua.estimator import FAILED, FEED_QUEUE, EstimatorFeed
+    from twin.pipeline.api import default_scenario
+
+    async def run() -> list:
+        feed = EstimatorFeed(load_scenario(default_scenario()), "kf", ("imu",))
+        for k in range(2 * FEED_QUEUE + 2):
+            await feed.add("imu", {"t": np.arange(k, k + 1.0, 0.5)}, k + 1.0)
+        await feed.finish()
+        return feed.take()
+
+    out = asyncio.run(asyncio.wait_for(run(), 60))
+    assert len(out) == 1 and out[0].kind == FAILED and out[0].message.startswith("kf stopped: ")
