@@ -1,6 +1,7 @@
 """The shearer positioning methods by name, run on a sensor log (each an estimates/NAME stream):
 
-* 001 (estimators.shearer.positioning): ``dr``, ``dr_compensated``, ``kf``, ``kf_cpoem``, ``kf_cpoem_rts``,
+* 001 (estimators.shearer.positioning): ``dr``, ``dr_compensated``, ``kf``, ``kf_rts``, ``kf_cpoem``,
+  ``kf_cpoem_rts``,
   ``rts_offline``;
 * 003 (estimators.shearer.adaptive_federated_mag): ``ckf_mag``, ``afkf`` (need the mag stream);
 * 004 (estimators.shearer.rail_kinematics): ``fkf_rail`` (needs the push-ram stream and the support positions).
@@ -22,11 +23,12 @@ from estimators.shearer.prepare import Prepared, prepare
 from estimators.shearer.rail_kinematics import run_rail
 from estimators.shearer.solution import Solution
 
-METHODS = ("dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag", "afkf", "fkf_rail")
+METHODS = ("dr", "dr_compensated", "kf", "kf_rts", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag", "afkf",
+           "fkf_rail")
 
 
 TASKS = (("kf_cpoem_rts", "rts_offline", "dr_compensated"), ("fkf_rail",), ("afkf",), ("ckf_mag",), ("kf_cpoem",),
-         ("kf",), ("dr",))
+         ("kf_rts",), ("kf",), ("dr",))
 """The methods in groups that run together (the smoother's forward run feeds rts_offline and dr_compensated), the
 longest first, so that a pool of processes finishes together."""
 
@@ -46,6 +48,8 @@ def _run_group(log: Log, cfg: Config, prep: Prepared, group: tuple[str, ...]) ->
             out["dr_compensated"] = dead_reckoning(log, cfg, prep, smoothed.cal[-1])
     elif group[0] in ("kf", "kf_cpoem"):
         out[group[0]], _, _ = run_kf(log, cfg, prep, cpoem=group[0] == "kf_cpoem", smooth=False)
+    elif group[0] == "kf_rts":
+        _, out["kf_rts"], _ = run_kf(log, cfg, prep, cpoem=False, smooth=True)
     elif group[0] == "dr":
         out["dr"] = dead_reckoning(log, cfg, prep)
     elif group[0] in ("ckf_mag", "afkf"):

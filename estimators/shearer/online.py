@@ -10,8 +10,8 @@ estimators.shearer.positioning.KfPasses filters them. A pass's rows are the batc
 rows of the pass under way, the odometer from the last known epoch, the push-ram readings since the last pass's points,
 and the epochs' times, distance and channel (17 bytes an epoch).
 
-Methods: ``kf_cpoem_rts`` (each pass smoothed at its end, the output), ``kf_cpoem`` and ``kf`` (the forward filter) of
-001, and 004's ``fkf_rail`` (estimators.shearer.rail_kinematics.RailPasses; it reads the face survey stream too).
+Methods: ``kf_cpoem_rts`` and ``kf_rts`` (each pass smoothed at its end, the output), ``kf_cpoem`` and ``kf`` (the forward
+filter) of 001, and 004's ``fkf_rail`` (estimators.shearer.rail_kinematics.RailPasses; it reads the face survey stream too).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from estimators.shearer.prepare import Preparer
 from estimators.shearer.rail_kinematics import RailPasses
 from estimators.shearer.solution import Solution, make_solution
 
-ONLINE_METHODS = ("kf_cpoem_rts", "kf_cpoem", "kf", "fkf_rail")
+ONLINE_METHODS = ("kf_cpoem_rts", "kf_cpoem", "kf_rts", "kf", "fkf_rail")
 """The methods that run online."""
 
 _EMPTY = {stream.name: {c.name: np.zeros(0, c.dtype) for c in stream.columns} for stream in (IMU, ODOMETER, SURVEY)}
@@ -75,7 +75,8 @@ class OnlinePositioning:
         if self.passes is None and prep.segments[self.done:]:
             self.passes = (RailPasses(log, self.cfg, prep, self.cfg.isolate_by, whole=False)
                            if self.method == "fkf_rail" else
-                           KfPasses(log, self.cfg, prep, cpoem=self.method != "kf", smooth=self.method == "kf_cpoem_rts"))
+                           KfPasses(log, self.cfg, prep, cpoem=self.method.startswith("kf_cpoem"),
+                                     smooth=self.method.endswith("_rts")))
         out = []
         per_epoch = prep.steps * prep.n_samples
         for a, b in prep.segments[self.done:]:

@@ -8,6 +8,9 @@ Methods (estimators.shearer.methods runs them by name, each an estimates/NAME st
 * ``dr``            the "traditional method" of 001 section 4: free SINS attitude and odometer distance;
 * ``dr_compensated``  the same with the sensor biases, odometer scale and mounting estimated by ``kf_cpoem_rts``;
 * ``kf``            SINS/odometer filter with zero-velocity and zero-rate updates at stands;
+* ``kf_rts``        the same with the online RTS smoother run at each face end over the pass just finished (the
+                    path between the face ends' survey fixes, each pass on its own: what face alignment wants,
+                    twin.pipeline.alignment_loop);
 * ``kf_cpoem``      plus CPOEM fixes whose points come from the forward filter;
 * ``kf_cpoem_rts``  plus the online RTS smoother run at each face end over the pass just finished; the smoothed
                     points feed the next cycle's fixes, the output is the smoothed pass;

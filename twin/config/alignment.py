@@ -14,7 +14,7 @@ from twin.config.section import Section, between
 class Alignment(Section):
     """The face alignment loop (none: open loop, the face drifts)."""
 
-    mode: Literal["none", "truth", "kf_cpoem_rts", "kf_cpoem", "kf", "fkf_rail"] = "none"
+    mode: Literal["none", "truth", "kf_rts", "kf_cpoem_rts", "kf_cpoem", "kf", "fkf_rail"] = "none"
     """Path fed to the alignment system: none (open loop), truth (the true shearer path of each shear: the upper bound
     of what an estimator can give), or a shearer positioning method run online on the run's own readings (001's
     filters, 004's fkf_rail; twin.pipeline.alignment_loop.EstimatedShears)."""

@@ -165,8 +165,8 @@ class Rates(Section):
 class ShearerPositioning(Section):
     """The shearer positioning estimators of 001 that `longwall run` / `longwall estimate` run on the log."""
 
-    methods: list[Literal["dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag",
-                          "afkf", "fkf_rail"]] = [
+    methods: list[Literal["dr", "dr_compensated", "kf", "kf_rts", "kf_cpoem", "kf_cpoem_rts", "rts_offline",
+                          "ckf_mag", "afkf", "fkf_rail"]] = [
         "dr", "dr_compensated", "kf", "kf_cpoem", "kf_cpoem_rts", "rts_offline"]
     """estimators.shearer.positioning METHODS; an empty list runs none."""
     tuning: Literal["ours", "appendix_a"] = "ours"

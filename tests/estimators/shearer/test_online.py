@@ -34,7 +34,7 @@ def _pieces(streams, edges):
                for name, cols in streams.items()}
 
 
-@pytest.mark.parametrize("method", ["kf_cpoem_rts", "kf", "fkf_rail"])
+@pytest.mark.parametrize("method", ["kf_cpoem_rts", "kf_rts", "kf", "fkf_rail"])
 def test_a_log_fed_in_pieces_gives_the_batch_rows_pass_by_pass(default_streams, method):
     """Cut anywhere (inside passes, inside stands, a cut of 0.3 s), the online run's passes joined are the batch
     method's epochs 1.. bit for bit; a pass comes out as soon as its cut has ended, before the log does; the IMU
