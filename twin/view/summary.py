@@ -34,11 +34,15 @@ class ShearerStats:
 
 
 def twin_summary(scn: Scenario, tables: dict[str, dict[str, np.ndarray]], shearer: ShearerStats,
-                 offsets_m: np.ndarray | None = None, sequences: list[int] | None = None) -> dict:
+                 offsets_m: np.ndarray | None = None, sequences: list[int] | None = None,
+                 path_errors: list[dict[str, float]] | None = None) -> dict:
     """The run's summary (metrics.json "twin") from the face's truth tables and the shearer's statistics: per cycle
     the pans' and supports' advance errors, the face line's straightness (RMS and max deviation from its best-fit
     line) and creep (estimators.face.straightness), the offsets its push applied (`offsets_m`, cycles x supports) and
-    the face alignment system's sequence number after its shear (`sequences`, in a closed loop)."""
+    the face alignment system's sequence number after its shear (`sequences`, in a closed loop) and, in a loop fed by
+    an estimator, the errors of its path over the cycle's shear (`path_errors`: twin.pipeline.alignment_loop's SEP
+    and RMS across the face about the best-fit line, what the offsets see)."""
+    shear_errors = {e["shear"]: e for e in path_errors or []}
     pans, sups, cycles = tables["truth_pans"], tables["truth_supports"], tables["truth_cycles"]
     n_pan = scn.face.pan_count
     n_sup = int(sups["support"].max()) + 1
@@ -56,7 +60,9 @@ def twin_summary(scn: Scenario, tables: dict[str, dict[str, np.ndarray]], sheare
             "straightness_rms_mm": float(line.straightness_rms[k] * 1e3),
             "straightness_max_mm": float(line.straightness_max[k] * 1e3), "creep_mm": float(line.creep[k] * 1e3),
             "offsets_rms_mm": float(np.sqrt(np.mean(offsets_m[k] ** 2)) * 1e3) if offsets_m is not None else 0.0,
-            **({"alignment_sequence": int(sequences[k])} if sequences else {})})
+            **({"alignment_sequence": int(sequences[k])} if sequences else {}),
+            **({"path_sep_mm": shear_errors[k]["sep_m"] * 1e3, "path_across_rms_mm": shear_errors[k]["x_rms_m"] * 1e3}
+               if k in shear_errors else {})})
     return {
         "scenario": scn.name, "seed": scn.seed, "simulated_s": duration,
         "shearer_samples": shearer.samples, "pan_updates": int(pans["t"].size),
@@ -85,4 +91,9 @@ def format_summary(summary: dict, wall_s: float) -> str:
                      f" {c['offsets_rms_mm']:>12.1f}")
     if summary.get("alignment", "none") != "none":
         lines.append(f"face alignment: {summary['alignment']} path, offsets applied on the next shear")
+    scored = [c for c in summary["cycles"] if "path_sep_mm" in c]
+    if scored:
+        lines.append(f"its path over {len(scored)} shears: SEP median "
+                     f"{np.median([c['path_sep_mm'] for c in scored]):.0f} mm, across the face about its best-fit line "
+                     f"RMS median {np.median([c['path_across_rms_mm'] for c in scored]):.1f} mm")
     return "\n".join(lines)

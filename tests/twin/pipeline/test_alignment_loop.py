@@ -62,6 +62,13 @@ def test_an_estimator_steers_with_the_offsets_its_saved_readings_give(estimator_
     truth.observe(res.tables["truth_shearer"])
     diff = np.abs(truth.published[0].offsets_m - res.offsets[1]).max()
     assert 1e-5 < diff < 0.02, diff
+    stats = ShearerStats()
+    stats.update(res.tables["truth_shearer"])
+    summary = twin_summary(scn, res.tables, stats, res.offsets, [a.sequence for a in res.alignment], res.path_errors)
+    assert [e["shear"] for e in res.path_errors] == [0, 1]
+    for c, e in zip(summary["cycles"], res.path_errors):  # the estimate's errors beside the straightness it gave
+        assert c["path_sep_mm"] == e["sep_m"] * 1e3 and 0.0 < c["path_across_rms_mm"] < c["path_sep_mm"]
+    assert "its path over 2 shears: SEP median" in format_summary(summary, 1.0)
 
 
 def test_an_estimator_that_lost_track_does_not_steer(estimator_fed):
