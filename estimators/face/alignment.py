@@ -14,6 +14,16 @@ term fills smoothly; the path alone, taken as the line, is not: on drift_200 a s
 its neighbours', and the path's deviation from its best-fit line correlated with the pan line's at -0.1 to 0.1; the
 solved line at 0.91-0.94, its error 1.6-1.8 mm RMS of 3.7-5.0. With no shoe spacing the path is the line.
 
+That is the true body point's path. An inertial estimate of it is not: the filter holds the machine's velocity along
+its body axis (the non-holonomic constraint, estimators.shearer), and the body's heading is the chord between the
+shoes, so the path it gives integrates the chord's slope, (L(y + a) - L(y - a)) / 2a, and is the line's mean over the
+shoe span, p(y) = 1/(2a) integral of L from y - a to y + a: blind at wavelengths 2a / m and of the opposite sign
+between them, where the two-shoe model reads a kink backwards and the loop steered it further out. `path_model`
+says which the path is ("shoes" for the truth, "heading" for an estimate); on face_alignment open loop (12 cycles),
+the line's error about its best-fit line against the truth's, per shear: kf_rts 5.3 mm growing to 17.9 mm with the
+two-shoe model, 3.0-5.3 mm with the heading model; kf_cpoem_rts 5.7-19.4 and 3.7-10.4 mm; the true path 1.6-4.0
+and 5.4-16.4 mm.
+
 Not everywhere: at the gate where the cut starts, the pans were pushed a web during the last shear's snake sumping,
 and the snake runs back down to the unpushed line; the path there says nothing of the line the rest of the cut
 sees. Shields within `end_zone_m` of the start of the path are left out (the sump and the snake: the shearer's length
@@ -64,6 +74,7 @@ note saying why.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from scipy.optimize import lsq_linear
@@ -74,6 +85,9 @@ LINE_SMOOTHING = 0.03
 """Weight of the line's second differences against the path's misfit when the line is solved from the two-shoe mean
 (module docstring; the line's correlation with the truth on drift_200: 0.91-0.94 at 0.01, 0.89-0.92 at 0.1, 0.71 at
 1)."""
+HEADING_POINTS = 29
+"""Points of the trapezoidal mean over the shoe span in the heading path model (a 7 m span: one every 0.25 m, under
+the pans' 1.5-2 m)."""
 LIMIT_MARGIN = 0.95
 """Share of each limit the offsets are brought within (the bounded solver meets its bounds to about 1e-10; the
 twin's check_offsets holds the exact limits)."""
@@ -104,6 +118,9 @@ class AlignmentConfig:
     """Length of the path from its start whose face line is left out (the last shear's sump and snake)."""
     shoe_spacing_m: float = 0.0
     """Distance between the shearer's shoes on the pans (0: the path is the line itself)."""
+    path_model: Literal["shoes", "heading"] = "shoes"
+    """What the path is of the line (module docstring): the two-shoe mean (the true body point) or the mean over the
+    shoe span (an inertial estimate, which integrates the machine's heading)."""
     path_ends_m: tuple[float, float] | None = None
     """Along-face y of a straight cut's two ends on the face as installed (the shearer's reversal points, half its
     length in from each face end): the face's creep is measured against them (None: the shields stay at
@@ -171,12 +188,24 @@ def _interpolation(y: np.ndarray, y_st: np.ndarray) -> np.ndarray:
     return m
 
 
-def rail_line(path_x: np.ndarray, rows: np.ndarray, station_y_m: np.ndarray, shoe_spacing_m: float) -> np.ndarray:
-    """The pan line at the shields from the path at the shields `path_x`, using the shields `rows` (mask): the
-    least-squares line whose two-shoe mean is the path (module docstring)."""
-    n = station_y_m.size
+def path_kernel(station_y_m: np.ndarray, shoe_spacing_m: float, path_model: str) -> np.ndarray:
+    """(n, n): the path at the shields from the line at the shields, as `path_model` sees it (module docstring): the
+    two-shoe mean, or the trapezoidal mean over the shoe span (HEADING_POINTS)."""
     a = shoe_spacing_m / 2
-    mean = 0.5 * (_interpolation(station_y_m - a, station_y_m) + _interpolation(station_y_m + a, station_y_m))
+    if path_model == "shoes":
+        return 0.5 * (_interpolation(station_y_m - a, station_y_m) + _interpolation(station_y_m + a, station_y_m))
+    w = np.full(HEADING_POINTS, 1.0 / (HEADING_POINTS - 1))
+    w[[0, -1]] *= 0.5
+    return sum(wk * _interpolation(station_y_m + dy, station_y_m)
+               for wk, dy in zip(w, np.linspace(-a, a, HEADING_POINTS)))
+
+
+def rail_line(path_x: np.ndarray, rows: np.ndarray, station_y_m: np.ndarray, shoe_spacing_m: float,
+              path_model: str = "shoes") -> np.ndarray:
+    """The pan line at the shields from the path at the shields `path_x`, using the shields `rows` (mask): the
+    least-squares line whose path (path_kernel) is the path (module docstring)."""
+    n = station_y_m.size
+    mean = path_kernel(station_y_m, shoe_spacing_m, path_model)
     d2 = np.diff(np.eye(n), 2, axis=0)
     lhs = np.vstack([mean[rows], np.sqrt(LINE_SMOOTHING) * d2])
     rhs = np.concatenate([path_x[rows], np.zeros(n - 2)])
@@ -249,7 +278,7 @@ class FaceAlignmentSystem:
             held = ""
         line = np.full(y_st.size, np.nan)
         if valid.any():
-            line[valid] = (rail_line(path_x, valid, y_st, cfg.shoe_spacing_m) if cfg.shoe_spacing_m > 0
+            line[valid] = (rail_line(path_x, valid, y_st, cfg.shoe_spacing_m, cfg.path_model) if cfg.shoe_spacing_m > 0
                            else path_x)[valid]
         if held:
             note = f"face alignment {label}: {held}: offsets of sequence {self.last.sequence} held"

@@ -38,7 +38,8 @@ from twin.sensors.streams import ShearerSensors, SupportSensors
 
 def alignment_config(scn: Scenario) -> AlignmentConfig:
     """The alignment system's figures for a scenario's face: the shields' push points along the face, the stroke
-    and bend limits twin.config.push.check_offsets holds offsets to, and the [alignment] section's settings."""
+    and bend limits twin.config.push.check_offsets holds offsets to, and the [alignment] section's settings; the path
+    is the body point's in truth mode, an estimator's otherwise (estimators.face.alignment's path models)."""
     f, a, p = scn.face, scn.alignment, scn.pattern
     bend = math.radians(f.bend_limit_horizontal_deg)
     return AlignmentConfig(
@@ -52,7 +53,7 @@ def alignment_config(scn: Scenario) -> AlignmentConfig:
         planned_slope=0.0 if a.target == "square" else None, max_turn_rad=math.radians(a.max_turn_deg),
         min_coverage=a.min_coverage,
         end_zone_m=scn.shearer.length_m + (p.push_lag_pans + p.snake_length_pans + 2) * f.pan_length_m,
-        shoe_spacing_m=scn.shearer.shoe_spacing_m,
+        shoe_spacing_m=scn.shearer.shoe_spacing_m, path_model="shoes" if a.mode == "truth" else "heading",
         path_ends_m=(scn.shearer.length_m / 2, f.pan_count * f.pan_length_m - scn.shearer.length_m / 2),
     )
 

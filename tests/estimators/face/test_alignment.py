@@ -64,6 +64,31 @@ def test_the_line_under_a_two_shoe_machine_is_recovered_from_its_path():
     assert np.std(solved[inner] - line[inner]) < 0.6 * np.std(line[inner])
 
 
+def test_an_inertial_path_is_the_line_under_the_machines_heading():
+    """An inertial estimate's path integrates the machine's heading, the chord between its shoes (here by a running sum
+    of the chord's slope on a 1 cm grid, not the kernel's mean): read with the heading model it gives back the line (a
+    10 m and a 45 m wave, 16 mm RMS) within 15 % (2.0 mm: the shields' shares average the path); read as a two-shoe mean the 10 m wave comes back turned over (the two
+    kernels' signs differ between wavelengths 7 and 14 m), which the loop would steer further out."""
+    y_st = _cfg().station_y_m
+    short, long_ = 0.010 * np.sin(2 * np.pi * y_st / 10.0), 0.020 * np.sin(2 * np.pi * y_st / 45.0)
+    line, a = short + long_, 3.5
+    y = np.arange(y_st[0] + a, y_st[-1] - a, 0.01)
+    chord = (np.interp(y + a, y_st, line) - np.interp(y - a, y_st, line)) / (2 * a)
+    x = np.concatenate([[0.0], np.cumsum(0.5 * (chord[1:] + chord[:-1]) * np.diff(y))])
+    x += np.mean(line[(y_st > y[0] + a) & (y_st < y[0] + 3 * a)]) - x[0]  # any constant: the target takes it out
+    p_st, _ = path_at_shields(np.column_stack([x, y, 0 * y]), np.zeros(y.size), y_st, SPACING_M)
+    rows = np.isfinite(p_st)
+    inner = rows & (y_st > y_st[0] + 2 * a) & (y_st < y_st[-1] - 2 * a)
+
+    def about_line(v):
+        return v[inner] - np.polyval(np.polyfit(y_st[inner], v[inner], 1), y_st[inner])
+
+    heading = rail_line(p_st, rows, y_st, 2 * a, "heading")
+    assert np.sqrt(np.mean((about_line(heading) - about_line(line)) ** 2)) < 0.15 * np.std(about_line(line))
+    shoes = rail_line(p_st, rows, y_st, 2 * a, "shoes")
+    assert np.corrcoef(about_line(shoes - long_), short[inner])[0, 1] < -0.5
+
+
 def test_offsets_within_the_limits_are_the_smoothing_solve():
     """With no bound active the offsets are argmin |o - d|^2 + lambda |D2 o|^2: (I + lambda D2'D2) o = d, solved here
     directly (not through the double running sum)."""
