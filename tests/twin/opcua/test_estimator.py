@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import subprocess
-import sys
 from types import SimpleNamespace
 
 import numpy as np
@@ -16,6 +14,7 @@ from estimators.io.log import log_from_columns
 from estimators.io.logformat import ESTIMATE, FLAG_ISOLATED, STREAMS, read_stream
 from estimators.shearer.methods import estimate
 from estimators.shearer.online import OnlinePositioning
+from tests.twin.opcua.conftest import served
 from twin.cli import main
 from twin.config.scenario import load_scenario
 from twin.opcua.estimator import FED_STREAMS, LOST_TRACK, RAIL_ISOLATED, EstimatedPass, pass_alarms
@@ -110,15 +109,7 @@ def test_the_served_estimate_is_the_method_run_on_the_served_logs(asyncua, tmp_p
     batch method's rows; ShearerPosition is its last row, its sigma above 0, within 4 sigma of the truth at its
     Time; the alarm events received are those the offline passes raise."""
     port, out = free_port(), tmp_path / "served"
-    server = subprocess.Popen([sys.executable, "-m", "twin.cli", "serve", "--cycles", "2", "--speed", "max",
-                               "--endpoint", f"opc.tcp://127.0.0.1:{port}", "--out", str(out)],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        seen = asyncio.run(asyncio.wait_for(_served_client(asyncua, port), 600))
-        stdout, stderr = server.communicate(timeout=120)
-    finally:
-        server.kill()
-    assert server.returncode == 0, stderr[-2000:]
+    seen, stdout = served(2, port, out, lambda: _served_client(asyncua, port), 600, 120)
     scn = load_scenario(out / "scenario.toml")
     cfg = positioning_config(scn)
     streams = {name: read_stream(out, STREAMS[name]).to_pydict() for name in FED_STREAMS}

@@ -4,13 +4,12 @@ client, and who may connect."""
 from __future__ import annotations
 
 import asyncio
-import subprocess
-import sys
 
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from tests.twin.opcua.conftest import served
 from twin.cli import main
 from twin.config.scenario import load_scenario
 from twin.view.layout import free_port
@@ -74,15 +73,7 @@ def test_a_client_reads_the_shearer_moving_and_its_offsets_steer_the_next_shear(
     shield's ram stroke; the offsets it writes during a cycle are applied on the next one only (alignment.parquet),
     and the pans' advance over that cycle is a web plus the offset (truth_pans)."""
     port, out = free_port(), tmp_path / "served"
-    server = subprocess.Popen([sys.executable, "-m", "twin.cli", "serve", "--cycles", "3", "--speed", "max",
-                               "--endpoint", f"opc.tcp://127.0.0.1:{port}", "--out", str(out)],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        seen = asyncio.run(asyncio.wait_for(_client(asyncua, port), 300))
-        stdout, stderr = server.communicate(timeout=600)
-    finally:
-        server.kill()
-    assert server.returncode == 0, stderr[-2000:]
+    seen, stdout = served(3, port, out, lambda: _client(asyncua, port), 300, 600)
     assert "x real time" in stdout
     assert np.ptp(seen["seen"]) > 0 and seen["ram"] > 0
     cycle = seen["written_in"] + 1
