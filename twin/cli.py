@@ -256,7 +256,7 @@ def _command(args: argparse.Namespace) -> int:
                            ready=lambda: print(f"serving on {args.endpoint} (Ctrl-C stops it)", flush=True))
         print(f"published {served['simulated_s']:.0f} s of the face in {served['wall_s']:.1f} s "
               f"({served['simulated_s'] / served['wall_s']:.0f}x real time, {served['ticks']} publications, "
-              f"{served['passes']} estimated passes)")
+              f"{served['passes']} estimated passes, {served['hydraulic_alarms']} hydraulic alarms)")
     elif args.command == "record":
         report = api.record(args.opcua, args.out, args.duration, force=args.force)
         from twin.opcua.recorder import summary  # the opcua extra is there: api.record said so otherwise

@@ -33,6 +33,12 @@ Sensors/ReadBlocks). Its alarms are events of EstimatorAlarmEventType (a BaseEve
 SimulationTime [s] and Kind: LostTrack, RailIsolated, EstimatorFailed; Message and Severity) emitted by the
 Estimator object.
 
+Hydraulic alarms (with the PushRam and Pressure sensors, estimators.faults.online_checks): each fault the supports'
+hydraulic and push-ram checks find on the rows served, once, as an event of HydraulicAlarmEventType (a BaseEventType
+with Support (0 for the headgate's first shield), Kind (hydraulic_checks' kinds: ram_stall, failed_set, ...), Cause
+(face or sensor) and SimulationTime (when the logs confirmed it [s]); Message and Severity) emitted by the
+RoofSupportSystem object.
+
 Run: State ("Running", then "Finished" once every block is published) and Scenario (the run's scenario TOML, what
 the estimators read their configuration from).
 """
@@ -45,8 +51,9 @@ from dataclasses import dataclass
 import numpy as np
 from asyncua import Node, Server, ua
 
+from estimators.faults.online_checks import CHECKED_STREAMS
 from estimators.io.logformat import ESTIMATE, Stream
-from twin.opcua.blocks import Block
+from twin.opcua.blocks import SENSOR_NODES, Block
 from twin.opcua.estimator import POSITION_AXES
 
 NAMESPACE = "urn:longwall-twin:opc40561"
@@ -70,6 +77,10 @@ ALARM_EVENT_TYPE = "EstimatorAlarmEventType"
 ALARM_FIELDS = (("Method", ua.VariantType.String), ("SimulationTime", ua.VariantType.Double),
                 ("Kind", ua.VariantType.String))
 """The estimator's alarm events: a BaseEventType (Message, Severity, Time: wall clock) with these fields."""
+HYDRAULIC_ALARM_EVENT_TYPE = "HydraulicAlarmEventType"
+HYDRAULIC_ALARM_FIELDS = (("Support", ua.VariantType.UInt32), ("Kind", ua.VariantType.String),
+                          ("Cause", ua.VariantType.String), ("SimulationTime", ua.VariantType.Double))
+"""The supports' hydraulic alarm events: a BaseEventType with these fields."""
 READ_BLOCKS_OUTPUTS = (("Sequences", ua.VariantType.UInt32), ("FirstRows", ua.VariantType.UInt64),
                        ("RowCounts", ua.VariantType.UInt32), ("CompleteUntil", ua.VariantType.Double),
                        ("Columns", ua.VariantType.Variant))
@@ -139,6 +150,8 @@ class FaceNodes:
     sensors: dict[str, SensorNodes]
     state: Node
     estimator: EstimatorNodes | None
+    hydraulic_alarms: object | None
+    """The hydraulic alarms' event generator (None without the PushRam and Pressure sensors)."""
 
 
 
@@ -213,7 +226,8 @@ async def build(server: Server, n_shields: int, streams: dict[str, Stream], read
                 scenario_toml: str, estimator: tuple[str, Callable[[int], list[ua.Variant]]] | None = None
                 ) -> FaceNodes:
     """The Longwall object and everything under it (module docstring); `estimator`: its method and the answer of
-    its ReadBlocks (FromSequence -> blocks_variants), None without one."""
+    its ReadBlocks (FromSequence -> blocks_variants), None without one; the hydraulic alarms' event type with the
+    PushRam and Pressure streams."""
     ns = await server.register_namespace(NAMESPACE)
     longwall = await server.nodes.objects.add_object(ns, "Longwall")
     shearer_obj = await longwall.add_object(ns, "Shearer")
@@ -232,6 +246,11 @@ async def build(server: Server, n_shields: int, streams: dict[str, Stream], read
     await sequence.set_writable()
     sensors = await _sensors(ns, longwall, streams, read_blocks)
     estimated = await _estimator(server, ns, longwall, *estimator) if estimator is not None else None
+    hydraulic_alarms = None
+    if {SENSOR_NODES[name] for name in CHECKED_STREAMS} <= streams.keys():
+        alarm_type = await server.create_custom_event_type(ns, HYDRAULIC_ALARM_EVENT_TYPE, ua.ObjectIds.BaseEventType,
+                                                           list(HYDRAULIC_ALARM_FIELDS))
+        hydraulic_alarms = await server.get_event_generator(alarm_type, rss)
     state = await longwall.add_variable(ns, "State", STATE_RUNNING)
     await longwall.add_variable(ns, "Scenario", scenario_toml)
-    return FaceNodes(shearer, shields, offsets, sequence, applied, status, sensors, state, estimated)
+    return FaceNodes(shearer, shields, offsets, sequence, applied, status, sensors, state, estimated, hydraulic_alarms)

@@ -13,8 +13,8 @@ all streams cut at one time, as a log cut into consecutive pieces, which gives t
 Alarms (`Alarm`): a pass over which the health monitor found the filter lost track (LOST_TRACK); epochs of a pass
 with the rail model isolated by its fault detector (RAIL_ISOLATED, fkf_rail: FLAG_ISOLATED in its rows); the
 estimator stopped (FAILED: a log it cannot use, or any failure of its; the rows still coming are drained, so the
-face goes on being served). The supports' hydraulic and push-ram checks
-(estimators.faults) judge a whole log (windows confirmed over the run) and do not run online: they raise none.
+face goes on being served). The supports' hydraulic and push-ram checks raise their own
+(twin.opcua.server.HydraulicAlarms).
 """
 
 from __future__ import annotations

@@ -14,6 +14,10 @@ The estimator (`estimator`, default kf_cpoem_rts): the same sensor rows, as they
 method run online in a worker thread (twin.opcua.estimator); each pass is published under Longwall/Estimator once
 the publisher's clock reaches the time it became known (EstimatorPublisher), its alarms as events.
 
+The supports' hydraulic and push-ram checks run on the PushRam and Pressure rows as they reach the publisher, on a
+sliding window (estimators.faults.online_checks, in an executor: the server keeps answering its clients); each fault
+they find is an event of the RoofSupportSystem once (HydraulicAlarms).
+
 Memory is bounded: the twin hands its chunks (a cycle of shearer truth, a cycle's support rows, sensor rows of
 SENSOR_CHUNK_S) through a queue of QUEUE_CHUNKS, so it runs at most that far ahead of what is published.
 
@@ -36,6 +40,8 @@ import numpy as np
 from asyncua import Server, ua
 from asyncua.server.user_managers import User, UserManager, UserRole
 
+from estimators.faults.hydraulic_checks import Attribution
+from estimators.faults.online_checks import CHECKED_STREAMS, OnlineChecks
 from twin.config.push import check_offsets, offset_limits
 from twin.config.scenario import Scenario, scenario_to_toml
 from twin.face.layout import support_stations
@@ -62,6 +68,7 @@ from twin.opcua.estimator import (
     check_method,
     shearer_position,
 )
+from twin.pipeline.estimate import hydraulic_layout, ram_layout
 from twin.pipeline.rundir import atomic_run_dir, check_target
 from twin.pipeline.simulate import LiveTaps
 
@@ -75,6 +82,8 @@ LINGER_S = 30.0
 """After the run, the server stays up at most this long [s of wall time] while clients are connected."""
 MIN_LINGER_S = 5.0
 """... and at least this long, for a recorder reconnecting just then."""
+HYDRAULIC_SEVERITY = {"face": 700, "sensor": 500}
+"""The hydraulic alarms' OPC UA severity (1..1000) by cause: the face's faults stop the supports, a sensor's misleads."""
 
 
 class _PasswordUsers(UserManager):
@@ -204,14 +213,42 @@ class EstimatorPublisher:
         await self.nodes.alarms.trigger(message=alarm.message)
 
 
+class HydraulicAlarms:
+    """The supports' checks (estimators.faults.online_checks) run on the PushRam and Pressure rows `add`ed; each new
+    fault an event of `generator` (address_space.HYDRAULIC_ALARM_EVENT_TYPE's)."""
+
+    def __init__(self, checks: OnlineChecks, generator):
+        self.checks, self.generator = checks, generator
+        self.raised = 0
+
+    async def add(self, name: str, columns: dict[str, np.ndarray], made_until: float) -> None:
+        """A stream's next rows (BlockStream.add's); the windows they complete checked and their faults raised."""
+        if name in CHECKED_STREAMS:
+            self.checks.add(name, columns, made_until)
+            await self._raise(await asyncio.get_running_loop().run_in_executor(None, self.checks.take))
+
+    async def finish(self) -> None:
+        """The log ends: its last rows checked."""
+        await self._raise(await asyncio.get_running_loop().run_in_executor(None, self.checks.take, True))
+
+    async def _raise(self, found: list[Attribution]) -> None:
+        for a in found:
+            event = self.generator.event
+            event.Support, event.Kind, event.Cause, event.SimulationTime = a.support, a.kind, a.cause, a.t_detect
+            event.Severity = HYDRAULIC_SEVERITY[a.cause]
+            await self.generator.trigger(message=f"support {a.support}: {a.kind} ({a.cause}) {a.evidence}")
+            self.raised += 1
+
+
 class Publisher:
     """Writes the twin's truth to the nodes at `publish_hz` of simulated time, paced at `speed` times real time."""
 
     def __init__(self, server: Server, nodes: FaceNodes, fas: FasInput, speed: float, publish_hz: float,
-                 sensors: dict[str, BlockStream], estimator: EstimatorPublisher | None = None):
+                 sensors: dict[str, BlockStream], estimator: EstimatorPublisher | None = None,
+                 hydraulics: HydraulicAlarms | None = None):
         self.server, self.nodes, self.fas, self.speed, self.publish_hz = server, nodes, fas, speed, publish_hz
         self.sensors = sensors  # browse name -> its blocks
-        self.estimator = estimator
+        self.estimator, self.hydraulics = estimator, hydraulics
         self._write = server_write(server)
         self.complete_until = {name: 0.0 for name in sensors}  # as last written
         self.supports: list[dict[str, np.ndarray]] = []  # rows not yet published, in time order
@@ -245,19 +282,23 @@ class Publisher:
 
     async def add_rows(self, name: str, columns: dict[str, np.ndarray], made_until: float) -> None:
         """A sensor stream's rows as the twin drew them (logformat name), published when their time comes, and
-        fed to the estimator."""
+        fed to the estimator and the supports' checks."""
         if SENSOR_NODES[name] in self.sensors:
             self.sensors[SENSOR_NODES[name]].add(columns, made_until)
             if self.estimator is not None:
                 await self.estimator.feed.add(name, columns, made_until)
+            if self.hydraulics is not None:
+                await self.hydraulics.add(name, columns, made_until)
 
     async def finish(self) -> None:
-        """The run is over: every row left goes in a last block, the estimator's last passes are run, and State
-        says Finished."""
+        """The run is over: every row left goes in a last block, the estimator's last passes are run, the supports'
+        last rows checked, and State says Finished."""
         for stream in self.sensors.values():
             stream.made_until = math.inf
         if self.estimator is not None:
             await self.estimator.feed.finish()
+        if self.hydraulics is not None:
+            await self.hydraulics.finish()
         await self._blocks(math.inf)
         await self.nodes.state.write_value(STATE_FINISHED)
 
@@ -324,7 +365,7 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
     """Serve `scn` on `endpoint` until its run ends (the run directory `out` written as it goes), each sensor
     stream's last `history_s` of blocks held for ReadBlocks, the shearer positioning method `estimator` (one of
     ONLINE_METHODS; None: none) run on the sensor rows and published; `ready()` is called once the server listens.
-    Returns what was published: simulated time, ticks, wall time, the estimator's passes."""
+    Returns what was published: simulated time, ticks, wall time, the estimator's passes, the hydraulic alarms."""
     from twin.pipeline.twin_stream import stream_twin
 
     host, port = parse_endpoint(endpoint)
@@ -360,8 +401,10 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
         feed = EstimatorFeed(scn, method, tuple(s.stream.name for s in streams.values()))
         estimated = EstimatorPublisher(server_write(server), nodes.estimator, feed, history,
                                        math.radians(scn.face.azimuth_deg))
+    hydraulics = (HydraulicAlarms(OnlineChecks(ram_layout(scn), hydraulic_layout(scn)), nodes.hydraulic_alarms)
+                  if nodes.hydraulic_alarms is not None else None)
     fas = FasInput(scn, server, nodes)
-    publisher = Publisher(server, nodes, fas, speed, publish_hz, streams, estimated)
+    publisher = Publisher(server, nodes, fas, speed, publish_hz, streams, estimated, hydraulics)
     chunks: queue.Queue = queue.Queue(maxsize=QUEUE_CHUNKS)
     loop = asyncio.get_running_loop()
     start = time.perf_counter()
@@ -416,4 +459,5 @@ async def serve(scn: Scenario, out: Path, endpoint: str, speed: float = 1.0,
         await server.stop()
     t = publisher.start
     return {"ticks": publisher.ticks, "wall_s": wall_s, "passes": estimated.passes if estimated else 0,
+            "hydraulic_alarms": hydraulics.raised if hydraulics else 0,
             "simulated_s": publisher.last_tick / publish_hz - (t[0] if t else 0.0)}
