@@ -24,7 +24,7 @@ from twin.face.export_target import DEFAULT_WIDTH_PX, ExportError, check_width
 from estimators.shearer.online import ONLINE_METHODS
 from twin.opcua.access import DEFAULT_ENDPOINT, PASSWORD_ENV, ServeError
 from twin.opcua.estimator import DEFAULT_ESTIMATOR, NO_ESTIMATOR
-from twin.pipeline import api
+from twin.pipeline import api, serving
 from twin.pipeline.api import default_scenario
 from twin.pipeline.montecarlo import MonteCarloError
 from twin.pipeline.rundir import RunDirError
@@ -249,7 +249,7 @@ def _command(args: argparse.Namespace) -> int:
         from twin.view.report import build_report
         print(build_report(args.run_dir))
     elif args.command == "serve":
-        served = api.serve(args.scenario or default_scenario(), args.out, args.seed, args.cycles,
+        served = serving.serve(args.scenario or default_scenario(), args.out, args.seed, args.cycles,
                            endpoint=args.endpoint, speed=args.speed, publish_hz=args.publish_rate, user=args.user,
                            force=args.force, sensors=not args.twin_only, history_s=args.history,
                            estimator=args.estimator,
@@ -258,8 +258,8 @@ def _command(args: argparse.Namespace) -> int:
               f"({served['simulated_s'] / served['wall_s']:.0f}x real time, {served['ticks']} publications, "
               f"{served['passes']} estimated passes, {served['hydraulic_alarms']} hydraulic alarms)")
     elif args.command == "record":
-        report = api.record(args.opcua, args.out, args.duration, force=args.force)
-        from twin.opcua.recorder import summary  # the opcua extra is there: api.record said so otherwise
+        report = serving.record(args.opcua, args.out, args.duration, force=args.force)
+        from twin.opcua.recorder import summary  # the opcua extra is there: serving.record said so otherwise
         print(summary(report, args.out))
     elif args.command == "model":
         written = api.model(args.scenario or default_scenario(), args.xml, args.png,

@@ -38,7 +38,8 @@ def test_default_run_writes_a_complete_run_directory(default_run):
 def test_recording_reads_back_with_the_face_entities(default_run):
     reader = RrdReader(str(default_run / "run.rrd"))
     entities = {chunk.entity_path for chunk in reader.stream().to_chunks()}
-    for entity in ("/world/floor", "/world/pans", "/world/supports", "/world/rams", "/world/shearer",
+    for entity in ("/world/floor", "/world/pans/boxes", "/world/supports/boxes", "/world/supports/cylinders",
+                   "/world/rams", "/world/shearer", "/world/shearer/boxes", "/world/shearer/cylinders",
                    "/world/shearer_path", "/plots/shearer_speed", "/plots/bend_horizontal_deg",
                    "/plots/ram_length"):
         assert entity in entities or entity.lstrip("/") in entities, entity

@@ -14,7 +14,7 @@ Alarms (`Alarm`): a pass over which the health monitor found the filter lost tra
 with the rail model isolated by its fault detector (RAIL_ISOLATED, fkf_rail: FLAG_ISOLATED in its rows); the
 estimator stopped (FAILED: a log it cannot use, or any failure of its; the rows still coming are drained, so the
 face goes on being served). The supports' hydraulic and push-ram checks raise their own
-(twin.opcua.server.HydraulicAlarms).
+(twin.opcua.publishers.HydraulicAlarms).
 """
 
 from __future__ import annotations

@@ -153,7 +153,7 @@ async def _in_process(asyncua, port: int, items: list) -> dict:
     """A server with the Estimator's nodes only; a fake feed handing `items` over; a client subscribed to the
     alarms reads what the publisher wrote."""
     from twin.opcua.address_space import blocks_variants, build
-    from twin.opcua.server import EstimatorPublisher, server_write
+    from twin.opcua.publishers import EstimatorPublisher, server_write
 
     server = asyncua.Server()
     await server.init()

@@ -1,10 +1,9 @@
-"""The supports' hydraulic alarms of `longwall serve` (twin.opcua.server.HydraulicAlarms): each fault the online
+"""The supports' hydraulic alarms of `longwall serve` (twin.opcua.publishers.HydraulicAlarms): each fault the online
 checks find is an event of the RoofSupportSystem, once."""
 
 from __future__ import annotations
 
 import asyncio
-from types import SimpleNamespace
 
 import numpy as np
 
@@ -35,7 +34,7 @@ class FakeChecks:
 
 async def _in_process(asyncua, port: int) -> dict:
     from twin.opcua.address_space import HYDRAULIC_ALARM_EVENT_TYPE, NAMESPACE, build
-    from twin.opcua.server import HydraulicAlarms
+    from twin.opcua.publishers import HydraulicAlarms
 
     server = asyncua.Server()
     await server.init()
