@@ -70,7 +70,7 @@ class OnlineChecks:
         if not np.isfinite(self.t_first):
             return []
         complete = min(self.made_until.values())
-        if final:
+        if final or not np.isfinite(complete):  # a stream with no more rows at all: up to the last row there is
             complete = max((float(p["t"][-1]) for pieces in self.rows.values() for p in pieces if p["t"].size),
                            default=self.t_checked)
         out = []

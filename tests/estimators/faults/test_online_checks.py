@@ -30,14 +30,15 @@ def _logs(faults: list[dict]):
 
 
 def _online(scn, pushram, pressure, **window) -> list[tuple[float, object]]:
-    """(the end of the piece after which it was said, the fault) for the logs fed in pieces of PIECE_S."""
+    """(the end of the piece after which it was said, the fault) for the logs fed in pieces of PIECE_S, the last with
+    no more rows to come (made until infinity, as the server ends a stream: the checks stop at its last row)."""
     checks = OnlineChecks(ram_layout(scn), hydraulic_layout(scn), **window)
     said = []
     edges = np.arange(0.0, float(pushram["t"][-1]) + PIECE_S, PIECE_S)
     for a, b in zip(edges[:-1], edges[1:]):
         for name, log in (("pushram", pushram), ("pressure", pressure)):
             now = (log["t"] >= a) & (log["t"] < b)
-            checks.add(name, {c: np.asarray(v)[now] for c, v in log.items()}, float(b))
+            checks.add(name, {c: np.asarray(v)[now] for c, v in log.items()}, np.inf if b == edges[-1] else float(b))
         said += [(float(b), f) for f in checks.take()]
         held = np.concatenate([p["t"] for pieces in checks.rows.values() for p in pieces])
         assert held.min() >= b - checks.window_s - checks.step_s  # the last window's rows and those since
