@@ -120,7 +120,8 @@ def test_report_and_view_on_a_run_without_truth(imported, estimated, viewer_laun
     from twin.view.report import REPORT_DIR, REPORT_HTML
 
     assert main(["report", str(imported)]) == 0
-    assert {p.name for p in (imported / REPORT_DIR).glob("*.png")} == {"top_view.png", "pressures.png"}
+    assert {p.name for p in (imported / REPORT_DIR).glob("*.png")} == {
+        "top_view.png", "plan_view.png", "profile.png", "sigma.png", "supports.png", "pressures.png"}  # no errors
     page = (imported / REPORT_DIR / REPORT_HTML).read_text()
     assert "no errors scored" in page and "errors against time" in page and "survey [m]" in page
     assert main(["view", str(imported)]) == 0
