@@ -78,9 +78,12 @@ def best_methods(run: RunData, stats: dict[str, list[dict]]) -> list[str]:
     median horizontal one-sigma."""
     if stats:
         return sorted(stats, key=lambda m: stats[m][-1]["sep"])
-    spread = {m: float(np.nanmedian(np.hypot(column(table, "sd_pos_e"), column(table, "sd_pos_n"))))
-              for m, table in run.estimates.items()}
-    return sorted(spread, key=lambda m: spread[m] if np.isfinite(spread[m]) else np.inf)
+    def spread(table: pa.Table) -> float:  # dr's estimates have no sigma: last
+        sd = np.hypot(column(table, "sd_pos_e"), column(table, "sd_pos_n"))
+        return float(np.median(sd[np.isfinite(sd)])) if np.isfinite(sd).any() else np.inf
+
+    spreads = {m: spread(table) for m, table in run.estimates.items()}
+    return sorted(spreads, key=spreads.__getitem__)
 
 
 def _window(table: pa.Table, cut: Cut) -> pa.Table:
