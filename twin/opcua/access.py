@@ -16,15 +16,15 @@ class ServeError(ValueError):
     """A serve or record request that cannot be met (one line: what, where, how to fix)."""
 
 
-def parse_endpoint(endpoint: str) -> tuple[str, int]:
-    """(host, port) of an opc.tcp:// endpoint; ServeError otherwise."""
+def parse_endpoint(endpoint: str, option: str = "--endpoint") -> tuple[str, int]:
+    """(host, port) of an opc.tcp:// endpoint given as `option`; ServeError otherwise."""
     url = urlparse(endpoint)
     try:
         port = url.port
     except ValueError:
         port = None
     if url.scheme != "opc.tcp" or not url.hostname or port is None:
-        raise ServeError(f"--endpoint {endpoint}: not opc.tcp://HOST:PORT (e.g. {DEFAULT_ENDPOINT})")
+        raise ServeError(f"{option} {endpoint}: not opc.tcp://HOST:PORT (e.g. {DEFAULT_ENDPOINT})")
     return url.hostname, port
 
 

@@ -67,7 +67,7 @@ class Recorder:
 
     def __init__(self, endpoint: str, out: Path, duration_s: float | None = None, force: bool = False,
                  warn=None):
-        parse_endpoint(endpoint)
+        parse_endpoint(endpoint, "--opcua")
         if duration_s is not None and not duration_s > 0:
             raise ServeError(f"--duration {duration_s:g}: must be above 0 s of simulated time")
         check_target(out, force)

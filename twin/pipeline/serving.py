@@ -59,7 +59,7 @@ def record(endpoint: str, out: str | Path, duration_s: float | None = None, *, f
 
     from twin.opcua.access import ServeError, parse_endpoint
 
-    parse_endpoint(endpoint)
+    parse_endpoint(endpoint, "--opcua")
     try:
         from twin.opcua.recorder import Recorder
     except ModuleNotFoundError as err:

@@ -131,7 +131,7 @@ def test_the_estimators_on_the_recording_give_the_batch_runs_sep(served_and_reco
 
 
 @pytest.mark.parametrize("args, said", [
-    (["--opcua", "http://127.0.0.1:4840"], "not opc.tcp://HOST:PORT"),
+    (["--opcua", "http://127.0.0.1:4840"], "--opcua http://127.0.0.1:4840: not opc.tcp://HOST:PORT"),
     (["--opcua", "opc.tcp://127.0.0.1:{port}"], "no OPC UA server answers there"),
     (["--opcua", "opc.tcp://127.0.0.1:{port}", "--duration", "-1"], "must be above 0"),
     (["--opcua", "opc.tcp://127.0.0.1:{port}", "--out", "{full}"], "directory exists and is not empty"),
