@@ -79,7 +79,7 @@ from typing import Literal
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from estimators.face.straightness import mat_ft
+from estimators.face.straightness import mat_ft, sd_in_face_frame
 
 LINE_SMOOTHING = 0.03
 """Weight of the line's second differences against the path's misfit when the line is solved from the two-shoe mean
@@ -157,7 +157,7 @@ def path_in_face_frame(p_t: np.ndarray, sd_en: np.ndarray | None, azimuth_rad: f
     if sd_en is None:
         return p_f, np.full(p_f.shape[0], np.nan)
     sd = np.asarray(sd_en, float)
-    return p_f, np.sqrt((c[0, 0] * sd[:, 0]) ** 2 + (c[0, 1] * sd[:, 1]) ** 2)
+    return p_f, sd_in_face_frame(np.column_stack([sd[:, 0], sd[:, 1], np.zeros(len(sd))]), azimuth_rad)[:, 0]
 
 
 def path_at_shields(p_f: np.ndarray, sd_x: np.ndarray, station_y_m: np.ndarray, spacing_m: float

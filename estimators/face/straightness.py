@@ -36,6 +36,12 @@ def mat_ft(azimuth_rad: float) -> np.ndarray:
     return np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0.0, 0.0, 1.0]])
 
 
+def sd_in_face_frame(sd_enu: np.ndarray, azimuth_rad: float) -> np.ndarray:
+    """One-sigma along F's x, y, z (..., 3) from the tangent plane's east, north, up one-sigma (..., 3) taken as
+    independent."""
+    return np.sqrt(np.asarray(sd_enu, float) ** 2 @ (mat_ft(azimuth_rad) ** 2).T)
+
+
 def pan_lines(pans: dict[str, np.ndarray], times: np.ndarray, n_pans: int, azimuth_rad: float) -> np.ndarray:
     """Every pan's position in F (T, N, 3) as it stood at each of `times`: its latest row of the truth_pans columns
     (t, pan, p_t_e/n/u) at or before the time. A pan with no row by then is NaN."""

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimators.face.straightness import mat_ft
+from estimators.face.straightness import sd_in_face_frame
 from estimators.io.logformat import FLAG_ISOLATED
 from estimators.shearer.config import PositioningError
 from estimators.shearer.online import ONLINE_METHODS, OnlinePositioning, PassEstimate
@@ -99,7 +99,7 @@ def shearer_position(columns: dict[str, np.ndarray], azimuth_rad: float) -> tupl
     """The last row's time, position (POSITION_AXES) and its one-sigma: F's from the tangent plane's east, north and
     up one-sigma taken as independent."""
     sd_t = np.array([columns[f"sd_pos_{a}"][-1] for a in "enu"])
-    sd_f = np.sqrt(mat_ft(azimuth_rad) ** 2 @ sd_t ** 2)
+    sd_f = sd_in_face_frame(sd_t, azimuth_rad)
     p = [columns[f"p_f_{a}"][-1] for a in "xyz"] + [columns[f"p_t_{a}"][-1] for a in "enu"]
     return float(columns["t"][-1]), np.array(p), np.concatenate([sd_f, sd_t])
 
