@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+import pyarrow as pa
 from scipy.stats import chi2
 
 from estimators.io.logformat import (
@@ -68,21 +69,94 @@ def slerp(t_src: np.ndarray, q_src: np.ndarray, t: np.ndarray) -> np.ndarray:
     return quat_normalize(quat_mul(q0, rotvec_to_quat(u[:, None] * step)))
 
 
+class TruthTrack:
+    """The truth_shearer stream, given whole (a table or mapping of arrays) or as blocks of consecutive rows (e.g.
+    estimators.io.logformat.StreamBlocks, read again at each call), interpolated at estimate times (`at`). Only one
+    block is held at a time; the answers for the last KEEP sets of times are kept, since the methods of
+    a run are scored, and drawn, at the same filter epochs. Block by block equals whole, bit for bit: each time is
+    interpolated between the same two samples, and the longitude unwrapped with its correction summed in order."""
+
+    KEEP = 2
+
+    def __init__(self, blocks):
+        self.blocks = [blocks] if isinstance(blocks, Mapping | pa.Table) else blocks
+        self._kept: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
+
+    def at(self, t: np.ndarray) -> dict[str, np.ndarray]:
+        """truth_at's dict at times t, plus "cycle" (of the sample at or before each time) when the truth has it."""
+        t = np.asarray(t, float)
+        for t_kept, true in self._kept:
+            if np.array_equal(t_kept, t):
+                return true
+        true = self._interpolate(t)
+        self._kept = [(t.copy(), true), *self._kept][:self.KEEP]
+        return true
+
+    def _interpolate(self, t: np.ndarray) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        todo = np.ones(t.size, bool)
+        prev = None  # the previous block's last sample, its longitude unwrapped, the correction summed to it
+        t_span = [np.nan, np.nan]
+        for block in self.blocks:
+            cols = {k: column(block, k) for k in ("t", "lat", "lon", "h")}
+            if not cols["t"].size:
+                continue
+            cols["q_nb"] = columns(block, "q_nb", "wxyz")
+            if "cycle" in (block.keys() if isinstance(block, Mapping) else block.column_names):
+                cols["cycle"] = column(block, "cycle")
+            if prev is None:
+                t_span[0] = cols["t"][0]
+                lo, carry, lon_first = -np.inf, 0.0, cols["lon"][:1]
+            else:
+                cols = {k: np.concatenate([prev[k], v]) for k, v in cols.items()}
+                lo, carry, lon_first = cols["t"][0], prev["carry"], prev["lon_unwrapped"]
+            # np.unwrap's correction, summed in order from the run's first sample
+            lon = cols["lon"]
+            dd = np.diff(lon)
+            correction = np.mod(dd + np.pi, 2 * np.pi) - np.pi
+            np.copyto(correction, np.pi, where=(correction == -np.pi) & (dd > 0))
+            correction -= dd
+            np.copyto(correction, 0.0, where=np.abs(dd) < np.pi)
+            summed = np.cumsum(np.concatenate([[carry], correction]))
+            cols["lon"] = np.concatenate([lon_first, lon[1:] + summed[1:]])
+            hi = cols["t"][-1]
+            self._fill(out, cols, t, todo & (t >= lo) & (t < hi), todo)
+            prev = {k: v[-1:] for k, v in cols.items()} | {"lon": lon[-1:], "carry": summed[-1],
+                                                           "lon_unwrapped": cols["lon"][-1:]}
+            last, t_span[1] = cols, hi
+        if prev is None:
+            raise LogError("truth_shearer holds no samples to score against")
+        if t.size and (t.min() < t_span[0] - 1e-9 or t.max() > t_span[1] + 1e-9):
+            raise LogError(f"estimate times {t.min():.6g} .. {t.max():.6g} s lie outside the truth span "
+                           f"{t_span[0]:.6g} .. {t_span[1]:.6g} s")
+        self._fill(out, last, t, todo.copy(), todo)  # the times at the last sample
+        return out
+
+    @staticmethod
+    def _fill(out: dict[str, np.ndarray], cols: dict[str, np.ndarray], t: np.ndarray, sel: np.ndarray,
+              todo: np.ndarray) -> None:
+        """Interpolate the times `sel` in the samples `cols` into `out` (allocated at the first call)."""
+        if not out:
+            out |= {k: np.empty(t.size) for k in ("lat", "lon", "h")} | {"q_nb": np.empty((t.size, 4))}
+            if "cycle" in cols:
+                out["cycle"] = np.empty(t.size)
+        if not sel.any():
+            return
+        ts, t_src = t[sel], cols["t"]
+        for k in ("lat", "lon", "h"):
+            out[k][sel] = np.interp(ts, t_src, cols[k])
+        out["q_nb"][sel] = slerp(t_src, cols["q_nb"], ts)
+        if "cycle" in out:
+            out["cycle"][sel] = cols["cycle"][np.clip(np.searchsorted(t_src, ts, side="right") - 1, 0, None)]
+        todo &= ~sel
+
+
 def truth_at(truth_shearer, t: np.ndarray) -> dict[str, np.ndarray]:
     """The true body point (lat, lon, h: linear) and attitude (q_nb (M, 4): slerp) at times t within the truth
-    span. Raises LogError (one line) when a time lies outside the span."""
-    t = np.asarray(t, float)
-    t_truth = column(truth_shearer, "t")
-    if t.size and (t.min() < t_truth[0] - 1e-9 or t.max() > t_truth[-1] + 1e-9):
-        raise LogError(f"estimate times {t.min():.6g} .. {t.max():.6g} s lie outside the truth span "
-                       f"{t_truth[0]:.6g} .. {t_truth[-1]:.6g} s")
-    lon = np.unwrap(column(truth_shearer, "lon"))
-    return {
-        "lat": np.interp(t, t_truth, column(truth_shearer, "lat")),
-        "lon": np.interp(t, t_truth, lon),
-        "h": np.interp(t, t_truth, column(truth_shearer, "h")),
-        "q_nb": slerp(t_truth, columns(truth_shearer, "q_nb", "wxyz"), t),
-    }
+    span, and the cycle of the sample at or before each when the truth has it. `truth_shearer`: a table, a mapping
+    of arrays or a TruthTrack. Raises LogError (one line) when a time lies outside the span."""
+    track = truth_shearer if isinstance(truth_shearer, TruthTrack) else TruthTrack(truth_shearer)
+    return track.at(t)
 
 
 def geodetic_to_enu_offset(lat, lon, h, lat_ref, lon_ref, h_ref) -> np.ndarray:

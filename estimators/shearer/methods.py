@@ -12,7 +12,9 @@ from __future__ import annotations
 import multiprocessing
 import signal
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 from estimators.io.log import Log
 from estimators.shearer.adaptive_federated_mag import run_mag
@@ -33,8 +35,13 @@ TASKS = (("kf_cpoem_rts", "rts_offline", "dr_compensated"), ("fkf_rail",), ("afk
 longest first, so that a pool of processes finishes together."""
 
 
-def _run_group(log: Log, cfg: Config, prep: Prepared, group: tuple[str, ...]) -> dict[str, Solution]:
-    """One task of TASKS, restricted to the requested methods of its group."""
+Finish = Callable[[str, Solution], Any]
+"""What a caller does with each method's solution where it is made (its process), e.g. write and score it; its
+value is returned in place of the solution."""
+
+
+def _run_group(log: Log, cfg: Config, prep: Prepared, finish: Finish | None, group: tuple[str, ...]) -> dict:
+    """One task of TASKS, restricted to the requested methods of its group, each solution through `finish`."""
     out: dict[str, Solution] = {}
     if set(group) <= set(TASKS[0]):
         with tempfile.TemporaryDirectory(prefix="longwall-rts-") as tmp:
@@ -58,11 +65,11 @@ def _run_group(log: Log, cfg: Config, prep: Prepared, group: tuple[str, ...]) ->
         out["fkf_rail"] = run_rail(log, cfg, prep, cfg.isolate_by)
     for name, sol in out.items():
         assess(sol, cfg, name)
-    return out
+    return out if finish is None else {name: finish(name, out.pop(name)) for name in list(out)}
 
 
-_SHARED: tuple[Log, Config, Prepared] | None = None
-"""The log, configuration and prepared log a forked worker inherits from its parent (never pickled)."""
+_SHARED: tuple[Log, Config, Prepared, Finish | None] | None = None
+"""The log, configuration, prepared log and finish a forked worker inherits from its parent (never pickled)."""
 
 
 def _worker_start() -> None:
@@ -71,16 +78,16 @@ def _worker_start() -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def _worker_group(group: tuple[str, ...]) -> dict[str, Solution]:
+def _worker_group(group: tuple[str, ...]) -> dict:
     return _run_group(*_SHARED, group)
 
 
-def _run_forked(log: Log, cfg: Config, prep: Prepared, groups: list[tuple[str, ...]],
-                workers: int) -> list[dict[str, Solution]]:
+def _run_forked(log: Log, cfg: Config, prep: Prepared, finish: Finish | None, groups: list[tuple[str, ...]],
+                workers: int) -> list[dict]:
     """The groups on `workers` forked processes, which share the parent's log and prepared increments (copy on
     write) and its compiled kernels; results in the order of `groups`. An exception in a group is raised here."""
     global _SHARED
-    _SHARED = (log, cfg, prep)
+    _SHARED = (log, cfg, prep, finish)
     pool = multiprocessing.get_context("fork").Pool(min(workers, len(groups)), initializer=_worker_start)
     try:
         pending = [pool.apply_async(_worker_group, (g,)) for g in groups]
@@ -93,10 +100,12 @@ def _run_forked(log: Log, cfg: Config, prep: Prepared, groups: list[tuple[str, .
         _SHARED = None
 
 
-def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS, workers: int = 1) -> dict[str, Solution]:
+def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS, workers: int = 1,
+             finish: Finish | None = None) -> dict:
     """Run the requested methods on a log; returns method -> Solution, each through the health monitor
-    (estimators.shearer.health). With `workers` > 1 the independent groups of methods (TASKS) run on that many
-    forked processes (POSIX); every result is the one the sequential run gives, bit for bit."""
+    (estimators.shearer.health), or what `finish` made of it in the process that made it. With `workers` > 1 the
+    independent groups of methods (TASKS) run on that many forked processes (POSIX), a solution not sent back to
+    the parent when `finish` writes it; every result is the one the sequential run gives, bit for bit."""
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise PositioningError(f"unknown method '{unknown[0]}' (methods: {', '.join(METHODS)})")
@@ -105,8 +114,8 @@ def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS, workers:
     prep = prepare(log, cfg)
     groups = [g for g in (tuple(m for m in task if m in methods) for task in TASKS) if g]
     if workers > 1 and len(groups) > 1 and "fork" in multiprocessing.get_all_start_methods():
-        results = _run_forked(log, cfg, prep, groups, workers)
+        results = _run_forked(log, cfg, prep, finish, groups, workers)
     else:
-        results = [_run_group(log, cfg, prep, g) for g in groups]
+        results = [_run_group(log, cfg, prep, finish, g) for g in groups]
     out = {name: sol for res in results for name, sol in res.items()}
     return {m: out[m] for m in methods}

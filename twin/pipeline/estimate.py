@@ -28,6 +28,7 @@ from estimators.io.logformat import (
     ESTIMATE_STATES,
     STREAMS,
     Stream,
+    StreamBlocks,
     read_estimate,
     read_stream,
     write_estimate,
@@ -144,6 +145,42 @@ def solution_columns(sol: Solution, scn: Scenario) -> dict[str, np.ndarray]:
     return estimate_columns(sol, origin, np.radians(scn.face.azimuth_deg))
 
 
+def _truth_track(run_dir: Path) -> metrics.TruthTrack | None:
+    """The run's truth_shearer read a row group at a time, once for every method's epochs
+    (estimators.io.metrics.TruthTrack); None without it."""
+    if not (Path(run_dir) / STREAMS["truth_shearer"].filename).is_file():
+        return None
+    return metrics.TruthTrack(StreamBlocks(run_dir, STREAMS["truth_shearer"], metrics.SCORED_TRUTH))
+
+
+def _shearer_methods(run_dir: Path, scn: Scenario, methods: tuple[str, ...], workers: int
+                     ) -> dict[str, tuple[dict, list[str]]]:
+    """Run `methods` on run_dir's log on `workers` processes, each solution written to estimates/ and scored in
+    the process that made it (none is held by the parent): method -> (its metrics entry, the streams written)."""
+    truth = _truth_track(run_dir)
+    survey = read_stream(run_dir, STREAMS["survey"])
+    cycles = _optional(run_dir, "truth_cycles") if truth is not None else None
+    states_truth = true_states(scn) if truth is not None else None
+
+    def finish(name: str, sol: Solution) -> tuple[dict, list[str]]:
+        written = []
+        for stream, columns in ((ESTIMATE, solution_columns(sol, scn)),
+                                (ESTIMATE_STATES, state_columns(sol) if sol.cal is not None else None),
+                                (ESTIMATE_FUSION, sol.fusion), (ESTIMATE_DETECTORS, sol.detectors)):
+            if columns is not None:
+                write_estimate(run_dir, name, columns, stream)
+                written.append(stream.name)
+        table = read_estimate(run_dir, name)
+        entry = {"truth": truth is not None}
+        if truth is not None:
+            entry["cycles"] = metrics.cycle_metrics(*metrics.position_errors(table, truth),
+                                                    NO_CYCLES if cycles is None else cycles)
+        entry |= {"notes": sol.notes, "self": metrics.self_assessment(table, survey)}
+        return entry | (_calibration(sol, states_truth) if sol.cal is not None else {}), written
+
+    return estimate(load_log(run_dir), positioning_config(scn), methods, workers, finish)
+
+
 def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers: int = 1,
                    record_rate_hz: float | None = RECORD_RATE_HZ) -> dict:
     """Run the scenario's shearer estimators on run_dir; writes estimates/, estimates.rrd (with `recording`, at
@@ -162,7 +199,7 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers
     from twin.pipeline.support_estimate import SUPPORT_ATTITUDE, support_attitude
     from twin.view.estimate_recording import write_estimate_recording
     methods = tuple(scn.estimators.shearer.methods)
-    sols = estimate(load_log(run_dir), positioning_config(scn), methods, workers) if methods else {}
+    finished = _shearer_methods(run_dir, scn, methods, workers) if methods else {}
     supports = support_attitude(run_dir, scn)
     out = {} if supports is None else {SUPPORT_ATTITUDE: supports.metrics}
     if recording and supports is not None and not methods:
@@ -170,27 +207,11 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers
                                  rate_hz=record_rate_hz)
     if not methods:
         return out
-    truth = _optional(run_dir, "truth_shearer", metrics.SCORED_TRUTH)
-    survey = read_stream(run_dir, STREAMS["survey"])
-    cycles = _optional(run_dir, "truth_cycles") if truth is not None else None
+    written = {stream.name: [name for name in methods if stream.name in finished[name][1]]
+               for stream in (ESTIMATE, ESTIMATE_STATES, ESTIMATE_FUSION, ESTIMATE_DETECTORS)}
+    out |= {name: entry for name, (entry, _) in finished.items()}
+    truth = _truth_track(run_dir)
     states_truth = true_states(scn) if truth is not None else None
-    written: dict[str, list[str]] = {stream.name: [] for stream in (ESTIMATE, ESTIMATE_STATES, ESTIMATE_FUSION,
-                                                                    ESTIMATE_DETECTORS)}
-    for name in list(sols):  # each solution written, scored and let go before the next
-        sol = sols.pop(name)
-        for stream, columns in ((ESTIMATE, solution_columns(sol, scn)),
-                                (ESTIMATE_STATES, state_columns(sol) if sol.cal is not None else None),
-                                (ESTIMATE_FUSION, sol.fusion), (ESTIMATE_DETECTORS, sol.detectors)):
-            if columns is not None:
-                write_estimate(run_dir, name, columns, stream)
-                written[stream.name].append(name)
-        table = read_estimate(run_dir, name)
-        entry = {"truth": truth is not None}
-        if truth is not None:
-            entry["cycles"] = metrics.cycle_metrics(*metrics.position_errors(table, truth),
-                                                    NO_CYCLES if cycles is None else cycles)
-        entry |= {"notes": sol.notes, "self": metrics.self_assessment(table, survey)}
-        out[name] = entry | (_calibration(sol, states_truth) if sol.cal is not None else {})
     if recording:
         def tables(stream: Stream) -> EstimateTables:
             return EstimateTables(run_dir, stream, written[stream.name])

@@ -66,7 +66,7 @@ import pyarrow as pa
 import rerun as rr
 
 from estimators.io.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT, NONORTH_AXES
-from estimators.io.metrics import attitude_errors, column, columns, position_errors
+from estimators.io.metrics import attitude_errors, column, columns, position_errors, truth_at
 from estimators.nav import earth
 from estimators.shearer.federated_filter import MAG_DISTURBED, MAG_GATED, MAG_USED
 from estimators.shearer.methods import METHODS
@@ -129,8 +129,7 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method:
     # With truth one strip per cycle, the cycle of the truth sample at or before each estimate time.
     cycle = None
     if truth_shearer is not None:
-        t_truth = column(truth_shearer, "t")
-        cycle = column(truth_shearer, "cycle")[np.clip(np.searchsorted(t_truth, t_all, side="right") - 1, 0, None)]
+        cycle = truth_at(truth_shearer, t_all)["cycle"]
     rec.log(f"world/estimates/{method}/path", rr.LineStrips3D(path_strips(t_all, p_all, cycle, rate_hz), radii=0.03,
                                                               colors=color), static=True)
     moved = marker_rows(t_all, p_all, rate_hz)
@@ -289,8 +288,8 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
     """Write the estimators' outputs as `path` (normally RUN_DIR/estimates.rrd) with the recording id of
     RUN_DIR/run.rrd.
 
-    `truth_shearer`: the truth_shearer table (or its columns as arrays); `estimates`: method name -> ESTIMATE
-    table; `states`: method name -> ESTIMATE_STATES table (filters with sensor states only); `states_truth`:
+    `truth_shearer`: the truth_shearer table (or its columns as arrays, or an estimators.io.metrics.TruthTrack);
+    `estimates`: method name -> ESTIMATE table; `states`: method name -> ESTIMATE_STATES table (filters with sensor states only); `states_truth`:
     true values of the sensor states by ESTIMATE_STATES column name in SI units (e.g. "gyro_bias_x" [rad/s],
     "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters);
     `detectors`: method name -> (ESTIMATE_DETECTORS table, thresholds by statistic: residual, dual_state, t_on,

@@ -14,6 +14,7 @@ from estimators.io.metrics import (
     nees,
     nees_band,
     position_errors,
+    TruthTrack,
     slerp,
     truth_at,
 )
@@ -51,6 +52,32 @@ def offset_estimate(truth, t, offset_enu, rotvec=(0.0, 0.0, 0.0), **kwargs):
                                          true["h"])
     q = quat_mul(rotvec_to_quat(np.broadcast_to(rotvec, (t.size, 3))), true["q_nb"])
     return estimate_table(t, lat, lon, h, q, **kwargs)
+
+
+def test_truth_in_blocks_is_the_whole_truth_bit_for_bit():
+    """TruthTrack over blocks of rows cut anywhere gives the whole table's interpolation exactly: times between
+    samples, on samples (a block's first and last included), at both ends; a longitude crossing +-pi unwrapped with
+    its correction summed across the blocks; the cycle at or before each time."""
+    truth = straight_truth(2001, 0.05)
+    lon = truth["lon"] - LON0 + np.pi - 5e-9  # the track crosses the antimeridian
+    truth["lon"] = np.angle(np.exp(1j * lon))
+    truth["cycle"] = (truth["t"] // 37.0).astype(float)
+    rng = np.random.default_rng(3)
+    t = np.sort(np.concatenate([rng.uniform(0, truth["t"][-1], 700), truth["t"][::97], truth["t"][[0, -1]]]))
+    whole = truth_at(truth, t)
+    assert np.ptp(whole["lon"]) < 1.0  # unwrapped: no 2 pi jump
+    whole_slerp = slerp(truth["t"], np.column_stack([truth[f"q_nb_{a}"] for a in "wxyz"]), t)
+    np.testing.assert_array_equal(whole["q_nb"], whole_slerp)
+    for cuts in ([1, 2, 500, 501, 1700], [97 * 5, 97 * 11 + 1], list(range(100, 2000, 131))):
+        edges = [0, *cuts, truth["t"].size]
+        blocks = [{k: v[a:b] for k, v in truth.items()} for a, b in zip(edges[:-1], edges[1:])]
+        track = TruthTrack(blocks)
+        part = track.at(t)
+        for k in ("lat", "lon", "h", "q_nb", "cycle"):
+            np.testing.assert_array_equal(part[k], whole[k], err_msg=f"{k} cut at {cuts}")
+        assert track.at(t.copy()) is part  # the same epochs again: kept, not read again
+    with pytest.raises(LogError, match="outside the truth span"):
+        TruthTrack(blocks).at(np.array([truth["t"][-1] + 1.0]))
 
 
 def test_constant_east_offset_gives_rmse_and_sep():
