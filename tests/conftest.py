@@ -20,8 +20,8 @@ from twin.config.turntable import is_turntable
 from twin.pipeline.simulate import SimResult, simulate
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
-SEED004_VARIANTS = ("seed004_fault", "seed004_20cycles")
-"""seed004 with a fault or more cycles: the same face, checked against seed004 in tests/twin/config/test_scenario.py and run by
+SEED004_VARIANTS = ("seed004_fault", "seed004_20cycles", "panel_100")
+"""seed004 with a fault or more cycles (panel_100: a panel's worth): the same face, checked against seed004 in tests/twin/config/test_scenario.py and run by
 benchmarks/bench_rail.py (simulating them again here would only repeat seed004)."""
 SCENARIOS = sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")
                    if not (is_experiment(p) or is_turntable(p) or p.stem in SEED004_VARIANTS))

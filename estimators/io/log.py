@@ -7,6 +7,7 @@ so their memory does not grow with the length of the log."""
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -210,28 +211,87 @@ MIN_ROWS = {IMU.name: (2, "two IMU samples give the first sample interval"),
 """Fewest rows of the streams the positioning needs, and why."""
 
 
+def _check_rows(run_dir: Path, stream, rows: int) -> None:
+    least, why = MIN_ROWS[stream.name]
+    if rows < least:
+        raise LogError(f"{Path(run_dir) / stream.filename}: {rows} rows, the positioning needs at least "
+                       f"{least} ({why}); import a recording that has them")
+
+
 def load_log(run_dir: Path) -> Log:
     """The streams of a run directory the positioning reads (push rams, magnetometer and face survey optional),
     checked on load; the IMU's stay on disk (ImuFile)."""
     def optional(stream):
         return read_stream(run_dir, stream) if (Path(run_dir) / stream.filename).is_file() else None
 
-    def enough(stream, rows):
-        least, why = MIN_ROWS[stream.name]
-        if rows < least:
-            raise LogError(f"{Path(run_dir) / stream.filename}: {rows} rows, the positioning needs at least "
-                           f"{least} ({why}); import a recording that has them")
-
     def required(stream):
         table = read_stream(run_dir, stream)
-        enough(stream, table.num_rows)
+        _check_rows(run_dir, stream, table.num_rows)
         return table
 
     path = Path(run_dir) / IMU.filename
     if not path.is_file():
         raise LogError(f"{path}: stream file not found")
     imu = ImuFile.open(path)
-    enough(IMU, imu.size)
+    _check_rows(run_dir, IMU, imu.size)
     return log_from_columns(imu, required(ODOMETER), required(SURVEY),
                             optional(PUSHRAM), optional(MAG), optional(FACE_SURVEY))
 
+
+PIECE_STREAMS = (IMU, ODOMETER, SURVEY, PUSHRAM, FACE_SURVEY)
+"""The streams an online run reads (estimators.shearer.online.OnlinePositioning.feed), the first two required."""
+
+
+def log_pieces(run_dir: Path) -> Iterator[tuple[dict[str, dict[str, np.ndarray]], bool]]:
+    """A run directory's log for an online run, in consecutive pieces of time: (stream name -> columns, last piece).
+    Each piece is an IMU row group and every other stream's rows up to its last time (t <= it; the rest with the
+    last piece), each stream read a row group at a time and checked as load_log checks it (logformat.StreamBlocks),
+    so that only a row group of each is held."""
+    run_dir = Path(run_dir)
+    present = [s for s in PIECE_STREAMS if (run_dir / s.filename).is_file() or s in (IMU, ODOMETER, SURVEY)]
+    for stream in present[:3]:
+        if not (run_dir / stream.filename).is_file():
+            raise LogError(f"{run_dir / stream.filename}: stream file not found")
+        _check_rows(run_dir, stream, pq.ParquetFile(run_dir / stream.filename).metadata.num_rows)
+    others = {s.name: _Cursor(StreamBlocks(run_dir, s)) for s in present[1:]}
+    imu_blocks = iter(StreamBlocks(run_dir, IMU))
+    block = next(imu_blocks)
+    for after in (*imu_blocks, None):
+        t_last = float(block.column("t")[-1].as_py()) if block.num_rows and after is not None else np.inf
+        rows = {name: c.until(t_last) for name, c in others.items()}
+        piece = {IMU.name: _columns(block)} | {name: r for name, r in rows.items() if r is not None}
+        yield piece, after is None
+        block = after
+
+
+def _columns(table) -> dict[str, np.ndarray]:
+    return {name: table.column(name).to_numpy() for name in table.column_names}
+
+
+class _Cursor:
+    """A stream's rows handed out in order of time, up to a given time, its row groups read as they are reached."""
+
+    def __init__(self, blocks: StreamBlocks):
+        self.blocks = iter(blocks)
+        self.held: dict[str, np.ndarray] | None = None
+        self.ended = False
+
+    def until(self, t_end: float) -> dict[str, np.ndarray] | None:
+        """The rows not handed out yet with t <= t_end (None once the stream has ended)."""
+        parts = []
+        while True:
+            if self.held is None:
+                block = None if self.ended else next(self.blocks, None)
+                if block is None:
+                    self.ended = True
+                    break
+                self.held = _columns(block)
+            n = int(np.searchsorted(self.held["t"], t_end, side="right"))
+            parts.append({k: v[:n] for k, v in self.held.items()})
+            if n < self.held["t"].size:
+                self.held = {k: v[n:] for k, v in self.held.items()}
+                break
+            self.held = None
+        if not parts:
+            return None
+        return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}

@@ -63,11 +63,13 @@ def _corrections(t: np.ndarray, llh: np.ndarray, v_n: np.ndarray) -> np.ndarray:
 
 
 def check_track(t: np.ndarray, llh: np.ndarray, v_n: np.ndarray, q_nb: np.ndarray, sd: np.ndarray,
-                sd_pos: np.ndarray, cfg: Config) -> Track:
+                sd_pos: np.ndarray, cfg: Config, has_sd: bool | None = None) -> Track:
     """The checks of the module docstring on epochs t of a track: llh (K, 3), v_n (K, 3), q_nb (K, 4), the
-    one-sigmas sd (K, n) (all NaN: a method without a covariance) of which sd_pos (K, 3) the position's."""
+    one-sigmas sd (K, n) (all NaN: a method without a covariance) of which sd_pos (K, 3) the position's; `has_sd`
+    whether the method has a covariance (None: whether any position one-sigma is finite)."""
     finite = np.isfinite(llh).all(axis=1) & np.isfinite(v_n).all(axis=1) & np.isfinite(q_nb).all(axis=1)
-    has_sd = np.isfinite(sd_pos).any()
+    if has_sd is None:
+        has_sd = bool(np.isfinite(sd_pos).any())
     if has_sd:
         finite &= np.isfinite(sd).all(axis=1)
     speed = np.linalg.norm(np.where(np.isfinite(v_n), v_n, 0.0), axis=1)
@@ -88,23 +90,69 @@ def filter_lost(t: np.ndarray, nav: np.ndarray, sd: np.ndarray, cfg: Config) -> 
                        cfg).lost
 
 
+class Assessment:
+    """`assess` over a method's solution given in consecutive pieces (an online run's passes): `check` flags each
+    piece's unhealthy epochs in place, the last epoch of the piece before carried for the jump check, so the flags
+    and `notes` are those of the whole solution's. `covariance`: whether the method has one (its one-sigmas are
+    checked); None: whether any one-sigma of the piece is finite (a whole solution's check)."""
+
+    KINDS = ("not finite", "fast", "jump")
+
+    def __init__(self, cfg: Config, name: str, covariance: bool | None = None):
+        self.cfg, self.name, self.covariance = cfg, name, covariance
+        self.last: Solution | None = None
+        self.count = {k: 0 for k in self.KINDS}
+        self.t_span = {k: [np.nan, np.nan] for k in self.KINDS}
+        self.peak = {k: 0.0 for k in self.KINDS}
+        self.bad = 0
+
+    def check(self, sol: Solution) -> None:
+        if sol.t.size == 0:
+            return
+        prev = self.last
+        cat = {k: getattr(sol, k) if prev is None else np.concatenate([getattr(prev, k), getattr(sol, k)])
+               for k in ("t", "llh", "v_n", "q_nb", "sd")}
+        track = check_track(cat["t"], cat["llh"], cat["v_n"], cat["q_nb"], cat["sd"], cat["sd"][:, SD_POS], self.cfg,
+                            self.covariance)
+        skip = 0 if prev is None else 1
+        track = Track(*(a[skip:] for a in track))
+        sol.flags[track.lost] |= FLAG_UNHEALTHY
+        self.bad += int(track.lost.sum())
+        for kind, mask, value in (("not finite", ~track.finite, None), ("fast", track.fast, track.speed),
+                                  ("jump", track.jump, track.ratio)):
+            if mask.any():
+                t = sol.t[mask]
+                if not self.count[kind]:
+                    self.t_span[kind][0] = t[0]
+                self.t_span[kind][1] = t[-1]
+                self.count[kind] += int(mask.sum())
+                if value is not None:
+                    self.peak[kind] = max(self.peak[kind], float(value[mask].max()))
+        self.last = Solution(*(getattr(sol, k)[-1:] for k in ("t", "llh", "v_n", "q_nb", "sd", "flags")))
+
+    def notes(self) -> list[str]:
+        """A note per kind of lost track: when, how often, how far."""
+        cfg, out = self.cfg, []
+        what = {"not finite": ("not finite", ""),
+                "fast": (f"faster than {cfg.health_max_speed_m_s:g} m/s", f", up to {self.peak['fast']:.3g} m/s"),
+                "jump": (f"moved beyond {cfg.health_jump_sigma:g} sigma of its own covariance",
+                         f", up to {self.peak['jump']:.3g} sigma")}
+        for kind in self.KINDS:
+            n = self.count[kind]
+            if n:
+                label, detail = what[kind]
+                t0, t1 = self.t_span[kind]
+                out.append(f"health: {self.name} lost track at {n} epoch{'s' * (n != 1)} ({label}{detail}; t {t0:.1f}-"
+                           f"{t1:.1f} s): its estimate and sigma there are not to be trusted")
+        return out
+
+
 def assess(sol: Solution, cfg: Config, name: str) -> int:
     """Flag the unhealthy epochs of `sol` (in place: flags and a note per kind); returns their number."""
-    track = check_track(sol.t, sol.llh, sol.v_n, sol.q_nb, sol.sd, sol.sd[:, SD_POS], cfg)
-    bad = track.lost
-    sol.flags[bad] |= FLAG_UNHEALTHY
-    for kind, mask, what in (
-            ("not finite", ~track.finite, ""),
-            (f"faster than {cfg.health_max_speed_m_s:g} m/s", track.fast,
-             f", up to {track.speed[track.fast].max(initial=0):.3g} m/s"),
-            (f"moved beyond {cfg.health_jump_sigma:g} sigma of its own covariance", track.jump,
-             f", up to {track.ratio[track.jump].max(initial=0):.3g} sigma")):
-        if mask.any():
-            t = sol.t[mask]
-            n = int(mask.sum())
-            sol.notes.append(f"health: {name} lost track at {n} epoch{'s' * (n != 1)} ({kind}{what}; t {t[0]:.1f}-"
-                             f"{t[-1]:.1f} s): its estimate and sigma there are not to be trusted")
-    return int(bad.sum())
+    assessment = Assessment(cfg, name)
+    assessment.check(sol)
+    sol.notes.extend(assessment.notes())
+    return assessment.bad
 
 
 NIS_WINDOW = 10

@@ -12,18 +12,19 @@ from __future__ import annotations
 import multiprocessing
 import signal
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 from estimators.io.log import Log
 from estimators.shearer.adaptive_federated_mag import run_mag
 from estimators.shearer.config import Config, PositioningError
-from estimators.shearer.health import assess
+from estimators.shearer.health import Assessment, assess
+from estimators.shearer.online import OnlinePositioning
 from estimators.shearer.positioning import dead_reckoning, rts_offline, run_kf
 from estimators.shearer.prepare import Prepared, prepare
 from estimators.shearer.rail_kinematics import run_rail
-from estimators.shearer.solution import Solution
+from estimators.shearer.solution import Solution, join_rows
 
 METHODS = ("dr", "dr_compensated", "kf", "kf_rts", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag", "afkf",
            "fkf_rail")
@@ -35,13 +36,28 @@ TASKS = (("kf_cpoem_rts", "rts_offline", "dr_compensated"), ("fkf_rail",), ("afk
 longest first, so that a pool of processes finishes together."""
 
 
-Finish = Callable[[str, Solution], Any]
-"""What a caller does with each method's solution where it is made (its process), e.g. write and score it; its
-value is returned in place of the solution."""
+STREAMED = ("kf_cpoem_rts", "kf_rts", "kf_cpoem", "kf")
+"""The methods `estimate` runs online over the log's pieces when it is given them (estimators.shearer.online: 001's
+filter a pass at a time, the batch method's rows bit for bit), unless another requested method reads the batch
+run (kf_cpoem_rts feeds rts_offline and dr_compensated)."""
+
+Pieces = Callable[[], Iterator[tuple[Mapping[str, Mapping[str, Any]], bool]]]
+"""The log in consecutive pieces of time, (stream name -> columns, last piece), read afresh at each call
+(estimators.io.log.log_pieces)."""
 
 
-def _run_group(log: Log, cfg: Config, prep: Prepared, finish: Finish | None, group: tuple[str, ...]) -> dict:
-    """One task of TASKS, restricted to the requested methods of its group, each solution through `finish`."""
+class Sink(Protocol):
+    """What a caller does with each method's rows where they are made (the process that runs the method): `rows`
+    takes them in time order (a batch method's whole solution, an online one's passes), their flags final; `done`
+    the method's notes, and returns what `estimate` gives for the method."""
+
+    def rows(self, name: str, sol: Solution) -> None: ...
+
+    def done(self, name: str, notes: list[str]) -> Any: ...
+
+
+def _run_group(log: Log, cfg: Config, prep: Prepared, sink: Sink | None, group: tuple[str, ...]) -> dict:
+    """One task of TASKS, restricted to the requested methods of its group, each solution given to `sink`."""
     out: dict[str, Solution] = {}
     if set(group) <= set(TASKS[0]):
         with tempfile.TemporaryDirectory(prefix="longwall-rts-") as tmp:
@@ -65,11 +81,39 @@ def _run_group(log: Log, cfg: Config, prep: Prepared, finish: Finish | None, gro
         out["fkf_rail"] = run_rail(log, cfg, prep, cfg.isolate_by)
     for name, sol in out.items():
         assess(sol, cfg, name)
-    return out if finish is None else {name: finish(name, out.pop(name)) for name in list(out)}
+    if sink is None:
+        return out
+    for name in list(out):
+        sol = out.pop(name)
+        sink.rows(name, sol)
+        out[name] = sink.done(name, sol.notes)
+    return out
 
 
-_SHARED: tuple[Log, Config, Prepared, Finish | None] | None = None
-"""The log, configuration, prepared log and finish a forked worker inherits from its parent (never pickled)."""
+def _run_online(cfg: Config, pieces: Pieces, sink: Sink, name: str) -> dict:
+    """A method of STREAMED run online over the log's pieces, each pass (after epoch 0's row) through the health
+    monitor to `sink` as it ends: the batch method's rows and notes, a pass held at a time."""
+    online = OnlinePositioning(cfg, name)
+    health = Assessment(cfg, name, covariance=True)
+    first = True
+    for piece, final in pieces():
+        for one in online.feed(piece, final):
+            # Epoch 0 goes with the first pass: its rows computed alone would differ in the last bit (BLAS).
+            sol = join_rows([online.initial, one.solution]) if first else one.solution
+            health.check(sol)
+            sink.rows(name, sol)
+            first = False
+    if first:
+        raise PositioningError(f"{name}: the log holds no pass to filter (no odometer travel after the start)")
+    return {name: sink.done(name, online.finish() + health.notes())}
+
+
+Task = tuple[str, tuple[str, ...]]
+"""("batch", a group of TASKS) or ("online", (a method of STREAMED,))."""
+
+_SHARED: tuple[Log | None, Config, Prepared | None, Sink | None, Pieces | None] | None = None
+"""What a forked worker inherits from its parent (never pickled): the log, configuration, prepared log (batch
+groups), sink and the log's pieces (online methods)."""
 
 
 def _worker_start() -> None:
@@ -78,44 +122,54 @@ def _worker_start() -> None:
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def _worker_group(group: tuple[str, ...]) -> dict:
-    return _run_group(*_SHARED, group)
+def _run_task(task: Task) -> dict:
+    log, cfg, prep, sink, pieces = _SHARED
+    kind, group = task
+    return _run_group(log, cfg, prep, sink, group) if kind == "batch" else _run_online(cfg, pieces, sink, group[0])
 
 
-def _run_forked(log: Log, cfg: Config, prep: Prepared, finish: Finish | None, groups: list[tuple[str, ...]],
-                workers: int) -> list[dict]:
-    """The groups on `workers` forked processes, which share the parent's log and prepared increments (copy on
-    write) and its compiled kernels; results in the order of `groups`. An exception in a group is raised here."""
-    global _SHARED
-    _SHARED = (log, cfg, prep, finish)
-    pool = multiprocessing.get_context("fork").Pool(min(workers, len(groups)), initializer=_worker_start)
+def _run_tasks(tasks: list[Task], workers: int) -> list[dict]:
+    """The tasks on `workers` forked processes, which share the parent's log and prepared increments (copy on
+    write) and its compiled kernels; results in the order of `tasks`. An exception in a task is raised here."""
+    pool = multiprocessing.get_context("fork").Pool(min(workers, len(tasks)), initializer=_worker_start)
     try:
-        pending = [pool.apply_async(_worker_group, (g,)) for g in groups]
+        pending = [pool.apply_async(_run_task, (task,)) for task in tasks]
         results = [p.get() for p in pending]
         pool.close()
         return results
     finally:
         pool.terminate()
         pool.join()
-        _SHARED = None
 
 
-def estimate(log: Log, cfg: Config, methods: tuple[str, ...] = METHODS, workers: int = 1,
-             finish: Finish | None = None) -> dict:
+def estimate(log: Log | None, cfg: Config, methods: tuple[str, ...] = METHODS, workers: int = 1,
+             sink: Sink | None = None, pieces: Pieces | None = None) -> dict:
     """Run the requested methods on a log; returns method -> Solution, each through the health monitor
-    (estimators.shearer.health), or what `finish` made of it in the process that made it. With `workers` > 1 the
-    independent groups of methods (TASKS) run on that many forked processes (POSIX), a solution not sent back to
-    the parent when `finish` writes it; every result is the one the sequential run gives, bit for bit."""
+    (estimators.shearer.health), or what `sink` made of it in the process that made it. Given the log's `pieces`
+    too, the methods of STREAMED run online over them, their rows to the sink pass by pass (the log need not be
+    loaded if all run so: None). With `workers` > 1 the independent groups of methods (TASKS) run on that many
+    forked processes (POSIX), a solution not sent back to the parent when a sink writes it; every result is the
+    one the sequential run gives, bit for bit."""
+    global _SHARED
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise PositioningError(f"unknown method '{unknown[0]}' (methods: {', '.join(METHODS)})")
     if workers < 1:
         raise ValueError(f"workers: must be >= 1 (got {workers})")
-    prep = prepare(log, cfg)
-    groups = [g for g in (tuple(m for m in task if m in methods) for task in TASKS) if g]
-    if workers > 1 and len(groups) > 1 and "fork" in multiprocessing.get_all_start_methods():
-        results = _run_forked(log, cfg, prep, finish, groups, workers)
-    else:
-        results = [_run_group(log, cfg, prep, finish, g) for g in groups]
+    tasks: list[Task] = []
+    for task in TASKS:
+        group = tuple(m for m in task if m in methods)
+        if group:
+            online = sink is not None and pieces is not None and len(group) == 1 and group[0] in STREAMED
+            tasks.append(("online" if online else "batch", group))
+    prep = prepare(log, cfg) if any(kind == "batch" for kind, _ in tasks) else None
+    _SHARED = (log, cfg, prep, sink, pieces)
+    try:
+        if workers > 1 and len(tasks) > 1 and "fork" in multiprocessing.get_all_start_methods():
+            results = _run_tasks(tasks, workers)
+        else:
+            results = [_run_task(task) for task in tasks]
+    finally:
+        _SHARED = None
     out = {name: sol for res in results for name, sol in res.items()}
     return {m: out[m] for m in methods}

@@ -60,6 +60,8 @@ class OnlinePositioning:
         self.passes: KfPasses | RailPasses | None = None
         self.done = 0
         """Passes run."""
+        self.initial: Solution | None = None
+        """001's filters: epoch 0's row of the batch method (the start state), once the first pass runs."""
 
     def feed(self, streams: Mapping[str, Mapping[str, np.ndarray]], final: bool = False) -> list[PassEstimate]:
         """The passes that end with these rows (stream name -> columns as in estimators.io.logformat: imu, odometer,
@@ -73,10 +75,13 @@ class OnlinePositioning:
             return []
         log = self.preparer.log
         if self.passes is None and prep.segments[self.done:]:
-            self.passes = (RailPasses(log, self.cfg, prep, self.cfg.isolate_by, whole=False)
-                           if self.method == "fkf_rail" else
-                           KfPasses(log, self.cfg, prep, cpoem=self.method.startswith("kf_cpoem"),
-                                     smooth=self.method.endswith("_rts")))
+            if self.method == "fkf_rail":
+                self.passes = RailPasses(log, self.cfg, prep, self.cfg.isolate_by, whole=False)
+            else:
+                self.passes = KfPasses(log, self.cfg, prep, cpoem=self.method.startswith("kf_cpoem"),
+                                       smooth=self.method.endswith("_rts"))
+                self.initial = self.passes.first_row(prep)
+                self.initial.flags |= FLAG_SMOOTHED if self.method.endswith("_rts") else 0
         out = []
         per_epoch = prep.steps * prep.n_samples
         for a, b in prep.segments[self.done:]:
@@ -93,6 +98,13 @@ class OnlinePositioning:
             self.imu.forget_before(b * per_epoch - 1)
             self.preparer.forget_before(a)
         return out
+
+    def finish(self) -> list[str]:
+        """The notes of the batch method once the log has ended (KfPasses.finish: the fixes gated, the odometer's
+        gaps; 001's filters)."""
+        if isinstance(self.passes, KfPasses):
+            return self.passes.finish(self.preparer.prep)
+        return self.notes
 
     @property
     def notes(self) -> list[str]:

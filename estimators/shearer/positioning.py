@@ -241,6 +241,12 @@ class KfPasses:
             self.points = segment_points(prep, cfg, a, b, nav_s, p_s[:, es.DP, es.DP])
         return out._replace(nav_s=nav_s, sd_s=_sd(p_s))
 
+    def first_row(self, prep: Prepared) -> Solution:
+        """Epoch 0's row as run_kf gives it, before any pass has run: the start state and covariance, no calibration
+        (smoothed methods add FLAG_SMOOTHED)."""
+        return make_solution(prep.t_kf[:1], self.cfg, self.nav[None], _sd(self.p)[None], np.zeros(1, np.int32),
+                             np.zeros((1, es.N_CAL)), [])
+
     def finish(self, prep: Prepared) -> list[str]:
         """The run's notes, with the fixes gated and the odometer's gaps."""
         cfg, notes = self.cfg, self.notes

@@ -55,6 +55,12 @@ def make_solution(t_kf: np.ndarray, cfg: Config, nav: np.ndarray, sd_all: np.nda
                     nav[:, es.QUAT].copy(), sd, flags.copy(), cal.copy(), sd_cal, list(notes))
 
 
+def join_rows(parts: list[Solution]) -> Solution:
+    """Consecutive pieces of a filter's solution (with calibration; no notes, fusion or detectors) as one."""
+    return Solution(*(np.concatenate([getattr(p, k) for p in parts])
+                      for k in ("t", "llh", "v_n", "q_nb", "sd", "flags", "cal", "sd_cal")))
+
+
 def estimate_columns(sol: Solution, origin_llh: np.ndarray | None = None,
                      azimuth_rad: float | None = None) -> dict[str, np.ndarray]:
     """A Solution as ESTIMATE columns (estimators.io.logformat). With the run's reference point `origin_llh` (lat,

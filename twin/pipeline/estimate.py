@@ -20,7 +20,7 @@ import pyarrow as pa
 from estimators.faults.hydraulic_checks import HydraulicLayout
 from estimators.faults.ram_checks import RamLayout
 from estimators.io import metrics
-from estimators.io.log import load_log
+from estimators.io.log import load_log, log_pieces
 from estimators.io.logformat import (
     ESTIMATE,
     ESTIMATE_DETECTORS,
@@ -28,14 +28,16 @@ from estimators.io.logformat import (
     ESTIMATE_STATES,
     STREAMS,
     Stream,
+    StreamAppender,
     StreamBlocks,
+    estimate_file,
+    make_table,
     read_estimate,
     read_stream,
-    write_estimate,
 )
 from estimators.kalman.error_state import CAL_MOUNT, CAL_SCALE
 from estimators.shearer.config import Config, ImuNoise, MagSettings
-from estimators.shearer.methods import estimate
+from estimators.shearer.methods import STREAMED, estimate
 from estimators.shearer.rail_kinematics import detector_chi2
 from estimators.shearer.solution import Solution, estimate_columns, state_columns
 from twin.config.imu_grades import grade
@@ -153,32 +155,56 @@ def _truth_track(run_dir: Path) -> metrics.TruthTrack | None:
     return metrics.TruthTrack(StreamBlocks(run_dir, STREAMS["truth_shearer"], metrics.SCORED_TRUTH))
 
 
-def _shearer_methods(run_dir: Path, scn: Scenario, methods: tuple[str, ...], workers: int
-                     ) -> dict[str, tuple[dict, list[str]]]:
-    """Run `methods` on run_dir's log on `workers` processes, each solution written to estimates/ and scored in
-    the process that made it (none is held by the parent): method -> (its metrics entry, the streams written)."""
-    truth = _truth_track(run_dir)
-    survey = read_stream(run_dir, STREAMS["survey"])
-    cycles = _optional(run_dir, "truth_cycles") if truth is not None else None
-    states_truth = true_states(scn) if truth is not None else None
+class EstimateWriter:
+    """The sink of estimators.shearer.methods.estimate for a run directory: each method's rows appended to its
+    estimate files as they come (a pass at a time from an online method), the method scored once it is done
+    (estimators.io.metrics against the truth, read a row group at a time), all in the process that runs it."""
 
-    def finish(name: str, sol: Solution) -> tuple[dict, list[str]]:
-        written = []
-        for stream, columns in ((ESTIMATE, solution_columns(sol, scn)),
+    def __init__(self, run_dir: Path, scn: Scenario):
+        self.run_dir, self.scn = Path(run_dir), scn
+        self.truth = _truth_track(run_dir)
+        self.survey = read_stream(run_dir, STREAMS["survey"])
+        self.cycles = _optional(run_dir, "truth_cycles") if self.truth is not None else None
+        self.states_truth = true_states(scn) if self.truth is not None else None
+        self.open: dict[str, dict[str, StreamAppender]] = {}
+        self.last: dict[str, Solution] = {}
+
+    def rows(self, name: str, sol: Solution) -> None:
+        appenders = self.open.setdefault(name, {})
+        for stream, columns in ((ESTIMATE, solution_columns(sol, self.scn)),
                                 (ESTIMATE_STATES, state_columns(sol) if sol.cal is not None else None),
                                 (ESTIMATE_FUSION, sol.fusion), (ESTIMATE_DETECTORS, sol.detectors)):
             if columns is not None:
-                write_estimate(run_dir, name, columns, stream)
-                written.append(stream.name)
-        table = read_estimate(run_dir, name)
-        entry = {"truth": truth is not None}
-        if truth is not None:
-            entry["cycles"] = metrics.cycle_metrics(*metrics.position_errors(table, truth),
-                                                    NO_CYCLES if cycles is None else cycles)
-        entry |= {"notes": sol.notes, "self": metrics.self_assessment(table, survey)}
-        return entry | (_calibration(sol, states_truth) if sol.cal is not None else {}), written
+                if stream.name not in appenders:
+                    folder, named = estimate_file(self.run_dir, name, stream)
+                    folder.mkdir(parents=True, exist_ok=True)
+                    appenders[stream.name] = StreamAppender(folder, named)
+                appenders[stream.name].append(make_table(stream, columns))
+        self.last[name] = sol
 
-    return estimate(load_log(run_dir), positioning_config(scn), methods, workers, finish)
+    def done(self, name: str, notes: list[str]) -> tuple[dict, list[str]]:
+        """(The method's metrics entry, the estimate streams written)."""
+        appenders = self.open.pop(name)
+        for appender in appenders.values():
+            appender.close()
+        last = self.last.pop(name)
+        table = read_estimate(self.run_dir, name)
+        entry = {"truth": self.truth is not None}
+        if self.truth is not None:
+            entry["cycles"] = metrics.cycle_metrics(*metrics.position_errors(table, self.truth),
+                                                    NO_CYCLES if self.cycles is None else self.cycles)
+        entry |= {"notes": notes, "self": metrics.self_assessment(table, self.survey)}
+        return entry | (_calibration(last, self.states_truth) if last.cal is not None else {}), list(appenders)
+
+
+def _shearer_methods(run_dir: Path, scn: Scenario, methods: tuple[str, ...], workers: int
+                     ) -> dict[str, tuple[dict, list[str]]]:
+    """Run `methods` on run_dir's log on `workers` processes, each solution written to estimates/ and scored in
+    the process that made it (none is held by the parent; 001's filters run online over the log read a row group
+    at a time, estimators.shearer.methods.STREAMED): method -> (its metrics entry, the streams written)."""
+    log = load_log(run_dir) if any(m not in STREAMED for m in methods) else None
+    return estimate(log, positioning_config(scn), methods, workers, EstimateWriter(run_dir, scn),
+                    lambda: log_pieces(run_dir))
 
 
 def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers: int = 1,

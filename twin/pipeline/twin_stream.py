@@ -8,8 +8,8 @@ Parquet files in fixed row groups (estimators.io.logformat.StreamAppender), so t
 the chunking. The supports' push-ram and pressure streams are drawn a span of time at a time
 (twin.sensors.streams.SupportSensors; SupportDraw), after the face, or with live taps (a served run) as the face's
 rows become final, and appended the same way. What stays in memory for the whole run: the face's own tables (pans
-and supports, a row per move) and the shearer's (t, s), which the support streams read for the shearer's place
-along the face. Live taps get every sensor row the files get, as it is drawn.
+and supports, a row per move) and, where the support streams read the shearer's place along the face, its (t, s)
+(ShearerTrack). Live taps get every sensor row the files get, as it is drawn.
 """
 
 from __future__ import annotations
@@ -46,7 +46,38 @@ intermediate arrays stay small whatever a cycle's length (seed004's 77 min cycle
 SUPPORT_STREAMS = ("pushram", "pressure")
 """The streams drawn from the supports' truth a span of time at a time (SupportDraw)."""
 SUPPORT_TRUTH = ("t", "s")
-"""The shearer truth columns the support streams read (held for the whole run)."""
+"""The shearer truth columns the support streams read (ShearerTrack)."""
+
+
+class ShearerTrack:
+    """The shearer truth's (t, s) the support streams read, held only where they read it: about each rail_deviation
+    fault's window (twin.sensors.pushram places the deviation where the shearer's centre travels, s interpolated at
+    the window's start), and over the whole run with support IMUs (the shearer's field at each canopy unit,
+    twin.sensors.support_imu); a run with neither holds no per-sample row. The margin of two truth steps about a
+    window keeps the samples on either side of its ends, so the readings are those of the whole run's (t, s)."""
+
+    def __init__(self, scn: Scenario):
+        self.everything = bool(scn.sensors.support_imu.supports)
+        margin = 2.0 / scn.rates.truth_hz
+        self.windows = np.array([(f.t_start_s - margin, f.t_end_s + margin) for f in scn.faults
+                                 if f.kind == "rail_deviation"]).reshape(-1, 2)
+        self.parts: dict[str, list[np.ndarray]] = {k: [] for k in SUPPORT_TRUTH}
+        self.t_last = -np.inf
+
+    def add(self, rows: dict[str, np.ndarray]) -> None:
+        t = rows["t"]
+        if t.size:
+            self.t_last = float(t[-1])
+        keep = slice(None) if self.everything else (
+            (t[:, None] >= self.windows[:, 0]) & (t[:, None] <= self.windows[:, 1])).any(axis=1)
+        for k in SUPPORT_TRUTH:
+            self.parts[k].append(rows[k][keep])
+
+    def rows(self) -> dict[str, np.ndarray]:
+        """The held (t, s) in time order (concatenated once per call, kept as one block)."""
+        for k in SUPPORT_TRUTH:
+            self.parts[k] = [np.concatenate(self.parts[k])] if self.parts[k] else [np.empty(0)]
+        return {k: v[0] for k, v in self.parts.items()}
 
 
 class SupportDraw:
@@ -75,8 +106,9 @@ class SupportDraw:
             keep = np.concatenate([np.sort(latest), np.flatnonzero(~before)])
             self.rows = {k: v[keep] for k, v in self.rows.items()}
 
-    def finish(self, supports: dict[str, np.ndarray], shearer: dict[str, np.ndarray]) -> None:
-        self._draw(float(shearer["t"][-1]), True, supports, shearer)
+    def finish(self, supports: dict[str, np.ndarray], shearer: dict[str, np.ndarray], t_end: float) -> None:
+        """The rest up to the run's last truth time t_end, from the run's whole truth_supports."""
+        self._draw(t_end, True, supports, shearer)
 
     def _draw(self, t_end: float, last: bool, supports: dict[str, np.ndarray], shearer: dict[str, np.ndarray]) -> None:
         for t0, t1, end in self.sensors.spans(t_end, self.t_drawn, last):
@@ -102,7 +134,7 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
     appenders = {name: StreamAppender(run_dir, STREAMS[name]) for name in names}
     assembler = ChunkAssembler(halo_rows(scn))
     stats = ShearerStats()
-    held = {k: [] for k in SUPPORT_TRUTH}
+    track = ShearerTrack(scn)
 
     def write(name: str, cols: dict[str, np.ndarray], until: float) -> None:
         appenders[name].append(cols)
@@ -117,16 +149,10 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
                 write(name, cols, np.inf if chunk.last else chunk.t_end)
 
     def sink(rows: dict[str, np.ndarray]) -> None:
-        for k in SUPPORT_TRUTH:
-            held[k].append(rows[k])
+        track.add(rows)
         for a in range(0, rows["t"].size, chunk_rows):
             for chunk in assembler.push({k: v[a:a + chunk_rows] for k, v in rows.items()}):
                 take(chunk)
-
-    def shearer_held() -> dict[str, np.ndarray]:
-        for k in SUPPORT_TRUTH:
-            held[k] = [np.concatenate(held[k])]
-        return {k: v[0] for k, v in held.items()}
 
     supports_draw = SupportDraw(scn, write) if sensors else None
     taps = live
@@ -134,9 +160,8 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
         def face_rows(rows: dict[str, np.ndarray], t_final: float) -> None:
             live.supports(rows, t_final)
             supports_draw.add(rows)
-            if held["t"]:
-                shearer = shearer_held()
-                supports_draw.until(min(t_final, float(shearer["t"][-1])), shearer)
+            if np.isfinite(track.t_last):
+                supports_draw.until(min(t_final, track.t_last), track.rows())
 
         taps = LiveTaps(live.shearer, face_rows, live.sensors)
     try:
@@ -144,7 +169,7 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
         for chunk in assembler.finish():
             take(chunk)
         if supports_draw is not None:
-            supports_draw.finish(result.tables["truth_supports"], shearer_held())
+            supports_draw.finish(result.tables["truth_supports"], track.rows(), track.t_last)
     finally:
         for appender in appenders.values():
             appender.close()
@@ -153,7 +178,7 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
     write_stream(run_dir, ALIGNMENT, alignment_table(scn, cycles["t"], result.offsets, result.alignment))
     if sensors:
         write_stream(run_dir, STREAMS["faults"], faults_table(scn))
-        imu = support_imu_readings(scn, result.tables["truth_supports"], shearer_held(), 0)
+        imu = support_imu_readings(scn, result.tables["truth_supports"], track.rows(), 0)
         if imu is not None:
             write_stream(run_dir, STREAMS["support_imu"], imu)
             if live is not None and live.sensors is not None:

@@ -51,3 +51,30 @@ def test_the_spans_cover_the_run_once(run):
     spans = SupportSensors(scn, 0).spans(t_end)
     assert spans[0][0] == 0.0 and spans[-1][1] == t_end and spans[-1][2] and not any(s[2] for s in spans[:-1])
     assert all(a[1] == b[0] for a, b in zip(spans[:-1], spans[1:]))
+
+
+def test_the_shearer_track_held_gives_the_whole_runs_streams(run):
+    """A streaming run holds the shearer's (t, s) only about the rail_deviation windows (twin_stream.ShearerTrack):
+    fed in chunks cut anywhere, what it holds gives the streams of the whole (t, s) bit for bit, while holding a
+    small part of the run; a window's deviation is present (the test can see a wrong window)."""
+    from twin.pipeline.twin_stream import ShearerTrack
+
+    scn, supports, shearer, t_end = run
+    whole = SupportSensors(scn, 0).step(0.0, t_end, True, supports, shearer)
+    track = ShearerTrack(scn)
+    edges = [0, 1, 7_919, 7_920, 50_001, shearer["t"].size]
+    for a, b in zip(edges[:-1], edges[1:]):
+        track.add({k: v[a:b] for k, v in shearer.items()})
+    held = track.rows()
+    assert track.t_last == shearer["t"][-1]
+    assert 0 < held["t"].size < 0.25 * shearer["t"].size  # the window is 20 % of the run
+    got = SupportSensors(scn, 0).step(0.0, t_end, True, supports, held)
+    for name, cols in whole.items():
+        for key, value in cols.items():
+            assert np.array_equal(got[name][key], value, equal_nan=True), (name, key)
+    without = SupportSensors(scn.model_copy(update={"faults": [f for f in scn.faults if f.kind != "rail_deviation"]}),
+                             0).step(0.0, t_end, True, supports, held)
+    assert not np.array_equal(without["pushram"]["extension"], whole["pushram"]["extension"])
+    empty = ShearerTrack(scn.model_copy(update={"faults": []}))
+    empty.add(shearer)
+    assert empty.rows()["t"].size == 0 and empty.t_last == shearer["t"][-1]
