@@ -76,7 +76,7 @@ from twin.pipeline.support_estimate import ANGLES, FLAG_NAMES, SupportAttitude
 from twin.view import plan
 from twin.view.recording import run_recording_id
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
-from twin.view.rerun_columns import decimate, marker_rows, path_strips, series, time_column
+from twin.view.rerun_columns import PathStrips, decimate, marker_rows, path_strips, series, time_column
 from twin.view.rrd_stream import recording_id, recording_stream
 
 POSITION_AXES = ("east", "north", "up")
@@ -136,8 +136,11 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method:
     rec.log(f"world/estimates/{method}/position", rr.Points3D.from_fields(radii=0.15, colors=color), static=True)
     rec.send_columns(f"world/estimates/{method}/position", indexes=[time_column(t_all[moved])],
                      columns=rr.Points3D.columns(positions=p_all[moved].astype(np.float32)))
-    plan.log_path(rec, scn, f"{plan.PLAN_ROOT}/estimates/{method}", t_all, p_all,
-                  np.zeros(t_all.size, np.int64) if cycle is None else cycle, moved, rate_hz, color)
+    cycle = np.zeros(t_all.size, np.int64) if cycle is None else cycle
+    plan_path = PathStrips(rate_hz)
+    plan_path.push(t_all, plan.face_coordinates(scn, p_all, cycle), cycle)
+    plan.log_path(rec, scn, f"{plan.PLAN_ROOT}/estimates/{method}", plan_path, t_all[moved], p_all[moved],
+                  cycle[moved], color)
     sub, t = plot_rows(table, rate_hz)
 
     if truth_shearer is not None:

@@ -25,7 +25,7 @@ import rerun as rr
 
 from estimators.face.straightness import mat_ft, pan_lines
 from twin.config.scenario import Scenario
-from twin.view.rerun_columns import path_strips, time_column
+from twin.view.rerun_columns import PathStrips, time_column
 
 PLAN_SCALE = 20.0
 """Exaggeration of the plan view's lateral (towards the coal wall) scale."""
@@ -109,18 +109,16 @@ def send_target_line(rec: rr.RecordingStream, scn: Scenario, pans: dict[str, np.
                      columns=rr.LineStrips2D.columns(strips=strips).partition(np.ones(times.size, np.int64)))
 
 
-def log_path(rec: rr.RecordingStream, scn: Scenario, entity: str, t: np.ndarray, p_t: np.ndarray, cycle: np.ndarray,
-             moved: np.ndarray, rate_hz: float | None, color) -> None:
-    """A shearer path (times t, points p_t (K, 3) in t, each sample's cycle) as `entity/path`, one strip per cycle
-    without the samples it passes within PATH_TOLERANCE_M of (every sample at FULL rate), each logged at its cycle's
-    first sample (the plan shows the cycle in progress), and its point at the rows `moved` as `entity/position`."""
-    face = face_coordinates(scn, p_t, cycle)
-    strips = [plotted(s) for s in path_strips(t, face, cycle, rate_hz)]
-    starts = np.sort(np.unique(cycle, return_index=True)[1])  # each cycle's first sample, the strips' order
+def log_path(rec: rr.RecordingStream, scn: Scenario, entity: str, path: PathStrips, t_moved: np.ndarray,
+             p_moved: np.ndarray, cycle_moved: np.ndarray, color) -> None:
+    """A shearer path as `entity/path`: `path` holds its face_coordinates, one strip per cycle without the samples it
+    passes within PATH_TOLERANCE_M of (every sample at FULL rate; twin.view.rerun_columns.PathStrips), each logged at
+    its cycle's first sample (the plan shows the cycle in progress); and its point (p_moved (K, 3) in t, in cycles
+    cycle_moved) at times t_moved as `entity/position`."""
+    strips = [plotted(s) for s in path.strips()]
     rec.log(f"{entity}/path", rr.LineStrips2D.from_fields(radii=0.12, colors=color), static=True)
-    rec.send_columns(f"{entity}/path", indexes=[time_column(t[starts])],
+    rec.send_columns(f"{entity}/path", indexes=[time_column(path.start_times())],
                      columns=rr.LineStrips2D.columns(strips=strips).partition(np.ones(len(strips), np.int64)))
     rec.log(f"{entity}/position", rr.Points2D.from_fields(radii=0.6, colors=color), static=True)
-    rec.send_columns(f"{entity}/position", indexes=[time_column(t[moved])],
-                     columns=rr.Points2D.columns(positions=plotted(face[moved])))
-
+    rec.send_columns(f"{entity}/position", indexes=[time_column(t_moved)],
+                     columns=rr.Points2D.columns(positions=plotted(face_coordinates(scn, p_moved, cycle_moved))))

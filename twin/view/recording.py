@@ -53,15 +53,13 @@ from twin.view.geometry import BodyGeoms, body_geoms, log_body, send_bodies
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
 from twin.view.rerun_columns import (
     Blocks,
+    PathStrips,
     col,
-    column_of,
-    decimate,
+    decimated_rows,
     latest_rows,
     marker_rows,
-    path_strips,
     send_bar_chart,
     series,
-    take_rows,
     time_column,
     vec,
     xyzw,
@@ -189,7 +187,7 @@ def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table, ra
 SHEARER_COLUMNS = ("t", "lat", "lon", "p_t_e", "p_t_n", "p_t_u", "q_nb_w", "q_nb_x", "q_nb_y", "q_nb_z", "v_n_e", "v_n_n",
                    "cycle")
 """The truth_shearer columns the recording draws (a run reads only these back from its Parquet)."""
-BLOCK_STREAMS = ("truth_shearer", "imu", "pushram", "pressure")
+BLOCK_STREAMS = ("truth_shearer", "imu", "odometer", "mag", "pushram", "pressure")
 """The streams write_recording takes in blocks (a run reads them back a row group at a time)."""
 
 
@@ -198,14 +196,17 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_h
     """The shearer's geoms (the MJCF piece's, static in its body frame) under its pose, its path (3-D and plan) and
     speed."""
     log_body(rec, "world/shearer", body)
-    t_all = column_of(shearer, "t")
-    if t_all.size == 0:
-        return
+    path, plan_path = PathStrips(rate_hz), PathStrips(rate_hz)  # the whole path, at every sample
 
-    p_all = np.column_stack([column_of(shearer, f"p_t_{a}") for a in "enu"]).astype(float)
-    keep = decimate(t_all, rate_hz)
-    sub, t = take_rows(shearer, keep), t_all[keep]
-    p = vec(sub, "p_t")
+    def draw_path(block: pa.Table) -> None:
+        t, p, cycle = col(block, "t"), vec(block, "p_t"), col(block, "cycle")
+        path.push(t, p, cycle)
+        plan_path.push(t, plan.face_coordinates(scn, p, cycle), cycle)
+
+    sub = decimated_rows(shearer, rate_hz, draw_path)
+    if sub.num_rows == 0:
+        return
+    t, p = col(sub, "t"), vec(sub, "p_t")
     # n (ENU at the shearer) to t (ENU at the site origin): C_n^t = (C_t^e)^T C_n^e.
     c_te = mat_en(np.radians(scn.site.lat_deg), np.radians(scn.site.lon_deg))
     c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(col(sub, "lat"), col(sub, "lon"))
@@ -216,10 +217,9 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_h
     rec.send_columns("world/shearer", indexes=[time_column(t[moved])],
                      columns=rr.Transform3D.columns(translation=p[moved].astype(np.float32),
                                                     quaternion=xyzw(q_tb[moved])))
-    cycle_all = column_of(shearer, "cycle")
-    rec.log("world/shearer_path", rr.LineStrips3D(path_strips(t_all, p_all, cycle_all, rate_hz),
-                                                  radii=0.03, colors=TRUTH_RGB), static=True)
-    plan.log_path(rec, scn, f"{plan.PLAN_ROOT}/truth", t_all, p_all, cycle_all, keep[moved], rate_hz, TRUTH_RGB)
+    rec.log("world/shearer_path", rr.LineStrips3D(path.strips(), radii=0.03, colors=TRUTH_RGB), static=True)
+    plan.log_path(rec, scn, f"{plan.PLAN_ROOT}/truth", plan_path, t[moved], p[moved], col(sub, "cycle")[moved],
+                  TRUTH_RGB)
 
     speed = np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n"))
     series(rec, "plots/shearer_speed", t, speed[:, None], ["horizontal speed [m/s]"], rate_hz=rate_hz)

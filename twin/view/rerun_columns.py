@@ -9,7 +9,7 @@ The record rate (twin.view.record_rate) is a rate in Hz, or FULL (None): every s
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 import numpy as np
 import pyarrow as pa
@@ -48,26 +48,6 @@ def col(table: pa.Table, name: str) -> np.ndarray:
 def blocks_of(data: Blocks) -> Iterable[pa.Table]:
     return [data] if isinstance(data, pa.Table) else data
 
-
-def column_of(data: Blocks, name: str) -> np.ndarray:
-    """One column over all of a stream's rows."""
-    if isinstance(data, pa.Table):
-        return col(data, name)
-    if hasattr(data, "column"):
-        return data.column(name)
-    return np.concatenate([col(block, name) for block in data])
-
-
-def take_rows(data: Blocks, rows: np.ndarray) -> pa.Table:
-    """The rows (sorted indices over all of the stream's rows) as one table."""
-    if isinstance(data, pa.Table):
-        return data.take(pa.array(rows))
-    parts, start = [], 0
-    for block in data:
-        a, b = np.searchsorted(rows, [start, start + block.num_rows])
-        parts.append(block.take(pa.array(rows[a:b] - start)))
-        start += block.num_rows
-    return pa.concat_tables(parts)
 
 def vec(table: pa.Table, prefix: str, axes: str = "enu") -> np.ndarray:
     return np.column_stack([col(table, f"{prefix}_{a}") for a in axes]).astype(float)
@@ -134,17 +114,47 @@ def send_bar_chart(rec: rr.RecordingStream, entity: str, times: np.ndarray, valu
     column = rr.ComponentColumn(rr.BarChart.descriptor_values(), TensorColumn(values))
     rec.send_columns(entity, indexes=[time_column(times)], columns=[column])
 
+class Decimation:
+    """`decimate` over a series given in blocks, carrying the last row's interval: `push` each block's times, then
+    `last_kept` says whether the series' last row is among the rows kept (decimate adds it)."""
+
+    def __init__(self, rate_hz: float | None):
+        self.rate_hz, self._bin, self.last_kept = rate_hz, -np.inf, True
+
+    def push(self, t: np.ndarray) -> np.ndarray:
+        """Indices into the block `t` of its rows that begin an interval (every row at FULL rate)."""
+        if self.rate_hz is FULL or t.size == 0:
+            return np.arange(t.size)
+        bins = np.floor(np.asarray(t, float) * self.rate_hz + 1e-9)
+        keep = np.flatnonzero(np.diff(bins, prepend=self._bin) > 0)
+        self._bin, self.last_kept = bins[-1], keep.size > 0 and keep[-1] == t.size - 1
+        return keep
+
+
 def decimate(t: np.ndarray, rate_hz: float | None) -> np.ndarray:
     """Indices of the first sample in each 1/rate_hz interval (plus the last sample); every index at FULL rate."""
-    if t.size == 0:
-        return np.zeros(0, np.int64)
-    if rate_hz is FULL:
-        return np.arange(t.size)
-    bins = np.floor(np.asarray(t, float) * rate_hz + 1e-9)
-    keep = np.flatnonzero(np.r_[True, np.diff(bins) > 0])
-    if keep[-1] != t.size - 1:
-        keep = np.r_[keep, t.size - 1]
-    return keep
+    cut = Decimation(rate_hz)
+    keep = cut.push(t)
+    return keep if cut.last_kept else np.r_[keep, t.size - 1]
+
+
+def decimated_rows(data: Blocks, rate_hz: float | None,
+                   each: Callable[[pa.Table], None] | None = None) -> pa.Table:
+    """The rows of a stream (one table, or one or more blocks) that `decimate` keeps of its times, as one table;
+    `each` is called with every block as it is read (one pass for what else is drawn of the stream)."""
+    cut, parts, last = Decimation(rate_hz), [], None
+    for block in blocks_of(data):
+        if each is not None:
+            each(block)
+        if block.num_rows:
+            parts.append(block.take(pa.array(cut.push(col(block, "t")))))
+            last = block.slice(block.num_rows - 1)
+        elif not parts:
+            parts.append(block)
+    if not cut.last_kept:
+        parts.append(last)
+    return pa.concat_tables(parts)
+
 
 def marker_rows(t: np.ndarray, p: np.ndarray, rate_hz: float | None) -> np.ndarray:
     """Rows of a moving marker's positions p (K, 3) (or of several points of a body, (K, 3m)) to log: at most rate_hz
@@ -158,56 +168,147 @@ def marker_rows(t: np.ndarray, p: np.ndarray, rate_hz: float | None) -> np.ndarr
     return keep[decimate(travelled, 1.0 / MARKER_STEP_M)]
 
 
+class PathStrips:
+    """`path_strips` over a path given in blocks (each cycle's line carried on: LineCut), and the time of each
+    cycle's first sample: `push` each block, then `strips` and `start_times` (the strips' order if the cycles come in
+    order)."""
+
+    def __init__(self, rate_hz: float | None):
+        self.rate_hz = rate_hz
+        self._lines: dict[int, LineCut] = {}
+        self._kept: dict[int, list[np.ndarray]] = {}
+        self._first: dict[int, tuple[int, float]] = {}
+        self._rows = 0
+
+    def push(self, t: np.ndarray, p: np.ndarray, cycle: np.ndarray | None = None) -> None:
+        cycle = np.zeros(t.size, np.int64) if cycle is None else cycle
+        for c, first in zip(*np.unique(cycle, return_index=True)):
+            c = int(c)
+            rows = np.flatnonzero(cycle == c)
+            self._first.setdefault(c, (self._rows + first, float(t[first])))
+            if self.rate_hz is FULL:
+                self._kept.setdefault(c, []).append(p[rows])
+            else:
+                line = self._lines.setdefault(c, LineCut(PATH_TOLERANCE_M))
+                self._kept.setdefault(c, []).append(line.push(t[rows], p[rows])[1])
+        self._rows += t.size
+
+    def strips(self) -> list[np.ndarray]:
+        """The path as float32 strips, one per cycle in cycle order."""
+        for c, line in self._lines.items():
+            self._kept[c].append(line.finish()[1])
+        self._lines = {}
+        return [np.concatenate(self._kept[c]).astype(np.float32) for c in sorted(self._kept)]
+
+    def start_times(self) -> np.ndarray:
+        """Each cycle's first sample time, in the order of the samples."""
+        return np.array([t for _, t in sorted(self._first.values())])
+
+
 def path_strips(t: np.ndarray, p: np.ndarray, cycle: np.ndarray | None, rate_hz: float | None) -> list[np.ndarray]:
     """A path (K, 3) as float32 strips, one per cycle (one without `cycle`), each without the samples it passes within
     PATH_TOLERANCE_M of (the line through the others, in time: stops and reversals are kept); every sample at FULL
     rate."""
-    if cycle is None:
-        cycle = np.zeros(t.size, np.int64)
-    order = np.argsort(cycle, kind="stable")
-    _, starts = np.unique(cycle[order], return_index=True)
-    strips = []
-    for rows in np.split(order, starts[1:]):
-        if rate_hz is not FULL:
-            rows = rows[line_rows(t[rows], p[rows], PATH_TOLERANCE_M)]
-        strips.append(p[rows].astype(np.float32))
-    return strips
+    path = PathStrips(rate_hz)
+    path.push(np.asarray(t, float), np.asarray(p, float), cycle)
+    return path.strips()
+
+
+def median_interval(data: Blocks) -> tuple[float, int]:
+    """The median of a stream's sample intervals (np.median of np.diff of its times, NaN for fewer than two rows)
+    and its number of rows, from its blocks: the intervals are counted by value (a sampled clock has few)."""
+    values, counts, last, rows = np.zeros(0), np.zeros(0, np.int64), None, 0
+    for block in blocks_of(data):
+        t = col(block, "t")
+        if t.size:
+            values, at = np.unique(np.r_[values, np.diff(t) if last is None else np.diff(t, prepend=last)],
+                                   return_inverse=True)
+            counts = np.bincount(at, np.r_[counts, np.ones(at.size - counts.size, np.int64)]).astype(np.int64)
+            last, rows = t[-1], rows + t.size
+    n = int(counts.sum())
+    if n == 0:
+        return float("nan"), rows
+    ranks = np.searchsorted(np.cumsum(counts), [(n - 1) // 2, n // 2], side="right")
+    return float(np.mean(values[ranks[:2 - n % 2]])), rows
 
 
 def mean_rate(data: Blocks, columns: list[str], rate_hz: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Means of increments (the stream's `columns`) per second at about rate_hz: sums over runs of `step` rows / their
     duration, `step` the record interval in median sample intervals (each sample at FULL rate); (times at the runs'
-    ends, (M, len(columns))). A stream given in blocks is summed block by block (a run of rows may span two)."""
-    t = column_of(data, "t")
-    if t.size < 2:
-        return t, np.column_stack([column_of(data, c) for c in columns]).astype(float)
-    dt = float(np.median(np.diff(t)))
+    ends, (M, len(columns))). A stream given in blocks is read twice, block by block (a run of rows may span two)."""
+    dt, rows = median_interval(data)
+    if rows < 2:
+        table = pa.concat_tables(blocks_of(data))
+        return col(table, "t"), np.column_stack([col(table, c) for c in columns]).astype(float)
     step = 1 if rate_hz is FULL else max(1, int(round(1.0 / (rate_hz * dt))))
-    n = (t.size // step) * step
-    sums, carry = [], np.zeros((0, len(columns)))
+    n = (rows // step) * step
+    times, sums, carry, start = [], [], np.zeros((0, len(columns))), 0
     for block in blocks_of(data):
+        at = np.arange((step - 1 - start) % step, block.num_rows, step)  # the runs' last rows
+        times.append(col(block, "t")[at[at + start < n]])
         values = np.concatenate([carry, np.column_stack([col(block, c) for c in columns]).astype(float)])
         m = (values.shape[0] // step) * step
         sums.append(values[:m].reshape(m // step, step, len(columns)).sum(axis=1))
-        carry = values[m:]
-    return t[step - 1:n:step], np.concatenate(sums)[:n // step] / (step * dt)
+        carry, start = values[m:], start + block.num_rows
+    return np.concatenate(times), np.concatenate(sums)[:n // step] / (step * dt)
+
+
+class LineCut:
+    """`line_rows` over a series given in blocks, the same rows bit for bit: between blocks it holds the greedy scan's
+    anchor, the last row scanned from it and its slope bounds (line_kernel), and the block's last row (whose NaN edge
+    waits for the next row). `push` and `finish` return the rows decided kept: (indices over all the rows pushed,
+    their values (k, n))."""
+
+    def __init__(self, tolerance: float | np.ndarray):
+        self.tolerance = tolerance
+        self._t = np.zeros(0)
+        self._y = self._index = self._must = self._lo = self._hi = None
+        self._scanned, self._rows = 0, 0
+
+    def push(self, t: np.ndarray, values: np.ndarray, must: np.ndarray | None = None,
+             final: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        t, y = np.asarray(t, float), np.asarray(values, float)
+        y = y.reshape(t.size, -1) if t.size else y.reshape(0, int(np.prod(y.shape[1:])))
+        if self._y is None:
+            m = y.shape[1]
+            self._y, self._index, self._must = np.zeros((0, m)), np.zeros(0, np.int64), np.zeros(0, bool)
+            self._lo, self._hi = np.full(m, -np.inf), np.full(m, np.inf)
+            self._tol = np.broadcast_to(np.asarray(self.tolerance, float), (m,)).copy()
+        t, y = np.r_[self._t, t], np.concatenate([self._y, y])
+        index = np.r_[self._index, self._rows + np.arange(t.size - self._t.size)]
+        edge = np.r_[self._must, np.zeros(index.size - self._index.size, bool) if must is None else must]
+        self._rows += index.size - self._index.size
+        if not t.size:
+            return index, y
+        nan = np.isnan(y)
+        turned = (nan[1:] != nan[:-1]).any(axis=1)  # between the scanned rows too: their edges are not read
+        edge[1:] |= turned
+        edge[:-1] |= turned
+        n = t.size if final else t.size - 1  # the last row's edge waits for the next row
+        keep, a, end = line_kernel(t[:n], np.ascontiguousarray(y[:n]), self._tol, edge[:n], self._lo, self._hi,
+                                   max(self._scanned, 1), final)
+        reported = min(self._scanned, 1)  # the anchor was, when it was kept
+        decided = np.flatnonzero(keep[reported:]) + reported
+        carried = np.unique([a, end, *range(n, t.size)]) if n else np.arange(t.size)
+        self._t, self._y, self._index, self._must = t[carried], y[carried], index[carried], edge[carried]
+        self._scanned = min(n, 1 + (end > a))
+        return index[decided], y[decided]
+
+    def finish(self) -> tuple[np.ndarray, np.ndarray]:
+        """The rows kept at the series' end (its last among them)."""
+        if self._y is None:
+            return np.zeros(0, np.int64), np.zeros((0, 1))
+        return self.push(np.zeros(0), np.zeros((0, self._y.shape[1])), final=True)
+
 
 def line_rows(t: np.ndarray, values: np.ndarray, tolerance: float | np.ndarray,
               must: np.ndarray | None = None) -> np.ndarray:
     """Indices of the rows of `values` (K,) or (K, n) over times `t` that a line drawn through them keeps within
     `tolerance` (per column, or one for all) of every row left out; rows where a value turns NaN or back, rows marked
     in `must` (K,) bool, the first and the last are kept."""
-    t = np.asarray(t, float)
-    y = np.asarray(values, float).reshape(t.size, -1)
-    if t.size < 3:
-        return np.arange(t.size)
-    nan = np.isnan(y)
-    edge = np.zeros(t.size, bool) if must is None else np.array(must, bool)
-    turned = (nan[1:] != nan[:-1]).any(axis=1)
-    edge[1:] |= turned
-    edge[:-1] |= turned
-    tol = np.broadcast_to(np.asarray(tolerance, float), (y.shape[1],)).copy()
-    return np.flatnonzero(line_kernel(t, np.ascontiguousarray(y), tol, edge))
+    line = LineCut(tolerance)
+    rows = line.push(t, values, must)[0]
+    return np.r_[rows, line.finish()[0]]
 
 
 def _intervals(t: np.ndarray, width_s: float) -> np.ndarray:

@@ -19,8 +19,8 @@ from twin.view.rerun_columns import (
     Blocks,
     blocks_of,
     col,
-    column_of,
     decimate,
+    decimated_rows,
     mean_rate,
     send_bar_chart,
     series,
@@ -37,12 +37,13 @@ def log_sensors(rec: rr.RecordingStream, sensors: dict[str, Blocks], rate_hz: fl
         for k, (name, label) in enumerate((("gyro", "rad/s"), ("accel", "m/s^2"))):
             series(rec, f"sensors/imu/{name}", tt, rates[:, 3 * k:3 * k + 3], [f"{a} [{label}]" for a in "xyz"],
                    rate_hz=rate_hz)
+    # Of the other long streams only the rows at the record rate are held (series decimates them the same again).
     if "odometer" in sensors:
-        odo = sensors["odometer"]
+        odo = decimated_rows(sensors["odometer"], rate_hz)
         series(rec, "sensors/odometer/distance", col(odo, "t"), col(odo, "distance")[:, None], ["distance [m]"],
                rate_hz=rate_hz)
     if "mag" in sensors:
-        mag = sensors["mag"]
+        mag = decimated_rows(sensors["mag"], rate_hz)
         series(rec, "sensors/mag", col(mag, "t"), vec(mag, "b", "xyz") * 1e6, [f"{a} [uT]" for a in "xyz"],
                rate_hz=rate_hz)
     if "support_imu" in sensors:
@@ -55,7 +56,7 @@ def log_sensors(rec: rr.RecordingStream, sensors: dict[str, Blocks], rate_hz: fl
                    [f"{a} [rad/s]" for a in "xyz"], rate_hz=rate_hz)
     if "pushram" in sensors:
         ram = sensors["pushram"]
-        times = np.unique(column_of(ram, "t"))
+        times = sample_times(ram)
         shown = times[decimate(times, FULL if rate_hz is FULL else min(rate_hz, 0.2))]
         send_bar_chart(rec, "sensors/pushram", shown, bar_grid(ram, shown, ("extension",))[0])
     if "pressure" in sensors:
@@ -89,7 +90,7 @@ PRESSURE_BAR_HZ = 0.2
 def _log_pressures(rec: rr.RecordingStream, pressure: Blocks, rate_hz: float | None) -> None:
     """The legs' and rams' pressure readings as a bar chart per support each, and the face's lowest leg pressure and
     highest ram pressure as time series (a support that failed to set, a leaking leg, a stalled ram stand out)."""
-    times = np.unique(column_of(pressure, "t"))
+    times = sample_times(pressure)
     shown = times[decimate(times, FULL if rate_hz is FULL else min(rate_hz, PRESSURE_BAR_HZ))]
     for column, grid in zip(("leg", "ram"), bar_grid(pressure, shown, ("leg", "ram"))):
         send_bar_chart(rec, f"sensors/pressure/{column}_bars", shown, grid)
@@ -100,6 +101,14 @@ def _log_pressures(rec: rr.RecordingStream, pressure: Blocks, rate_hz: float | N
         np.fmax.at(extremes[:, 1], at, col(block, "ram"))
     series(rec, "sensors/pressure/extremes", times, extremes, ["lowest leg [MPa]", "highest ram [MPa]"],
            rate_hz=rate_hz)
+
+
+def sample_times(data: Blocks) -> np.ndarray:
+    """The distinct times of a stream (one table or blocks), sorted: a per-support stream has many rows at each."""
+    times = np.zeros(0)
+    for block in blocks_of(data):
+        times = np.unique(np.r_[times, np.unique(col(block, "t"))])
+    return times
 
 
 def bar_grid(data: Blocks, shown: np.ndarray, columns: tuple[str, ...]) -> list[np.ndarray]:

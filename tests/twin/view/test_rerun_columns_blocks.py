@@ -1,0 +1,124 @@
+"""twin.view.rerun_columns over streams given in blocks (a long stream read a row group at a time): the carried
+helpers give the whole series' rows bit for bit, however the blocks are cut (empty and one-row blocks included)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyarrow as pa
+import pytest
+
+from twin.view.line_kernel import line_kernel
+from twin.view.record_rate import FULL
+from twin.view.rerun_columns import (
+    PATH_TOLERANCE_M,
+    LineCut,
+    PathStrips,
+    decimate,
+    decimated_rows,
+    mean_rate,
+    median_interval,
+    path_strips,
+)
+from twin.view.sensor_recording import sample_times
+
+
+def _cuts(rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    """Row indices of 0..n cut into blocks anywhere: some empty, many of one to three rows."""
+    tiny = np.cumsum(rng.integers(0, 4, n))
+    cuts = np.sort(np.r_[rng.integers(0, n + 1, 5), tiny[tiny <= n][:: max(1, int(rng.integers(1, 4)))]])
+    return np.split(np.arange(n), cuts)
+
+
+def _series(rng: np.random.Generator, n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """A random walk (K, m) with repeated times, flat stretches and NaN gaps."""
+    t = np.cumsum(rng.choice([0.0, 0.1, 0.1, 0.3], n))
+    y = np.cumsum(rng.normal(size=(n, m)) * rng.choice([0.0, 1.0, 5.0], (n, 1)), axis=0)
+    y[rng.random((n, m)) < 0.05] = np.nan
+    return t, y
+
+
+def _whole_line(t: np.ndarray, y: np.ndarray, tol: float) -> np.ndarray:
+    """The greedy line of the whole series in one call of the kernel (NaN edges marked as line_rows does)."""
+    nan = np.isnan(y)
+    turned = (nan[1:] != nan[:-1]).any(axis=1)
+    edge = np.r_[turned, False] | np.r_[False, turned]
+    m = y.shape[1]
+    keep, _, _ = line_kernel(t, y, np.full(m, tol), edge, np.empty(m), np.empty(m), 1, True)
+    return np.flatnonzero(keep)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_line_cut_in_blocks_keeps_the_whole_series_rows(seed):
+    rng = np.random.default_rng(seed)
+    for _ in range(20):
+        n, m = int(rng.integers(1, 300)), int(rng.integers(1, 4))
+        t, y = _series(rng, n, m)
+        tol = rng.uniform(0.1, 3.0)
+        whole = _whole_line(t, y, tol)
+        assert 2 < whole.size < n or n < 30  # a real cut: some rows left out
+        line, rows, values = LineCut(tol), [], []
+        for part in _cuts(rng, n) + [None]:
+            got = line.finish() if part is None else line.push(t[part], y[part])
+            rows.append(got[0])
+            values.append(got[1])
+        assert np.array_equal(np.concatenate(rows), whole)
+        assert np.array_equal(np.concatenate(values), y[whole], equal_nan=True)
+
+
+@pytest.mark.parametrize("rate_hz", [10.0, FULL])
+def test_path_strips_in_blocks_equal_the_whole_paths(rate_hz):
+    rng = np.random.default_rng(7)
+    n = 3000
+    t = np.arange(n) * 0.05
+    # Straight runs and stops, with noise at the tolerance.
+    v = np.repeat(rng.normal(scale=0.01, size=(30, 3)) * rng.choice([0.0, 1.0], (30, 1)), 100, axis=0)
+    p = np.cumsum(v, axis=0) + rng.normal(scale=0.3 * PATH_TOLERANCE_M, size=(n, 3))
+    cycle = np.repeat([0, 1, 2], [1000, 1500, 500])
+    path = PathStrips(rate_hz)
+    for part in _cuts(rng, n):
+        path.push(t[part], p[part], cycle[part])
+    whole = path_strips(t, p, cycle, rate_hz)
+    assert [len(s) for s in whole] == [1000, 1500, 500] if rate_hz is FULL else sum(len(s) for s in whole) < n / 2
+    assert all(np.array_equal(a, b) for a, b in zip(path.strips(), whole, strict=True))
+    assert np.array_equal(path.start_times(), t[[0, 1000, 2500]])
+
+
+def _table(rng: np.random.Generator, n: int) -> pa.Table:
+    t = 3.0 + np.cumsum(rng.choice([0.005, 0.005, 0.0050001, 0.01], n))
+    return pa.table({"t": t, "a": rng.normal(size=n), "b": rng.normal(size=n)})
+
+
+def _blocks(rng: np.random.Generator, table: pa.Table) -> list[pa.Table]:
+    return [table.take(pa.array(part, pa.int64())) for part in _cuts(rng, table.num_rows)]
+
+
+@pytest.mark.parametrize("rate_hz", [10.0, 33.0, 1000.0, FULL])
+def test_decimated_rows_in_blocks_are_the_decimated_rows(rate_hz):
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 5, 700):
+        table = _table(rng, n)
+        t = table.column("t").to_numpy()
+        rows = decimate(t, rate_hz)
+        assert rows[-1] == n - 1 and (rate_hz is FULL or rate_hz > 100 or rows.size < n or n < 3)
+        assert decimated_rows(_blocks(rng, table), rate_hz).equals(table.take(pa.array(rows)))
+
+
+@pytest.mark.parametrize("rate_hz", [10.0, 33.0, FULL])
+def test_mean_rate_in_blocks_is_the_whole_streams(rate_hz):
+    rng = np.random.default_rng(5)
+    for n in (2, 3, 10, 999, 1000):
+        table = _table(rng, n)
+        t, values = table.column("t").to_numpy(), np.column_stack([table.column(c).to_numpy() for c in "ab"])
+        dt = float(np.median(np.diff(t)))
+        assert median_interval(_blocks(rng, table)) == (dt, n)
+        step = 1 if rate_hz is FULL else max(1, int(round(1.0 / (rate_hz * dt))))
+        k = n // step
+        times, rates = mean_rate(_blocks(rng, table), ["a", "b"], rate_hz)
+        assert np.array_equal(times, t[step - 1:k * step:step])
+        assert np.array_equal(rates, values[:k * step].reshape(k, step, 2).sum(axis=1) / (step * dt))
+
+
+def test_sample_times_of_blocks_are_the_distinct_times():
+    rng = np.random.default_rng(2)
+    table = pa.table({"t": np.repeat(np.arange(50) * 0.5, 7), "support": np.tile(np.arange(7), 50)})
+    assert np.array_equal(sample_times(_blocks(rng, table)), np.arange(50) * 0.5)
