@@ -153,11 +153,12 @@ def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table, ra
     once; every time at FULL rate)."""
     if supports.num_rows == 0:
         return
-    times, _, rows = latest_rows(col(supports, "t"), col(supports, "support"))
+    t = col(supports, "t")
+    times = np.unique(t)
     if rate_hz is not FULL:
         frame = np.floor(times * min(rate_hz, SUPPORT_FRAME_HZ) + 1e-9)
-        keep = np.flatnonzero(np.r_[np.diff(frame) > 0, True])
-        times, rows = times[keep], rows[keep]
+        times = times[np.r_[np.diff(frame) > 0, True]]
+    times, _, rows = latest_rows(t, col(supports, "support"), times)
     n_t, n_s = rows.shape
     p = vec(supports, "p_t")[rows]                   # (n_t, n_s, 3) ram connection on the base
     ram = col(supports, "ram")[rows]

@@ -15,6 +15,7 @@ from twin.view.rerun_columns import (
     PathStrips,
     decimate,
     decimated_rows,
+    latest_rows,
     mean_rate,
     median_interval,
     path_strips,
@@ -122,3 +123,20 @@ def test_sample_times_of_blocks_are_the_distinct_times():
     rng = np.random.default_rng(2)
     table = pa.table({"t": np.repeat(np.arange(50) * 0.5, 7), "support": np.tile(np.arange(7), 50)})
     assert np.array_equal(sample_times(_blocks(rng, table)), np.arange(50) * 0.5)
+
+
+def test_latest_rows_at_some_times_are_the_forward_filled_rows():
+    rng = np.random.default_rng(4)
+    t = np.sort(rng.choice(np.arange(40) * 0.5, 300))  # many rows at one time, ids repeated at a time
+    ident = rng.integers(0, 6, 300)
+    at = np.sort(rng.choice(np.unique(t), 12, replace=False))
+    times, ids, rows = latest_rows(t, ident, at)
+    assert np.array_equal(times, at) and np.array_equal(ids, np.unique(ident))
+    for k, time in enumerate(at):
+        for j, one in enumerate(ids):
+            mine = np.flatnonzero(ident == one)
+            before = mine[t[mine] <= time]
+            # the latest state (of two at one time the later row), else the id's first
+            assert rows[k, j] == (before[np.lexsort((before, t[before]))[-1]] if before.size
+                                  else mine[np.lexsort((mine, t[mine]))[0]])
+    assert np.array_equal(latest_rows(t, ident)[2][np.searchsorted(np.unique(t), at)], rows)
