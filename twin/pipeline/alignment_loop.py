@@ -154,6 +154,11 @@ class AlignmentLoop:
         self.published: list[ShearOffsets] = []
         """The system's output after each shear, in shear order."""
 
+    @property
+    def reads_support_rows(self) -> bool:
+        """An estimator mode fed by the twin reads the face recorder's support rows as they come (_SupportRows)."""
+        return self.estimated is not None
+
     def observe(self, chunk: dict[str, np.ndarray]) -> None:
         """Read a truth_shearer chunk: every straight cut that ends in it gives the system a shear."""
         if self.estimated is not None:

@@ -285,7 +285,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
           numba_event.install_listener("numba:compile", CompileNotice())):
         # The truth and trial 0's sensors go to the run directory as the twin makes them (twin.pipeline.twin_stream).
         result, shearer_stats = stream_twin(scn, staging, sensors, progress, offsets=offsets)
-        summary = twin_summary(scn, result.tables, shearer_stats, result.offsets,
+        summary = twin_summary(scn, result.tables, shearer_stats, result.support_advance, result.offsets,
                                [a.sequence for a in result.alignment], result.path_errors)
         if mc_trials:
             runner.submit(scn, staging, mc_trials)  # runs beside trial 0 unless sequential

@@ -30,6 +30,8 @@ class FaceRecorder:
         self.last_canopy = np.full(state.sup_x.size, np.nan)
         self.pan_rows: list[dict[str, np.ndarray]] = []
         self.sup_rows: list[dict[str, np.ndarray]] = []
+        self.sup_released = 0  # support row blocks let go (release_support_rows)
+        self.sup_first: dict[str, np.ndarray] | None = None  # the first block: the columns of an empty one
         self.versions: list[PanVersion] = []
         self.record(0.0, state, np.arange(state.pans.shape[0]), np.arange(state.sup_x.size))
 
@@ -87,6 +89,8 @@ class FaceRecorder:
             "advance": sup_x - self.sup_x0[sups], "ram": ram,
             "ram_pressure": self.hydraulics.ram.pressure_mpa(ram_force), "canopy": leg, "leg_pressure": leg_mpa,
             "set": (~is_lowered).astype(np.int8)})
+        if self.sup_first is None:
+            self.sup_first = self.sup_rows[0]
         self.last_leg_mpa[sups] = leg_mpa  # rows come in time order: the last of a support's is its latest
         self.last_canopy[sups] = leg
 
@@ -97,8 +101,20 @@ class FaceRecorder:
         keep = max(0, int(np.searchsorted(begins, t, side="right")) - 2)
         del self.versions[:keep]
 
+    def release_support_rows(self, upto: int) -> int:
+        """Let the support row blocks before block `upto` go (a streaming run has written them); returns `upto`.
+        Blocks keep their numbers: `sup_rows` holds the blocks from `sup_released` on."""
+        del self.sup_rows[:upto - self.sup_released]
+        self.sup_released = upto
+        return upto
+
+    def support_rows(self, since: int = 0) -> dict[str, np.ndarray]:
+        """The support rows of the blocks from block `since` on (all kept ones by default) in time order."""
+        blocks = self.sup_rows[max(since - self.sup_released, 0):]
+        return concat_rows(blocks) if blocks else {k: v[:0] for k, v in self.sup_first.items()}
+
     def tables(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-        return concat_rows(self.pan_rows), concat_rows(self.sup_rows)
+        return concat_rows(self.pan_rows), self.support_rows()
 
 
 def split_columns(arr: np.ndarray, prefix: str, axes: str) -> dict[str, np.ndarray]:
@@ -109,3 +125,19 @@ def concat_rows(rows: list[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     out = {k: np.concatenate([r[k] for r in rows]) for k in rows[0]}
     order = np.lexsort((out[next(k for k in out if k in ("pan", "support"))], out["t"]))
     return {k: v[order] for k, v in out.items()}
+
+
+class FinalRows:
+    """Support rows given in blocks as a run records them, handed out in time order once final: `split(rows,
+    t_final)` returns the rows held and given with t < t_final in time order (no row recorded later comes before
+    t_final: twin.pipeline.simulate's taps) and holds the rest. The blocks handed out, joined, are the whole run's
+    rows as concat_rows orders them (equal times in the order recorded)."""
+
+    def __init__(self):
+        self.held: dict[str, np.ndarray] | None = None
+
+    def split(self, rows: dict[str, np.ndarray], t_final: float) -> dict[str, np.ndarray]:
+        rows = rows if self.held is None else concat_rows([self.held, rows])
+        final = rows["t"] < t_final
+        self.held = {k: v[~final] for k, v in rows.items()}
+        return {k: v[final] for k, v in rows.items()}

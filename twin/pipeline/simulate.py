@@ -28,7 +28,7 @@ from twin.face.simulator import WINDOW_MARGIN_PANS, FaceSimulator
 from twin.face.truth import shearer_truth
 from twin.face.window import FaceState
 from twin.pipeline.alignment_loop import AlignmentLoop
-from twin.pipeline.face_recorder import FaceRecorder, concat_rows, split_columns
+from twin.pipeline.face_recorder import FaceRecorder, split_columns
 from twin.sensors.clock import sample_times
 from twin.sensors.faults import faults_of, shortfall_profile
 
@@ -85,6 +85,9 @@ class SimResult:
     offsets: np.ndarray
     alignment: list[ShearOffsets]
     path_errors: list[dict[str, float]]
+    support_advance: np.ndarray | None = None
+    """A streaming run (twin.pipeline.twin_stream): each support's advance [m] at each cycle's end (cycles x
+    supports), what the summary reads of the supports' truth, which is on disk."""
 
 
 def window_sizes(scn: Scenario) -> list[int]:
@@ -168,11 +171,14 @@ def simulate(scn: Scenario, progress: Progress | None = None, offsets: OffsetSou
 
 
 def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress | None = None,
-                    offsets: OffsetSource | None = None, live: LiveTaps | None = None) -> SimResult:
+                    offsets: OffsetSource | None = None, live: LiveTaps | None = None,
+                    supports_sink: Callable[[dict[str, np.ndarray], float], None] | None = None) -> SimResult:
     """Run the twin for a scenario, handing the shearer truth to `shearer_sink` a ride chunk (a cycle) at a time as
     it is made; the result holds the other truth tables. At most two chunks of the shearer's truth exist at once.
     `offsets` is the roof support system's per-cycle input (twin.face.drift.OffsetSource), added to the scenario's;
-    `live` taps the run as it goes (LiveTaps)."""
+    `live` taps the run as it goes (LiveTaps). `supports_sink` takes the truth_supports rows as LiveTaps.supports
+    does, after each cycle's events and the rest at the end (time inf), and the rows are then let go (the result has
+    no truth_supports), unless an estimator-fed face alignment reads them (they are kept)."""
     report = progress or (lambda stage, frac: None)
     frame = FaceFrame(np.radians(scn.face.azimuth_deg))
     timeline = Timeline(scn)
@@ -330,6 +336,8 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
 
     half = scn.shearer.length_m / 2
     supports_told = 0  # the recorder's support row blocks the live taps have seen
+    # The support rows are let go once the sink has them, unless the alignment system's estimator reads them.
+    release = supports_sink is not None and (loop is None or not loop.reads_support_rows)
     with ThreadPoolExecutor(max_workers=1) as pool:
         for plan in timeline.cycles:
             if loop is not None:  # the shears whose paths this cycle's offsets come from, handed over
@@ -349,9 +357,14 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
                 if t_due >= plan.t_push_end - MIN_EVENT_S or not event(t_due, None, plan.t_push_end, repush=k > 0):
                     break
             report("face", (plan.cycle + 1) / len(timeline.cycles))
-            if live is not None:
-                live.supports(concat_rows(recorder.sup_rows[supports_told:]), legs_t)
-                supports_told = len(recorder.sup_rows)
+            if live is not None or supports_sink is not None:
+                rows = recorder.support_rows(supports_told)
+                for tap in (live.supports if live is not None else None, supports_sink):
+                    if tap is not None:
+                        tap(rows, legs_t)
+                supports_told = recorder.sup_released + len(recorder.sup_rows)
+                if release:
+                    recorder.release_support_rows(supports_told)
             last = plan.cycle == len(timeline.cycles) - 1
             # Chunk k ends in the reversal stop after cycle k, before cycle k+1's first push.
             ready = [plan.cycle] if len(bounds) - 1 == len(timeline.cycles) else (
@@ -368,6 +381,10 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     legs_until(timeline.duration)
     recorder.record_legs(timeline.duration, state)
     pans_tab, sups_tab = recorder.tables()
-    tables = {lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_SUPPORTS.name: sups_tab, lf.TRUTH_CYCLES.name: cycles_table(timeline)}
+    tables = {lf.TRUTH_PANS.name: pans_tab, lf.TRUTH_CYCLES.name: cycles_table(timeline)}
+    if supports_sink is not None:
+        supports_sink(recorder.support_rows(supports_told), np.inf)
+    if not release:
+        tables[lf.TRUTH_SUPPORTS.name] = sups_tab
     return SimResult(tables, FloorGrid.from_scenario(scn, sim.floor), frame, timeline.duration, events, np.array(applied),
                      [] if loop is None else loop.published, [] if loop is None else loop.path_errors)

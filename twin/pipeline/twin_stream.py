@@ -5,11 +5,12 @@ twin.pipeline.simulate hands over the shearer truth a ride chunk (a cycle) at a 
 TruthChunks with their halos (twin.sensors.chunks), draws the shearer's sensor streams for each
 (twin.sensors.streams.ShearerSensors, which carries the sensors' state), and appends truth and readings to their
 Parquet files in fixed row groups (estimators.io.logformat.StreamAppender), so the files' bytes do not depend on
-the chunking. The supports' push-ram and pressure streams are drawn a span of time at a time
-(twin.sensors.streams.SupportSensors; SupportDraw), after the face, or with live taps (a served run) as the face's
-rows become final, and appended the same way. What stays in memory for the whole run: the face's own tables (pans
-and supports, a row per move) and, where the support streams read the shearer's place along the face, its (t, s)
-(ShearerTrack). Live taps get every sensor row the files get, as it is drawn.
+the chunking. The supports' truth is written as its rows become final (after each cycle's events;
+twin.pipeline.face_recorder.FinalRows), and their push-ram and pressure streams drawn from them a span of time at a
+time (twin.sensors.streams.SupportSensors; SupportDraw) and appended the same way. What stays in memory for the whole
+run: the pans' rows (a row per move), the supports' with support IMUs, and, where the support streams read the
+shearer's place along the face, its (t, s) (ShearerTrack). Live taps get every sensor row the files get, as it is
+drawn.
 """
 
 from __future__ import annotations
@@ -19,11 +20,11 @@ from pathlib import Path
 import numpy as np
 
 from estimators.io.logformat import ALIGNMENT, STREAMS, StreamAppender, write_stream
-from twin.config.scenario import Scenario
+from twin.config.scenario import Scenario, support_count
 from twin.face.drift import OffsetSource
 from twin.face.haulage import Timeline
 from twin.pipeline.alignment_loop import alignment_table
-from twin.pipeline.face_recorder import concat_rows
+from twin.pipeline.face_recorder import FinalRows, concat_rows
 from twin.pipeline.simulate import (
     LiveTaps,
     Progress,
@@ -36,7 +37,7 @@ from twin.pipeline.simulate import (
 from twin.sensors.chunks import ChunkAssembler, TruthChunk, halo_rows
 from twin.sensors.faults import faults_table
 from twin.sensors.streams import ShearerSensors, SupportSensors, support_imu_readings
-from twin.view.summary import ShearerStats
+from twin.view.summary import LatestAt, ShearerStats
 
 SHEARER_STREAMS = ("imu", "odometer", "mag", "survey", "face_survey")
 """The streams drawn from the shearer's truth chunk by chunk."""
@@ -83,7 +84,7 @@ class ShearerTrack:
 class SupportDraw:
     """Sensor trial 0's push-ram and pressure streams drawn a span of time at a time, handed to `write` (a
     SensorSink): `until` draws every sample before t_end from the truth_supports rows `add`ed so far (final before
-    it), `finish` the rest from the run's whole table. Only each support's latest row before the drawn time and the
+    it), `finish` the rest. Only each support's latest row before the drawn time and the
     rows after it are held (twin.sensors.clock.true_at reads no more)."""
 
     def __init__(self, scn: Scenario, write: SensorSink):
@@ -106,9 +107,9 @@ class SupportDraw:
             keep = np.concatenate([np.sort(latest), np.flatnonzero(~before)])
             self.rows = {k: v[keep] for k, v in self.rows.items()}
 
-    def finish(self, supports: dict[str, np.ndarray], shearer: dict[str, np.ndarray], t_end: float) -> None:
-        """The rest up to the run's last truth time t_end, from the run's whole truth_supports."""
-        self._draw(t_end, True, supports, shearer)
+    def finish(self, shearer: dict[str, np.ndarray], t_end: float) -> None:
+        """The rest up to the run's last truth time t_end (every row `add`ed)."""
+        self._draw(t_end, True, self.rows, shearer)
 
     def _draw(self, t_end: float, last: bool, supports: dict[str, np.ndarray], shearer: dict[str, np.ndarray]) -> None:
         for t0, t1, end in self.sensors.spans(t_end, self.t_drawn, last):
@@ -155,30 +156,40 @@ def stream_twin(scn: Scenario, run_dir: Path, sensors: bool = True, progress: Pr
                 take(chunk)
 
     supports_draw = SupportDraw(scn, write) if sensors else None
-    taps = live
-    if live is not None and supports_draw is not None:
-        def face_rows(rows: dict[str, np.ndarray], t_final: float) -> None:
-            live.supports(rows, t_final)
-            supports_draw.add(rows)
-            if np.isfinite(track.t_last):
+    final_rows = FinalRows()
+    advance = LatestAt(cycles["t_end"], support_count(scn))
+    supports_whole: list[dict[str, np.ndarray]] = []  # the supports' truth, held for support IMUs only
+    supports_file = StreamAppender(run_dir, STREAMS["truth_supports"])
+
+    def supports_sink(rows: dict[str, np.ndarray], t_final: float) -> None:
+        """The face's support rows as they become final: written, summarized, and their readings drawn."""
+        final = final_rows.split(rows, t_final)
+        supports_file.append(final)
+        advance.add(final["t"], final["support"], final["advance"])
+        if scn.sensors.support_imu.supports:
+            supports_whole.append(final)
+        if supports_draw is not None:
+            supports_draw.add(final)
+            if np.isfinite(t_final) and np.isfinite(track.t_last):
                 supports_draw.until(min(t_final, track.t_last), track.rows())
 
-        taps = LiveTaps(live.shearer, face_rows, live.sensors)
     try:
-        result = simulate_stream(scn, sink, progress, offsets, taps)
+        result = simulate_stream(scn, sink, progress, offsets, live, supports_sink)
         for chunk in assembler.finish():
             take(chunk)
         if supports_draw is not None:
-            supports_draw.finish(result.tables["truth_supports"], track.rows(), track.t_last)
+            supports_draw.finish(track.rows(), track.t_last)
     finally:
-        for appender in appenders.values():
+        for appender in (*appenders.values(), supports_file):
             appender.close()
+    result.support_advance = advance.finish()
     for name, cols in result.tables.items():
-        write_stream(run_dir, STREAMS[name], cols)
+        if name != "truth_supports":  # written as it came (an estimator-fed loop also keeps it in the result)
+            write_stream(run_dir, STREAMS[name], cols)
     write_stream(run_dir, ALIGNMENT, alignment_table(scn, cycles["t"], result.offsets, result.alignment))
     if sensors:
         write_stream(run_dir, STREAMS["faults"], faults_table(scn))
-        imu = support_imu_readings(scn, result.tables["truth_supports"], track.rows(), 0)
+        imu = support_imu_readings(scn, concat_rows(supports_whole), track.rows(), 0) if supports_whole else None
         if imu is not None:
             write_stream(run_dir, STREAMS["support_imu"], imu)
             if live is not None and live.sensors is not None:

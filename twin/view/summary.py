@@ -19,6 +19,33 @@ def latest_per_id(t: np.ndarray, ident: np.ndarray, n: int, t_max: float) -> np.
     return out
 
 
+class LatestAt:
+    """Each id's latest value at or before each of the (increasing) times `t_at`, from rows given in blocks in time
+    order (`add`): latest_per_id over the whole table, one block held at a time. `finish` gives the values
+    (len(t_at), n), NaN for an id with no row by then."""
+
+    def __init__(self, t_at: np.ndarray, n: int):
+        self.t_at = np.asarray(t_at, float)
+        self.values = np.full((self.t_at.size, n), np.nan)
+        self.current = np.full(n, np.nan)
+        self.done = 0  # times whose values are final
+
+    def add(self, t: np.ndarray, ident: np.ndarray, value: np.ndarray) -> None:
+        while self.done < self.t_at.size:
+            upto = int(np.searchsorted(t, self.t_at[self.done], side="right"))
+            if upto == t.size:
+                break  # a later block may still hold rows at or before this time
+            self.values[self.done] = self.current
+            self.values[self.done][ident[:upto]] = value[:upto]  # later rows overwrite earlier ones
+            self.done += 1
+        self.current[ident] = value
+
+    def finish(self) -> np.ndarray:
+        self.values[self.done:] = self.current
+        self.done = self.t_at.size
+        return self.values
+
+
 @dataclass
 class ShearerStats:
     """What the summary says of the shearer's truth, gathered chunk by chunk as a run streams (`update`)."""
@@ -34,24 +61,24 @@ class ShearerStats:
 
 
 def twin_summary(scn: Scenario, tables: dict[str, dict[str, np.ndarray]], shearer: ShearerStats,
-                 offsets_m: np.ndarray | None = None, sequences: list[int] | None = None,
+                 support_advance: np.ndarray, offsets_m: np.ndarray | None = None, sequences: list[int] | None = None,
                  path_errors: list[dict[str, float]] | None = None) -> dict:
-    """The run's summary (metrics.json "twin") from the face's truth tables and the shearer's statistics: per cycle
+    """The run's summary (metrics.json "twin") from the face's truth tables (pans and cycles), each support's advance
+    at each cycle's end (`support_advance`, cycles x supports: LatestAt) and the shearer's statistics: per cycle
     the pans' and supports' advance errors, the face line's straightness (RMS and max deviation from its best-fit
     line) and creep (estimators.face.straightness), the offsets its push applied (`offsets_m`, cycles x supports) and
     the face alignment system's sequence number after its shear (`sequences`, in a closed loop) and, in a loop fed by
     an estimator, the errors of its path over the cycle's shear (`path_errors`: twin.pipeline.alignment_loop's SEP
     and RMS across the face about the best-fit line, what the offsets see)."""
     shear_errors = {e["shear"]: e for e in path_errors or []}
-    pans, sups, cycles = tables["truth_pans"], tables["truth_supports"], tables["truth_cycles"]
+    pans, cycles = tables["truth_pans"], tables["truth_cycles"]
     n_pan = scn.face.pan_count
-    n_sup = int(sups["support"].max()) + 1
     duration = shearer.t_last
     line = face_drift(pans, cycles["t_end"], n_pan, np.radians(scn.face.azimuth_deg))
     per_cycle = []
     for k, t_end in enumerate(cycles["t_end"]):
         pan_adv = pans["advance"][latest_per_id(pans["t"], pans["pan"], n_pan, t_end)]
-        sup_adv = sups["advance"][latest_per_id(sups["t"], sups["support"], n_sup, t_end)]
+        sup_adv = support_advance[k]
         want = (k + 1) * scn.face.web_depth_m
         per_cycle.append({
             "cycle": k, "t_start_s": float(cycles["t"][k]), "t_end_s": float(t_end),

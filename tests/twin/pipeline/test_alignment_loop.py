@@ -11,10 +11,18 @@ from twin.config.scenario import ScenarioError
 from twin.pipeline.alignment_loop import AlignmentLoop
 from twin.pipeline.simulate import simulate
 from twin.sensors.streams import imu_truth, sensor_streams
-from twin.view.summary import ShearerStats, format_summary, twin_summary
+from twin.view.summary import LatestAt, ShearerStats, format_summary, twin_summary
 
 pytestmark = pytest.mark.slow  # over 3 s of the full suite: not in the quick subset (pytest -m "not slow")
 
+
+
+def support_advance(res) -> np.ndarray:
+    """Each support's advance at each cycle's end from a run's whole truth_supports (what a streaming run gathers)."""
+    sups = res.tables["truth_supports"]
+    advance = LatestAt(res.tables["truth_cycles"]["t_end"], int(sups["support"].max()) + 1)
+    advance.add(sups["t"], sups["support"], sups["advance"])
+    return advance.finish()
 
 def test_the_loop_applies_the_offsets_a_saved_run_gives():
     """Truth mode on the default face (its installed line crooked: 0.3 deg random yaw): cycle 0 is pushed as
@@ -31,7 +39,8 @@ def test_the_loop_applies_the_offsets_a_saved_run_gives():
     assert np.abs(res.offsets[1]).max() > 0.002
     stats = ShearerStats()
     stats.update(res.tables["truth_shearer"])
-    summary = twin_summary(scn, res.tables, stats, res.offsets, [a.sequence for a in res.alignment])
+    summary = twin_summary(scn, res.tables, stats, support_advance(res), res.offsets,
+                           [a.sequence for a in res.alignment])
     assert [c["alignment_sequence"] for c in summary["cycles"]] == [1, 2]
     assert summary["cycles"][1]["offsets_rms_mm"] == np.sqrt(np.mean(res.offsets[1] ** 2)) * 1e3 > 0.0
     assert "face alignment: truth path" in format_summary(summary, 1.0)
@@ -64,7 +73,8 @@ def test_an_estimator_steers_with_the_offsets_its_saved_readings_give(estimator_
     assert 1e-5 < diff < 0.02, diff
     stats = ShearerStats()
     stats.update(res.tables["truth_shearer"])
-    summary = twin_summary(scn, res.tables, stats, res.offsets, [a.sequence for a in res.alignment], res.path_errors)
+    summary = twin_summary(scn, res.tables, stats, support_advance(res), res.offsets,
+                           [a.sequence for a in res.alignment], res.path_errors)
     assert [e["shear"] for e in res.path_errors] == [0, 1]
     for c, e in zip(summary["cycles"], res.path_errors):  # the estimate's errors beside the straightness it gave
         assert c["path_sep_mm"] == e["sep_m"] * 1e3 and 0.0 < c["path_across_rms_mm"] < c["path_sep_mm"]

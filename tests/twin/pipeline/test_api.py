@@ -110,9 +110,9 @@ def test_the_progress_bar_names_the_stage_under_way_and_a_compilation(short_path
 
     real_simulate = twin_stream.simulate_stream
 
-    def simulate_after_a_compile(scn, sink, progress=None, offsets=None, live=None):
+    def simulate_after_a_compile(scn, sink, progress=None, offsets=None, live=None, supports_sink=None):
         nb.njit(lambda x: x + 1)(1)  # not cached: compiled now
-        return real_simulate(scn, sink, progress, offsets, live)
+        return real_simulate(scn, sink, progress, offsets, live, supports_sink)
 
     monkeypatch.setattr(api, "tqdm", Bar)
     monkeypatch.setattr(twin_stream, "simulate_stream", simulate_after_a_compile)
