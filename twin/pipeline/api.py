@@ -219,6 +219,8 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
               offsets: OffsetSource | None = None) -> Run:
     from numba.core import event as numba_event
 
+    from estimators.precompile import Precompiler
+    from estimators.shearer.precompiled import method_kernels
     from twin.face.haulage import Timeline
     from twin.pipeline.estimate import format_estimators, run_estimators, write_metrics
     from twin.pipeline.montecarlo import TrialResult, trial_runner
@@ -254,9 +256,16 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     compiling = [False]  # numba compiled a kernel in this stage: a first run after installing
 
     def show() -> None:
+        notice = compiling[0] or precompiler.compiling
         bar.set_description(f"longwall run {scn.name} ({running[0]}"
-                            + (": compiling numba kernels, first run only)" if compiling[0] else ")"))
+                            + (": compiling numba kernels, first run only)" if notice else ")"))
         bar.refresh()
+
+    def precompiled() -> None:
+        """The estimators' kernels in the cache before their processes start (each would compile them)."""
+        if precompiler.compiling:
+            show()
+        precompiler.wait()
 
     def progress(stage: str, frac: float) -> None:
         now = time.perf_counter()
@@ -281,13 +290,16 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
             pass
 
     monte_carlo = None
-    with (atomic_run_dir(out, force) as staging, trial_runner(workers, ray_address) as runner,
-          numba_event.install_listener("numba:compile", CompileNotice())):
+    # A first run compiles the estimators' kernels on the other cores while the twin runs (estimators.precompile).
+    kernels = method_kernels(scn.estimators.shearer.methods) if sensors else ()
+    with (Precompiler(kernels, usable_cores()) as precompiler, atomic_run_dir(out, force) as staging,
+          trial_runner(workers, ray_address) as runner, numba_event.install_listener("numba:compile", CompileNotice())):
         # The truth and trial 0's sensors go to the run directory as the twin makes them (twin.pipeline.twin_stream).
         result, shearer_stats = stream_twin(scn, staging, sensors, progress, offsets=offsets)
         summary = twin_summary(scn, result.tables, shearer_stats, result.support_advance, result.offsets,
                                [a.sequence for a in result.alignment], result.path_errors)
         if mc_trials:
+            precompiled()
             runner.submit(scn, staging, mc_trials)  # runs beside trial 0 unless sequential
         (staging / "scenario.toml").write_text(scenario_to_toml(scn))
         progress("write", 1.0)
@@ -306,6 +318,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
         wall_s = time.perf_counter() - start
         write_timing(staging, wall_s=wall_s, real_time_factor=summary["simulated_s"] / wall_s)
         (staging / "metrics.json").write_text(json.dumps({"twin": summary, "estimators": {}}, indent=2) + "\n")
+        precompiled()
         estimated = run_estimators(staging, scn, record_rate_hz=record_rate_hz,
                                    workers=est_workers) if sensors else {}
         write_metrics(staging, estimated)

@@ -1,0 +1,32 @@
+"""The kernels the shearer methods call, listed with their calls' argument types (estimators.shearer.precompiled): a
+first run compiles them ahead, so a listed type that no longer matches the call would compile them twice."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from estimators.shearer.methods import METHODS, estimate
+from estimators.shearer.precompiled import KERNELS, method_kernels
+from tests.estimators.shearer.test_independent_trajectories import NOISY, trajectory
+
+pytestmark = pytest.mark.slow  # runs every method (over 3 s with the kernels in the cache)
+
+
+def test_each_listed_kernel_is_called_with_the_listed_argument_types():
+    traj = trajectory("az45_eq")
+    errors = dataclasses.replace(NOISY, seed=7)
+    listed = tuple(m for m in METHODS if any(users and m in users for _, users in KERNELS))
+    estimate(traj.log(errors), traj.config(errors), listed, workers=1)
+    for kernel, _ in KERNELS:
+        assert kernel.signature() in kernel.dispatcher().signatures, kernel
+
+
+def test_the_methods_kernels():
+    assert method_kernels(()) == ()
+    dr = method_kernels(["dr"])
+    assert {k.name for k in dr} == {"_ekf_kernel", "_mechanize_kernel", "rotvec_mat", "_quat_to_mat_rows"}
+    every = method_kernels(METHODS)
+    assert every[0].name == "run_filter"  # the longest to compile first
+    assert len(every) == len(KERNELS)
