@@ -13,6 +13,8 @@ from numba.core import config
 
 from estimators.precompile import Kernel, Precompiler
 
+pytestmark = pytest.mark.slow  # new processes that import numba and compile: over 3 s
+
 TOY = "import numba\n\n\n@numba.njit(cache=True)\ndef scaled(x, k):\n    return x * k\n"
 
 CALL = textwrap.dedent("""
@@ -56,7 +58,7 @@ def test_a_precompiled_kernel_loads_in_another_process_without_compiling(toy):
         pre.wait()
         assert not pre.compiling
     assert compiled_by_a_call(toy, "float64") == ""
-    assert compiled_by_a_call(toy, "float32") == "scaled"  # other argument types: not in the cache
+    assert compiled_by_a_call(toy, "float32").startswith("scaled")  # other argument types: not in the cache
 
 
 def test_a_kernel_that_does_not_compile_leaves_the_others_and_the_caller_unharmed(toy):
