@@ -176,6 +176,8 @@ def enu_offset_to_geodetic(d_enu: np.ndarray, lat, lon, h) -> tuple[np.ndarray, 
     return (lat + d_enu[..., 1] / (r_m + h), lon + d_enu[..., 0] / ((r_n + h) * np.cos(lat)), h + d_enu[..., 2])
 
 
+SCORED_ESTIMATE = ("t", "lat", "lon", "h", *(f"sd_{q}_{a}" for q in ("pos", "att") for a in ENU), "flags")
+"""The ESTIMATE columns scoring and self_assessment read: a run loads only these."""
 SCORED_TRUTH = ("t", "lat", "lon", "h", "q_nb_w", "q_nb_x", "q_nb_y", "q_nb_z", "cycle")
 """The truth_shearer columns scoring reads (errors at the truth point, per cycle): a run loads only these."""
 

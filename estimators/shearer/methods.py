@@ -18,7 +18,7 @@ from typing import Any, Protocol
 
 from estimators.io.log import Log
 from estimators.shearer.adaptive_federated_mag import run_mag
-from estimators.shearer.config import Config, PositioningError
+from estimators.shearer.config import STREAMED, Config, PositioningError
 from estimators.shearer.health import Assessment, assess
 from estimators.shearer.online import OnlinePositioning
 from estimators.shearer.positioning import dead_reckoning, rts_offline, run_kf
@@ -35,11 +35,6 @@ TASKS = (("kf_cpoem_rts", "rts_offline", "dr_compensated"), ("fkf_rail",), ("afk
 """The methods in groups that run together (the smoother's forward run feeds rts_offline and dr_compensated), the
 longest first, so that a pool of processes finishes together."""
 
-
-STREAMED = ("kf_cpoem_rts", "kf_rts", "kf_cpoem", "kf")
-"""The methods `estimate` runs online over the log's pieces when it is given them (estimators.shearer.online: 001's
-filter a pass at a time, the batch method's rows bit for bit), unless another requested method reads the batch
-run (kf_cpoem_rts feeds rts_offline and dr_compensated)."""
 
 Pieces = Callable[[], Iterator[tuple[Mapping[str, Mapping[str, Any]], bool]]]
 """The log in consecutive pieces of time, (stream name -> columns, last piece), read afresh at each call

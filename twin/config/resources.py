@@ -17,6 +17,7 @@ import math
 import os
 from dataclasses import dataclass
 
+from estimators.shearer.config import STREAMED
 from twin.config.experiments import (
     AlignmentExperiment,
     ConingExperiment,
@@ -52,12 +53,26 @@ MAX_DISK_BYTES = 50 * GIB
 MAX_WALL_S = 6 * 3600.0
 """Six hours of computing (on this project's 2-core reference machine) is a batch job, not a twin run."""
 
-BASE_MEMORY = 0.86e9
-"""Peak memory of a run with no data [bytes]: the imports (318 MB measured), MuJoCo's model, numba's compiled
-filters; with MEMORY_PER_TABLE_BYTE the line through default.toml (1.19 GB peak, 181 MB of tables) and seed004
-(4.54 GB, 2.04 GB of tables)."""
-MEMORY_PER_TABLE_BYTE = 1.8
-"""Peak memory per byte of the run's tables (their copies, the recording's buffers, the filters' arrays)."""
+BASE_MEMORY = 0.45e9
+"""Peak memory of any stage of a face run before its data [bytes]: the imports (210 MB measured at the start),
+MuJoCo's window models, numba's compiled kernels, the workers' own."""
+CYCLE_BYTES_PER_TRUTH_ROW = 800.0
+"""The twin stage's peak memory per truth_shearer row of a cycle [bytes]: it holds about two cycles of the shearer's
+ride and truth (208 bytes a row) with their sensor draws in chunks (seed004: 1.21 GB with 937 000 rows a cycle)."""
+RECORDING_BYTES = 0.3e9
+"""The run recording's own (its blocks of the long streams, the record-rate rows, the pans)."""
+HELD_BYTES = {"support_frames": 210.0, "epochs_scored": 250.0, "epochs_batch": 2700.0}
+"""What a run's stages hold for its whole length [bytes per item]: the run recording's supports at each 1 Hz frame
+(twin.view.recording), each scored method's estimate while its errors are computed (per filter epoch, a method per
+worker at a time), and each batch method's solution and filter arrays (per filter epoch, the methods of a group and
+of the other workers at once; 001's filters streamed hold none: estimators.shearer.config.STREAMED). seed004 (200
+supports, 6.5 h, five batch methods, 234 000 epochs): the recording 1.75 GB, the estimators 3.16 GB."""
+PASS_BYTES_PER_EPOCH = 34e3
+"""A streamed filter's peak memory per filter epoch of its pass [bytes]: the pass's error states, covariances,
+predicted covariances and transitions for the smoother, its IMU rows (panel_100 over 5 cycles: 2.28 GB with two
+methods on two workers, 23 000 epochs a pass)."""
+BATCH_LOG_STREAMS = ("odometer", "mag", "pushram")
+"""The streams a batch method's log holds whole (estimators.io.log.load_log; the IMU stays on disk)."""
 FLOOR_BYTES_PER_CELL = 120.0
 """Memory per cell of the recording's floor mesh (its heights, vertices and triangles)."""
 FLOOR_CELL_M = 0.25
@@ -142,15 +157,13 @@ def face_resources(scn: Scenario, trials: int = 1, sensors: bool = True, workers
                  "pressure": t * s.pressure.rate_hz * support_count(scn),
                  "support_imu": t * s.support_imu.rate_hz * len(s.support_imu.supports),
                  "estimates": t * scn.estimators.shearer.filter_rate_hz * len(scn.estimators.shearer.methods)}
-    table = {k: n * ROW_COSTS[k].memory for k, n in rows.items()}
-    trial_bytes = sum(v for k, v in table.items() if k in SENSOR_STREAMS)
     f = scn.face
     # The window models' floor is a band under the window (twin.face.model.FloorBand); the recording's floor mesh
     # covers the run's face, at most MESH_MAX_CELLS cells.
     cells = min(MESH_MAX_CELLS, ((min(f.panel_length_m, scn.cycles * f.web_depth_m) + FLOOR_MARGIN_M) / FLOOR_CELL_M)
                 * ((f.pan_count * f.pan_length_m + FLOOR_MARGIN_M) / FLOOR_CELL_M))
-    memory = (BASE_MEMORY + MEMORY_PER_TABLE_BYTE * (sum(table.values()) + (workers - 1) * trial_bytes)
-              + FLOOR_BYTES_PER_CELL * cells)
+    stages = stage_memory(scn, t, rows, sensors, workers)
+    memory = max(stages.values()) + FLOOR_BYTES_PER_CELL * cells
     disk_once = {k: n * ROW_COSTS[k].disk for k, n in rows.items()}
     disk = sum(v * (trials if k in SENSOR_STREAMS else 1) for k, v in disk_once.items())
     steps = t / scn.rates.face_timestep_s + t * scn.rates.ride_hz + rows["truth_shearer"]
@@ -159,6 +172,35 @@ def face_resources(scn: Scenario, trials: int = 1, sensors: bool = True, workers
     return Resources(rows, memory, disk, t, wall, "cycles, the haulage stops and speeds, the rates (rates.*, "
                      "sensors.*.rate_hz), face.pan_count, face.panel_length_m, the estimators, --trials",
                      {"twin": TWIN_S_PER_STEP * steps, "estimators": estimating})
+
+
+def stage_memory(scn: Scenario, t: float, rows: dict[str, float], sensors: bool = True, workers: int = 1
+                 ) -> dict[str, float]:
+    """Peak memory [bytes] of each stage of a face run of simulated span t (`rows` per stream): the twin (two cycles
+    of the shearer's truth; support IMUs keep the supports' truth and the shearer's (t, s) whole), the run
+    recording (its supports' frames), the estimators (the scored estimates; batch methods their logs and solutions,
+    each Monte Carlo worker its own)."""
+    twin = BASE_MEMORY + CYCLE_BYTES_PER_TRUTH_ROW * rows["truth_shearer"] / scn.cycles
+    if scn.sensors.support_imu.supports:
+        twin += rows["truth_shearer"] * 16.0 + ROW_COSTS["support_imu"].memory * rows.get("support_imu", 0.0)
+    out = {"twin": twin,
+           "recording": BASE_MEMORY + RECORDING_BYTES + HELD_BYTES["support_frames"] * support_count(scn) * t}
+    methods = scn.estimators.shearer.methods
+    if sensors and methods:
+        epochs = t * scn.estimators.shearer.filter_rate_hz
+        at_once = min(len(methods), _cores())
+        batch = [m for m in methods if m not in STREAMED]
+        streamed = PASS_BYTES_PER_EPOCH * epochs / (2 * scn.cycles) * min(len(methods) - len(batch), at_once)
+        if batch:  # the log and the whole-run arrays of the batch methods, which run first (TASKS)
+            batch_bytes = (sum(rows.get(k, 0.0) * ROW_COSTS[k].memory for k in BATCH_LOG_STREAMS)
+                           + HELD_BYTES["epochs_batch"] * epochs * min(len(batch), 2 * at_once))
+            streamed = max(streamed, batch_bytes)
+        out["estimators"] = BASE_MEMORY + (streamed + HELD_BYTES["epochs_scored"] * epochs * at_once) * workers
+    return out
+
+
+def _cores() -> int:
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def paper_resources(exp: Experiment | Turntable) -> Resources:

@@ -36,8 +36,8 @@ from estimators.io.logformat import (
     read_stream,
 )
 from estimators.kalman.error_state import CAL_MOUNT, CAL_SCALE
-from estimators.shearer.config import Config, ImuNoise, MagSettings
-from estimators.shearer.methods import STREAMED, estimate
+from estimators.shearer.config import STREAMED, Config, ImuNoise, MagSettings
+from estimators.shearer.methods import estimate
 from estimators.shearer.rail_kinematics import detector_chi2
 from estimators.shearer.solution import Solution, estimate_columns, state_columns
 from twin.config.imu_grades import grade
@@ -188,7 +188,7 @@ class EstimateWriter:
         for appender in appenders.values():
             appender.close()
         last = self.last.pop(name)
-        table = read_estimate(self.run_dir, name)
+        table = read_stream(*estimate_file(self.run_dir, name), metrics.SCORED_ESTIMATE)
         entry = {"truth": self.truth is not None}
         if self.truth is not None:
             entry["cycles"] = metrics.cycle_metrics(*metrics.position_errors(table, self.truth),
@@ -201,7 +201,7 @@ def _shearer_methods(run_dir: Path, scn: Scenario, methods: tuple[str, ...], wor
                      ) -> dict[str, tuple[dict, list[str]]]:
     """Run `methods` on run_dir's log on `workers` processes, each solution written to estimates/ and scored in
     the process that made it (none is held by the parent; 001's filters run online over the log read a row group
-    at a time, estimators.shearer.methods.STREAMED): method -> (its metrics entry, the streams written)."""
+    at a time, estimators.shearer.config.STREAMED): method -> (its metrics entry, the streams written)."""
     log = load_log(run_dir) if any(m not in STREAMED for m in methods) else None
     return estimate(log, positioning_config(scn), methods, workers, EstimateWriter(run_dir, scn),
                     lambda: log_pieces(run_dir))

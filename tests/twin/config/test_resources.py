@@ -26,10 +26,11 @@ def test_simulated_span_is_the_timelines(name):
 
 
 def test_the_default_runs_figures():
-    """default.toml as measured: 452 450 IMU samples, 1.19 GB peak, 165 MB written; 10 trials write more."""
+    """default.toml as measured: 452 450 IMU samples, 0.70 GB peak (the process tree's PSS, benchmarks/bench_scale.py),
+    165 MB written; 10 trials write more."""
     res = face_resources(load_scenario(SCENARIO_DIR / "default.toml"))
     assert res.rows["imu"] == pytest.approx(452_450, rel=0.01)
-    assert res.memory_bytes == pytest.approx(1.19e9, rel=0.1) and res.disk_bytes == pytest.approx(1.65e8, rel=0.1)
+    assert res.memory_bytes == pytest.approx(0.70e9, rel=0.3) and res.disk_bytes == pytest.approx(1.65e8, rel=0.1)
     assert res.wall_s < 120
     more = face_resources(load_scenario(SCENARIO_DIR / "default.toml"), trials=10)
     assert more.disk_bytes > 5 * res.disk_bytes and more.wall_s > res.wall_s

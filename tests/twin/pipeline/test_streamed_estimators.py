@@ -1,4 +1,4 @@
-"""001's filters streamed in a run (twin.pipeline.estimate, estimators.shearer.methods.STREAMED): run online over
+"""001's filters streamed in a run (twin.pipeline.estimate, estimators.shearer.config.STREAMED): run online over
 the run directory's log read a row group at a time, their estimate files written pass by pass hold the batch
 method's rows bit for bit, with its notes and health flags."""
 
