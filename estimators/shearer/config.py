@@ -10,10 +10,10 @@ import numpy as np
 
 from estimators.faults.detectors import DetectorConfig
 
-STREAMED = ("kf_cpoem_rts", "kf_rts", "kf_cpoem", "kf")
+STREAMED = ("kf_cpoem_rts", "fkf_rail", "kf_rts", "kf_cpoem", "kf")
 """The methods `estimate` runs online over the log's pieces when it is given them (estimators.shearer.online: 001's
-filter a pass at a time, the batch method's rows bit for bit), unless another requested method reads the batch
-run (kf_cpoem_rts feeds rts_offline and dr_compensated)."""
+filter and 004's federated rail-model filter a pass at a time, the batch method's rows bit for bit), unless another
+requested method reads the batch run (kf_cpoem_rts feeds rts_offline and dr_compensated)."""
 
 DEG = np.pi / 180
 

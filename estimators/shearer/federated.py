@@ -74,6 +74,10 @@ class FederatedRun:
                                     np.zeros((cfg.mag.window, 1, 1)), np.zeros(1, np.int64), detectors)
         self.mode = fk.FEDERATED if federated else fk.CENTRALIZED
         self.health_notes: list[str] = []  # what the health monitor did (run_pass)
+        self.pass_fixes: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None = None
+        """The last pass's rail fixes: epochs, points, detector statistics, whether each was applied."""
+        self.n_disturbed = self.n_invalid = 0  # epochs with the magnetometer disturbed, a sub-filter unusable
+        self.t_disturbed = np.nan  # the first disturbed epoch's time
 
     def run_pass(self, a: int, b: int, rail: PassFixes | None = None) -> tuple[np.ndarray, fk.EpochOutput]:
         """The filter over epochs (a, b] with the pass's rail fixes (none: None), under the health monitor
@@ -117,32 +121,47 @@ class FederatedRun:
         applied = np.zeros(fixes.epoch.size, np.int8)
         stats[keep], applied[keep] = results.stats, results.applied
         self.last = fk.EpochOutput(*(field[-1:].copy() for field in out))
+        self.pass_fixes = (fixes.epoch, fixes.llh, stats, applied)
+        disturbed = out.mag_flags[1:] & fk.MAG_DISTURBED > 0
+        if disturbed.any() and not self.n_disturbed:
+            self.t_disturbed = prep.t_kf[a + 1 + np.argmax(disturbed)]
+        self.n_disturbed += int(disturbed.sum())
+        self.n_invalid += int(np.sum(out.mag_flags[1:] & fk.SUB_INVALID > 0))
         if self.out is not None:
             for whole, rows in zip(self.out, out):
                 whole[a + 1:b + 1] = rows[1:]
-            self.fixes.append((fixes.epoch, fixes.llh, stats, applied))
+            self.fixes.append(self.pass_fixes)
         return stats, out
+
+    def first_row(self) -> fk.EpochOutput:
+        """Epoch 0's output row as `solution` gives it: the start state with the initial one-sigma."""
+        row = _epoch_output(1, self.tuning.mag_params[fk.M_R_YAW])
+        row.nav[0], row.cal[0], row.sd[0] = self.prep.nav0, self.prep.cal0, np.sqrt(np.diag(self.p0))
+        return row
+
+    def rows(self, t: np.ndarray, out: fk.EpochOutput, notes: list[str]) -> Solution:
+        """The Solution, with its fusion columns, of output rows `out` at epochs t (a pass's, or the run's)."""
+        flags = out.flags | np.where(out.mag_flags & fk.MAG_USED, FLAG_MAG, 0).astype(np.int32)
+        sol = make_solution(t, self.cfg, out.nav, out.sd, flags, out.cal, notes)
+        sol.fusion = fusion_columns(t, out.beta, out.r_yaw, out.yaw_innov, out.mag_flags, out.sub_delta)
+        return sol
 
     def solution(self, notes: list[str]) -> Solution:
         """The run's Solution (notes: the method's so far; the fusion's are added) with its fusion columns."""
-        prep, cfg, out = self.prep, self.cfg, self.out
-        out.sd[0] = np.sqrt(np.diag(self.p0))
-        out.flags[:] |= np.where(out.mag_flags & fk.MAG_USED, FLAG_MAG, 0).astype(np.int32)
-        sol = make_solution(prep.t_kf, cfg, out.nav, out.sd, out.flags, out.cal, notes + self._notes())
-        sol.fusion = fusion_columns(prep.t_kf, out.beta, out.r_yaw, out.yaw_innov, out.mag_flags, out.sub_delta)
-        return sol
+        self.out.sd[0] = np.sqrt(np.diag(self.p0))
+        return self.rows(self.prep.t_kf, self.out, notes + self.notes())
 
-    def _notes(self) -> list[str]:
-        mag_flags = self.out.mag_flags
+    def notes(self) -> list[str]:
+        """What the health monitor did and what the fusion found over the passes run."""
         notes = list(self.health_notes)
-        disturbed = int(np.sum(mag_flags & fk.MAG_DISTURBED > 0))
+        disturbed = self.n_disturbed
         if disturbed:
-            first = self.prep.t_kf[np.argmax(mag_flags & fk.MAG_DISTURBED > 0)]
             notes.append(f"mag: {disturbed} epochs ({disturbed / self.cfg.filter_rate_hz:.1f} s, first at t = "
-                         f"{first:.1f} s) disturbed (field strength or dip off the model's), yaw updates left out")
-        invalid = int(np.sum(mag_flags & fk.SUB_INVALID > 0))
-        if invalid:
-            notes.append(f"fusion: a sub-filter's covariance was unusable at {invalid} epochs (weight 0, restarted)")
+                         f"{self.t_disturbed:.1f} s) disturbed (field strength or dip off the model's), yaw updates "
+                         f"left out")
+        if self.n_invalid:
+            notes.append(f"fusion: a sub-filter's covariance was unusable at {self.n_invalid} epochs (weight 0, "
+                         f"restarted)")
         return notes
 
 

@@ -61,7 +61,7 @@ class OnlinePositioning:
         self.done = 0
         """Passes run."""
         self.initial: Solution | None = None
-        """001's filters: epoch 0's row of the batch method (the start state), once the first pass runs."""
+        """Epoch 0's row of the batch method (the start state), once the first pass runs."""
 
     def feed(self, streams: Mapping[str, Mapping[str, np.ndarray]], final: bool = False) -> list[PassEstimate]:
         """The passes that end with these rows (stream name -> columns as in estimators.io.logformat: imu, odometer,
@@ -77,6 +77,7 @@ class OnlinePositioning:
         if self.passes is None and prep.segments[self.done:]:
             if self.method == "fkf_rail":
                 self.passes = RailPasses(log, self.cfg, prep, self.cfg.isolate_by, whole=False)
+                self.initial = self.passes.first_row(prep)
             else:
                 self.passes = KfPasses(log, self.cfg, prep, cpoem=self.method.startswith("kf_cpoem"),
                                        smooth=self.method.endswith("_rts"))
@@ -89,8 +90,11 @@ class OnlinePositioning:
             smoothed = isinstance(one, KfPass) and one.nav_s is not None
             nav, sd = (one.nav_s, one.sd_s) if smoothed else (one.nav, one.sd)
             t = prep.t_kf[a + 1:b + 1]
-            flags = one.flags[1:] | (FLAG_SMOOTHED if smoothed else 0)
-            solution = make_solution(t, self.cfg, nav[1:], sd[1:], flags, one.cal[1:], [])
+            if isinstance(self.passes, RailPasses):
+                solution = self.passes.pass_solution(prep, a, one)
+            else:
+                flags = one.flags[1:] | (FLAG_SMOOTHED if smoothed else 0)
+                solution = make_solution(t, self.cfg, nav[1:], sd[1:], flags, one.cal[1:], [])
             cut = next((slice(max(first - 1 - (a + 1), 0), last - a) for first, last in prep.cuts
                         if a < first and last <= b), None)
             out.append(PassEstimate(solution, cut, not filter_lost(t, nav[1:], sd[1:], self.cfg).any()))
@@ -101,10 +105,8 @@ class OnlinePositioning:
 
     def finish(self) -> list[str]:
         """The notes of the batch method once the log has ended (KfPasses.finish: the fixes gated, the odometer's
-        gaps; 001's filters)."""
-        if isinstance(self.passes, KfPasses):
-            return self.passes.finish(self.preparer.prep)
-        return self.notes
+        gaps; RailPasses.finish: the fusion's)."""
+        return [] if self.passes is None else self.passes.finish(self.preparer.prep)
 
     @property
     def notes(self) -> list[str]:

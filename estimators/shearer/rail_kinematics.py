@@ -99,6 +99,25 @@ class RailPasses:
         self.surveyed = False
         return out
 
+    def pass_solution(self, prep: Prepared, a: int, out: fk.EpochOutput) -> Solution:
+        """The Solution rows of the pass just run over epochs (a, b] (its output `out`), with their fusion columns
+        and the pass's rail fixes as detector rows: run_rail's rows over the pass."""
+        sol = self.filter.rows(prep.t_kf[a + 1:a + out.nav.shape[0]], fk.EpochOutput(*(f[1:] for f in out)), [])
+        epoch, llh, stats, applied = self.filter.pass_fixes
+        sol.detectors = detector_rows(prep, epoch, llh, stats, applied, out.flags[epoch - a])
+        return sol
+
+    def first_row(self, prep: Prepared) -> Solution:
+        """Epoch 0's row as run_rail gives it (no rail fix at it)."""
+        sol = self.filter.rows(prep.t_kf[:1], self.filter.first_row(), [])
+        sol.detectors = detector_rows(prep, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
+                                      np.zeros(0, np.int8), np.zeros(0, np.int32))
+        return sol
+
+    def finish(self, prep: Prepared) -> list[str]:
+        """The run's notes, with the fusion's (run_rail's)."""
+        return self.notes + self.filter.notes()
+
 
 def run_rail(log: Log, cfg: Config, prep: Prepared, isolate_by: str | None = "fsprt") -> Solution:
     """004: the federated SINS/odometer + SINS/rail-kinematics-model filter (RailPasses over the log's passes); the
@@ -153,15 +172,21 @@ def _rail_fixes(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: P
 
 
 def detector_columns(prep: Prepared, run: FederatedRun) -> dict[str, np.ndarray]:
-    """ESTIMATE_DETECTORS columns: per rail-model fix its time, predicted point, the three detector statistics
-    and whether it was applied; with the isolation flag of its epoch."""
+    """ESTIMATE_DETECTORS columns of a whole run (FederatedRun with `whole`): detector_rows of every pass's fixes."""
     epoch = np.concatenate([f[0] for f in run.fixes]).astype(np.int64)
-    llh = np.concatenate([f[1] for f in run.fixes]).reshape(-1, 3)
-    stats = np.concatenate([f[2] for f in run.fixes]).reshape(-1, 3)
-    applied = np.concatenate([f[3] for f in run.fixes])
+    return detector_rows(prep, epoch, *(np.concatenate([f[k] for f in run.fixes]) for k in (1, 2, 3)),
+                         run.out.flags[epoch])
+
+
+def detector_rows(prep: Prepared, epoch: np.ndarray, llh: np.ndarray, stats: np.ndarray, applied: np.ndarray,
+                  flags: np.ndarray) -> dict[str, np.ndarray]:
+    """ESTIMATE_DETECTORS columns: per rail-model fix (at `epoch`) its time, predicted point, the three detector
+    statistics and whether it was applied; with the isolation flag of its epoch (its filter `flags`)."""
+    llh, stats = np.reshape(llh, (-1, 3)), np.reshape(stats, (-1, 3))
     return {"t": prep.t_kf[epoch], "lat": llh[:, 0], "lon": llh[:, 1], "h": llh[:, 2],
-            **{f"{name}": stats[:, i] for i, name in enumerate(DETECTORS)}, "applied": applied.astype(np.int32),
-            "isolated": ((run.out.flags[epoch] & FLAG_ISOLATED) > 0).astype(np.int32)}
+            **{f"{name}": stats[:, i] for i, name in enumerate(DETECTORS)},
+            "applied": np.asarray(applied).astype(np.int32),
+            "isolated": ((flags & FLAG_ISOLATED) > 0).astype(np.int32)}
 
 
 def fsprt_alarms(detectors: dict[str, np.ndarray], t_on: float) -> np.ndarray:

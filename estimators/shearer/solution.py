@@ -56,9 +56,15 @@ def make_solution(t_kf: np.ndarray, cfg: Config, nav: np.ndarray, sd_all: np.nda
 
 
 def join_rows(parts: list[Solution]) -> Solution:
-    """Consecutive pieces of a filter's solution (with calibration; no notes, fusion or detectors) as one."""
-    return Solution(*(np.concatenate([getattr(p, k) for p in parts])
-                      for k in ("t", "llh", "v_n", "q_nb", "sd", "flags", "cal", "sd_cal")))
+    """Consecutive pieces of a filter's solution (with calibration; fusion and detector columns where they have
+    them) as one, without notes."""
+    sol = Solution(*(np.concatenate([getattr(p, k) for p in parts])
+                     for k in ("t", "llh", "v_n", "q_nb", "sd", "flags", "cal", "sd_cal")))
+    for extra in ("fusion", "detectors"):
+        have = [getattr(p, extra) for p in parts if getattr(p, extra) is not None]
+        if have:
+            setattr(sol, extra, {k: np.concatenate([h[k] for h in have]) for k in have[0]})
+    return sol
 
 
 def estimate_columns(sol: Solution, origin_llh: np.ndarray | None = None,

@@ -67,9 +67,9 @@ HELD_BYTES = {"support_frames": 210.0, "epochs_scored": 250.0, "epochs_batch": 2
 worker at a time), and each batch method's solution and filter arrays (per filter epoch, the methods of a group and
 of the other workers at once; 001's filters streamed hold none: estimators.shearer.config.STREAMED). seed004 (200
 supports, 6.5 h, five batch methods, 234 000 epochs): the recording 1.75 GB, the estimators 3.16 GB."""
-PASS_BYTES_PER_EPOCH = 34e3
+PASS_BYTES_PER_EPOCH = 45e3
 """A streamed filter's peak memory per filter epoch of its pass [bytes]: the pass's error states, covariances,
-predicted covariances and transitions for the smoother, its IMU rows (panel_100 over 5 cycles: 2.28 GB with two
+predicted covariances and transitions for the smoother, its IMU rows (panel_100 over 5 cycles: 2.57 GB with two
 methods on two workers, 23 000 epochs a pass)."""
 BATCH_LOG_STREAMS = ("odometer", "mag", "pushram")
 """The streams a batch method's log holds whole (estimators.io.log.load_log; the IMU stays on disk)."""
