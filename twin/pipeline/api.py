@@ -227,7 +227,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     from twin.pipeline.montecarlo_table import format_monte_carlo, write_monte_carlo
     from twin.pipeline.twin_stream import stream_twin
     from twin.sensors.faults import check_faults_in_run
-    from twin.view.recording import BLOCK_STREAMS, ESTIMATES_RRD, RUN_RRD, SHEARER_COLUMNS, write_recording
+    from twin.view.recording import BLOCK_STREAMS, ESTIMATES_RRD, RUN_RRD, STREAM_COLUMNS, write_recording
     from twin.view.summary import format_summary, twin_summary
 
     hold_mmap_threshold()  # memory flat over a long run (twin.pipeline.malloc)
@@ -305,7 +305,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
         progress("write", 1.0)
         # The long streams are read a row group at a time (the recording holds a few of their columns whole).
         tables = {name: (StreamBlocks if name in BLOCK_STREAMS else read_stream)(
-                      staging, STREAMS[name], SHEARER_COLUMNS if name == "truth_shearer" else None)
+                      staging, STREAMS[name], STREAM_COLUMNS.get(name))
                   for name in STREAMS if (staging / STREAMS[name].filename).is_file()}
         write_recording(staging / RUN_RRD, scn, {k: v for k, v in tables.items() if k.startswith("truth_")},
                         result.floor_grid.mesh_t(result.frame), record_rate_hz,

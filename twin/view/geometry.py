@@ -80,10 +80,12 @@ def log_body(rec: rr.RecordingStream, entity: str, geoms: BodyGeoms) -> None:
 
 
 def send_bodies(rec: rr.RecordingStream, entity: str, times: np.ndarray,
-                bodies: list[tuple[BodyGeoms, np.ndarray, np.ndarray]], colors: np.ndarray | None = None) -> None:
+                bodies: list[tuple[BodyGeoms, np.ndarray, np.ndarray]], colors: np.ndarray | None = None,
+                static: bool = True) -> None:
     """N bodies at T times, each drawn with the geoms of its kind: `bodies` holds (geoms, origins (T, N, 3), attitudes
     (T, N, 4) w, x, y, z) per body of the piece (a support and its canopy), all in the world; `colors` (T, N, G, 4)
-    uint8 over the geoms of all of them in that order (the MJCF's, static, without)."""
+    uint8 over the geoms of all of them in that order (the MJCF's, static, without). `static` False for the later
+    chunks of a history sent in several: the sizes (and the MJCF's colours) were logged with the first."""
     centres, quats = [], []
     for geoms, p, q in bodies:
         q_g = q[:, :, None, :]
@@ -98,10 +100,11 @@ def send_bodies(rec: rr.RecordingStream, entity: str, times: np.ndarray,
         rows = kind == k
         count = n * int(rows.sum())
         archetype, path = _archetype(k), f"{entity}/{SHAPES[k]}"
-        static = _sizes(k, np.broadcast_to(size[rows], (n, int(rows.sum()), 3)))
-        if colors is None:
-            static["colors"] = np.broadcast_to(rgba[rows], (n, int(rows.sum()), 4)).reshape(-1, 4)
-        rec.log(path, archetype.from_fields(**static, fill_mode="solid"), static=True)
+        if static:
+            fields = _sizes(k, np.broadcast_to(size[rows], (n, int(rows.sum()), 3)))
+            if colors is None:
+                fields["colors"] = np.broadcast_to(rgba[rows], (n, int(rows.sum()), 4)).reshape(-1, 4)
+            rec.log(path, archetype.from_fields(**fields, fill_mode="solid"), static=True)
         moving = {"centers": centres[:, :, rows].reshape(-1, 3).astype(np.float32),
                   "quaternions": xyzw(quats[:, :, rows]).reshape(-1, 4)}
         if colors is not None:

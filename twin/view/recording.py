@@ -1,9 +1,9 @@
 """The run's Rerun recording: the truth streams as a 3-D replay plus plots, written to one .rrd file.
 
 Everything is logged column-wise with `send_columns` on the duration timeline `sim_time` (seconds from the
-scenario start): one call per entity carries its whole history, with the per-time instance batches given by
-partition lengths. The Rerun world is the tangent plane t (ENU, metres, Z up), the frame of the truth
-tables' `p_t_*` columns.
+scenario start): one call per entity carries its whole history (the supports', a call per SUPPORT_CHUNK_FRAMES
+frames), with the per-time instance batches given by partition lengths. The Rerun world is the tangent plane t (ENU,
+metres, Z up), the frame of the truth tables' `p_t_*` columns.
 
 Entities (fixed names, checked by tests):
 
@@ -56,6 +56,7 @@ from twin.view.rerun_columns import (
     PathStrips,
     col,
     decimated_rows,
+    latest_frames,
     latest_rows,
     marker_rows,
     send_bar_chart,
@@ -75,6 +76,9 @@ TRUTH_RGB = np.array([240, 120, 40], np.uint8)
 """Colour of the true shearer path (3-D and plan)."""
 SUPPORT_FRAME_HZ = 1.0
 """Most support states a second of run time in the recording: a ram at 0.1-0.3 m/s moves 0.1-0.3 m between two."""
+SUPPORT_CHUNK_FRAMES = 1000
+"""Support frames built and sent at a time: the supports' part of the recording's memory is a chunk's (about 40 kB a
+frame for 100 supports: geoms, colours, rams), whatever the run's length."""
 _GREY = np.array([150, 150, 150], float)
 _RED = np.array([230, 30, 30], float)
 _LOWERED_RGBA = np.array([240, 160, 40, 255], np.uint8)
@@ -146,49 +150,48 @@ def _cycle_starts(cycles: pa.Table | None) -> np.ndarray | None:
     return None if cycles is None or cycles.num_rows == 0 else col(cycles, "t")
 
 
-def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: pa.Table, rate_hz: float | None,
+def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: Blocks, rate_hz: float | None,
                   base: BodyGeoms, canopy_body: BodyGeoms) -> None:
     """Every support's geoms (the MJCF piece's base and canopy bodies; a lowered support's canopy in orange) and ram at
     each time one changes, at most SUPPORT_FRAME_HZ (the last state of each interval, so that an event's end shows at
-    once; every time at FULL rate)."""
-    if supports.num_rows == 0:
-        return
-    t = col(supports, "t")
-    times = np.unique(t)
-    if rate_hz is not FULL:
-        frame = np.floor(times * min(rate_hz, SUPPORT_FRAME_HZ) + 1e-9)
-        times = times[np.r_[np.diff(frame) > 0, True]]
-    times, _, rows = latest_rows(t, col(supports, "support"), times)
-    n_t, n_s = rows.shape
-    p = vec(supports, "p_t")[rows]                   # (n_t, n_s, 3) ram connection on the base
-    ram = col(supports, "ram")[rows]
-    canopy = col(supports, "canopy")[rows]
-    is_set = col(supports, "set")[rows] != 0
+    once; every time at FULL rate), built and sent SUPPORT_CHUNK_FRAMES at a time."""
+    frame_hz = rate_hz if rate_hz is FULL else min(rate_hz, SUPPORT_FRAME_HZ)
     x_t = _advance_axis(scn)
+    chunks = latest_frames(supports, "support", SUPPORT_COLUMNS[2:], frame_hz, SUPPORT_CHUNK_FRAMES)
+    for k, (times, state) in enumerate(chunks):
+        n_t, n_s = state["ram"].shape
+        p = np.stack([state["p_t_e"], state["p_t_n"], state["p_t_u"]], axis=-1)  # (n_t, n_s, 3) ram connection
+        ram, is_set = state["ram"], state["set"] != 0
 
-    # The support body stands in F; its canopy body rides the leg slide (z) from its place on the base.
-    q_tf = np.broadcast_to(_face_quat_wxyz(scn), (n_t, n_s, 4))
-    canopy_f = canopy_body.body_pos + canopy[..., None] * np.array([0.0, 0.0, 1.0])
-    p_canopy = p + quat_rotate(q_tf, canopy_f)
-    colors = np.array(np.broadcast_to(np.concatenate([base.rgba, canopy_body.rgba]),
-                                      (n_t, n_s, len(base) + len(canopy_body), 4)))
-    colors[~is_set, len(base) + canopy_body.index("canopy")] = _LOWERED_RGBA
-    send_bodies(rec, "world/supports", times, [(base, p, q_tf), (canopy_body, p_canopy, q_tf)], colors)
-    lengths = np.full(n_t, n_s)
-    strips = np.stack([p, p + ram[..., None] * x_t], axis=2)  # (n_t, n_s, 2, 3)
-    rec.send_columns(
-        "world/rams",
-        indexes=[time_column(times)],
-        columns=rr.LineStrips3D.columns(strips=strips.reshape(-1, 2, 3).astype(np.float32)).partition(lengths),
-    )
-    rec.log("world/rams", rr.LineStrips3D.from_fields(radii=0.05, colors=[200, 200, 60]), static=True)
-    send_bar_chart(rec, "plots/ram_length", times, ram)
+        # The support body stands in F; its canopy body rides the leg slide (z) from its place on the base.
+        q_tf = np.broadcast_to(_face_quat_wxyz(scn), (n_t, n_s, 4))
+        canopy_f = canopy_body.body_pos + state["canopy"][..., None] * np.array([0.0, 0.0, 1.0])
+        p_canopy = p + quat_rotate(q_tf, canopy_f)
+        colors = np.array(np.broadcast_to(np.concatenate([base.rgba, canopy_body.rgba]),
+                                          (n_t, n_s, len(base) + len(canopy_body), 4)))
+        colors[~is_set, len(base) + canopy_body.index("canopy")] = _LOWERED_RGBA
+        send_bodies(rec, "world/supports", times, [(base, p, q_tf), (canopy_body, p_canopy, q_tf)], colors,
+                    static=k == 0)
+        lengths = np.full(n_t, n_s)
+        strips = np.stack([p, p + ram[..., None] * x_t], axis=2)  # (n_t, n_s, 2, 3)
+        rec.send_columns(
+            "world/rams",
+            indexes=[time_column(times)],
+            columns=rr.LineStrips3D.columns(strips=strips.reshape(-1, 2, 3).astype(np.float32)).partition(lengths),
+        )
+        if k == 0:
+            rec.log("world/rams", rr.LineStrips3D.from_fields(radii=0.05, colors=[200, 200, 60]), static=True)
+        send_bar_chart(rec, "plots/ram_length", times, ram)
 
 
 SHEARER_COLUMNS = ("t", "lat", "lon", "p_t_e", "p_t_n", "p_t_u", "q_nb_w", "q_nb_x", "q_nb_y", "q_nb_z", "v_n_e", "v_n_n",
                    "cycle")
 """The truth_shearer columns the recording draws (a run reads only these back from its Parquet)."""
-BLOCK_STREAMS = ("truth_shearer", "imu", "odometer", "mag", "pushram", "pressure")
+SUPPORT_COLUMNS = ("t", "support", "p_t_e", "p_t_n", "p_t_u", "ram", "canopy", "set")
+"""The truth_supports columns the recording draws."""
+STREAM_COLUMNS = {"truth_shearer": SHEARER_COLUMNS, "truth_supports": SUPPORT_COLUMNS}
+"""The columns a run reads back of the streams the recording draws only some of."""
+BLOCK_STREAMS = ("truth_shearer", "truth_supports", "imu", "odometer", "mag", "pushram", "pressure")
 """The streams write_recording takes in blocks (a run reads them back a row group at a time)."""
 
 
@@ -257,10 +260,10 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, Blocks],
     (twin.view.rrd_stream: the recording id from the scenario and seed).
 
     `truth` maps "truth_shearer", "truth_pans", "truth_supports" (required) and "truth_cycles" (optional: the
-    face line at each cycle's end) to tables with the columns of `estimators.io.logformat` (truth_shearer may come in
-    blocks: twin.view.rerun_columns.Blocks; so may the imu, pushram and pressure `sensors`). `floor_mesh` is (vertices (V, 3) in t,
-    triangle indices (T, 3)). `rate_hz` is the record rate (twin.view.rerun_columns: Hz, or FULL for every
-    sample) of the shearer and the time series.
+    face line at each cycle's end) to tables with the columns of `estimators.io.logformat` (truth_shearer and
+    truth_supports may come in blocks: twin.view.rerun_columns.Blocks; so may the `sensors` of BLOCK_STREAMS).
+    `floor_mesh` is (vertices (V, 3) in t, triangle indices (T, 3)). `rate_hz` is the record rate
+    (twin.view.rerun_columns: Hz, or FULL for every sample) of the shearer and the time series.
     """
     missing = [k for k in ("truth_shearer", "truth_pans", "truth_supports") if k not in truth]
     if missing:

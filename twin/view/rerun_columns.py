@@ -9,7 +9,7 @@ The record rate (twin.view.record_rate) is a rate in Hz, or FULL (None): every s
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator, Sequence
 
 import numpy as np
 import pyarrow as pa
@@ -77,6 +77,67 @@ def latest_rows(t: np.ndarray, ident: np.ndarray, at: np.ndarray | None = None
         mine = mine[np.argsort(t[mine], kind="stable")]
         rows[:, j] = mine[np.maximum(np.searchsorted(t[mine], times, side="right") - 1, 0)]
     return times, ids, rows
+
+def latest_frames(data: Blocks, ident: str, names: Sequence[str], rate_hz: float | None, frames: int
+                  ) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
+    """`latest_rows` of a (t, id)-keyed stream (t nondecreasing; one table or blocks) at the last distinct time of each
+    1/rate_hz interval (every distinct time at FULL rate), `frames` times at a time: (times (F,), {name: (F, n_id)} the
+    columns `names` of every id's latest row, ids in order), the last chunk with the rest. The same chunks whatever the
+    blocks: the stream is read twice, first for each id's first row (its state before it appears), then a block at a
+    time with each id's latest row carried across blocks and the rows of a block's last time held for the next (more
+    rows at that time may follow)."""
+    ids, state = _first_rows(data, ident, names)
+    if ids.size == 0:
+        return
+    pending: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
+    held = {"t": np.zeros(0), ident: ids[:0], **{name: state[name][:0] for name in names}}
+    for block in [*blocks_of(data), None]:
+        rows = held if block is None else {name: np.r_[held[name], col(block, name)] for name in held}
+        if rows["t"].size == 0:
+            continue
+        distinct = np.unique(rows["t"])
+        last = (np.ones(distinct.size, bool) if rate_hz is FULL
+                else np.r_[np.diff(np.floor(distinct * rate_hz + 1e-9)) > 0, True])
+        cut = rows["t"].size
+        if block is not None:  # the block's last time waits for the rest of its rows and for the next time
+            last[-1], cut = False, int(np.searchsorted(rows["t"], distinct[-1]))
+        t = np.r_[np.full(ids.size, -np.inf), rows["t"][:cut]]  # each id's state before the block's rows
+        who = np.r_[ids, rows[ident][:cut]]
+        values = {name: np.r_[state[name], rows[name][:cut]] for name in names}
+        times = distinct[last]
+        for start in range(0, times.size, frames):
+            at = latest_rows(t, who, times[start:start + frames])[2]
+            pending.append((times[start:start + frames], {name: values[name][at] for name in names}))
+            if sum(p[0].size for p in pending) >= frames:
+                chunk, pending = _frame_chunks(pending, frames)
+                yield chunk
+        state = {name: values[name][latest_rows(t, who, [np.inf])[2][0]] for name in names}
+        held = {name: rows[name][cut:] for name in rows}
+    if pending:
+        yield _frame_chunks(pending, frames)[0]
+
+
+def _first_rows(data: Blocks, ident: str, names: Sequence[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The ids of a (t, id)-keyed stream, in order, and the columns `names` of each one's first row."""
+    ids, firsts = np.zeros(0, np.int64), {name: [] for name in names}
+    for block in blocks_of(data):
+        new, at = np.unique(col(block, ident), return_index=True)
+        at = at[~np.isin(new, ids)]
+        ids = np.r_[ids, col(block, ident)[at]]
+        for name in names:
+            firsts[name].append(col(block, name)[at])
+    order = np.argsort(ids)
+    return ids[order], {name: np.concatenate(firsts[name])[order] for name in names}
+
+
+def _frame_chunks(pending: list[tuple[np.ndarray, dict[str, np.ndarray]]], frames: int
+                  ) -> tuple[tuple[np.ndarray, dict[str, np.ndarray]], list]:
+    """The first `frames` of the frames pending (all of them when fewer), and the rest still pending."""
+    times = np.concatenate([p[0] for p in pending])
+    values = {name: np.concatenate([p[1][name] for p in pending]) for name in pending[0][1]}
+    rest = [(times[frames:], {name: v[frames:] for name, v in values.items()})] if times.size > frames else []
+    return (times[:frames], {name: v[:frames] for name, v in values.items()}), rest
+
 
 class TensorColumn:
     """A column of 1-D float32 tensors (one per row) in Rerun's TensorData arrow layout.

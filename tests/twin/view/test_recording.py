@@ -292,10 +292,10 @@ def _chunk_contents(path) -> list[tuple[str, pa.RecordBatch]]:
     return out
 
 
-def test_the_long_streams_in_blocks_give_the_recording_of_whole_tables(tmp_path):
-    """A run's recording reads truth_shearer, imu, pushram and pressure a row group at a time (BLOCK_STREAMS): given in
-    blocks cut anywhere (inside a record interval, between the rows of one sample time), every chunk it writes holds
-    what the whole tables give."""
+def _default_run():
+    """The default scenario's truth and trial 0's sensors as tables, and a writer of its recording (each stream of
+    BLOCK_STREAMS cut in blocks anywhere, inside a record interval and between the rows of one sample time, with
+    `split`)."""
     from tests.conftest import simulated
     from twin.sensors.streams import imu_truth, sensor_streams
     from twin.view.recording import BLOCK_STREAMS
@@ -315,13 +315,55 @@ def test_the_long_streams_in_blocks_give_the_recording_of_whole_tables(tmp_path)
         write_recording(path, scn, {k: v for k, v in data.items() if k.startswith("truth_")},
                         result.floor_grid.mesh_t(result.frame), sensors={k: v for k, v in data.items()
                                                                           if not k.startswith("truth_")})
+    return write
 
+
+def test_the_long_streams_in_blocks_give_the_recording_of_whole_tables(tmp_path):
+    """A run's recording reads truth_shearer, truth_supports, imu, pushram and pressure a row group at a time
+    (BLOCK_STREAMS): given in blocks cut anywhere, every chunk it writes holds what the whole tables give."""
+    write = _default_run()
     write(tmp_path / "whole.rrd", False)
     write(tmp_path / "blocks.rrd", True)
     whole, blocks = _chunk_contents(tmp_path / "whole.rrd"), _chunk_contents(tmp_path / "blocks.rrd")
     assert len(whole) == len(blocks) > 20
     for (entity_a, a), (entity_b, b) in zip(whole, blocks):
         assert entity_a == entity_b and a.equals(b), entity_a
+
+
+def _rows(path) -> tuple[dict[tuple, pa.Table], dict[str, int]]:
+    """A recording's rows as a reader sees them, however they are cut into chunks: per (entity, static, columns) its
+    rows in time order, without row ids; and each entity's number of temporal chunks."""
+    parts, counts = {}, {}
+    for chunk in RrdReader(path).stream().to_chunks():
+        batch = chunk.to_record_batch()
+        batch = batch.select([n for n in batch.schema.names if "row" not in n.lower()])
+        parts.setdefault((str(chunk.entity_path), chunk.is_static, tuple(batch.schema.names)), []).append(batch)
+        counts[str(chunk.entity_path)] = counts.get(str(chunk.entity_path), 0) + (not chunk.is_static)
+    return {key: pa.Table.from_batches(batches) if key[1] else pa.Table.from_batches(batches).sort_by(TIMELINE)
+            for key, batches in parts.items()}, counts
+
+
+def test_the_supports_sent_in_chunks_are_the_rows_of_one_chunk(tmp_path, monkeypatch):
+    """The supports' frames built and sent SUPPORT_CHUNK_FRAMES at a time (truth_supports in blocks): every entity of
+    the recording holds the rows, at the times, of the recording sent in one chunk; the supports' entities are cut
+    into chunks of that many frames."""
+    import twin.view.recording as recording
+
+    write = _default_run()
+    write(tmp_path / "one.rrd", False)
+    one, one_counts = _rows(tmp_path / "one.rrd")
+    frames = one[("/plots/ram_length", False, (TIMELINE, "BarChart:values"))].num_rows
+    assert 20 < frames <= recording.SUPPORT_CHUNK_FRAMES  # a frame a second at most over the run: one chunk
+    monkeypatch.setattr(recording, "SUPPORT_CHUNK_FRAMES", frames // 6)
+    write(tmp_path / "chunks.rrd", True)
+    chunks, chunk_counts = _rows(tmp_path / "chunks.rrd")
+    assert one.keys() == chunks.keys()
+    for key, table in one.items():
+        assert table.equals(chunks[key]), key
+    supports = ("/world/supports/boxes", "/world/supports/cylinders", "/world/rams", "/plots/ram_length")
+    assert [(one_counts[e], chunk_counts[e]) for e in supports] == [(1, -(-frames // (frames // 6)))] * 4
+    assert {e: n for e, n in one_counts.items() if e not in supports} == \
+        {e: n for e, n in chunk_counts.items() if e not in supports}
 
 
 def test_the_plan_view_in_the_face_frame(recording):

@@ -15,6 +15,7 @@ from twin.view.rerun_columns import (
     PathStrips,
     decimate,
     decimated_rows,
+    latest_frames,
     latest_rows,
     mean_rate,
     median_interval,
@@ -140,3 +141,31 @@ def test_latest_rows_at_some_times_are_the_forward_filled_rows():
             assert rows[k, j] == (before[np.lexsort((before, t[before]))[-1]] if before.size
                                   else mine[np.lexsort((mine, t[mine]))[0]])
     assert np.array_equal(latest_rows(t, ident)[2][np.searchsorted(np.unique(t), at)], rows)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_latest_frames_of_blocks_are_the_whole_streams_latest_rows(seed):
+    """Each id's latest row at the last time of each interval (every time at FULL rate), from blocks cut anywhere (an
+    id appearing late takes its first row before): latest_rows of the whole table at those times, in chunks of
+    exactly `frames` times (the last with the rest), the columns' types kept."""
+    rng = np.random.default_rng(seed)
+    n = 400
+    t = np.sort(rng.choice(np.arange(160) * 0.25, n))  # 4 times a second, several rows at one time
+    ident = np.where(t < 10.0, rng.integers(0, 5, n), rng.integers(0, 7, n))  # ids 5 and 6 first seen after 10 s
+    table = pa.table({"t": t, "id": ident.astype(np.int32), "x": rng.normal(size=n),
+                      "flag": rng.integers(0, 2, n).astype(np.int8)})
+    for rate_hz in (FULL, 1.0, 0.3):
+        times = np.unique(t)
+        if rate_hz is not FULL:  # the last time of each interval
+            times = times[np.r_[np.diff(np.floor(times * rate_hz + 1e-9)) > 0, True]]
+        rows = latest_rows(t, ident, times)[2]
+        for frames in (1, 7, 1000):
+            chunks = list(latest_frames(_blocks(rng, table), "id", ("x", "flag"), rate_hz, frames))
+            assert [c[0].size for c in chunks[:-1]] == [frames] * (len(chunks) - 1)
+            assert 0 < chunks[-1][0].size <= frames
+            assert np.array_equal(np.concatenate([c[0] for c in chunks]), times)
+            for name in ("x", "flag"):
+                whole = table.column(name).to_numpy()[rows]
+                got = np.concatenate([c[1][name] for c in chunks])
+                assert got.dtype == whole.dtype and got.shape == (times.size, 7) and np.array_equal(got, whole)
+    assert list(latest_frames(table.slice(0, 0), "id", ("x",), 1.0, 5)) == []
