@@ -1,8 +1,8 @@
 """The run's Rerun recording: the truth streams as a 3-D replay plus plots, written to one .rrd file.
 
 Everything is logged column-wise with `send_columns` on the duration timeline `sim_time` (seconds from the
-scenario start): one call per entity carries its whole history (the supports', a call per SUPPORT_CHUNK_FRAMES
-frames), with the per-time instance batches given by partition lengths. The Rerun world is the tangent plane t (ENU,
+scenario start): one call per entity carries its whole history (the supports', a call per SUPPORT_CHUNK_GEOMS
+geoms), with the per-time instance batches given by partition lengths. The Rerun world is the tangent plane t (ENU,
 metres, Z up), the frame of the truth tables' `p_t_*` columns.
 
 Entities (fixed names, checked by tests):
@@ -76,9 +76,10 @@ TRUTH_RGB = np.array([240, 120, 40], np.uint8)
 """Colour of the true shearer path (3-D and plan)."""
 SUPPORT_FRAME_HZ = 1.0
 """Most support states a second of run time in the recording: a ram at 0.1-0.3 m/s moves 0.1-0.3 m between two."""
-SUPPORT_CHUNK_FRAMES = 1000
-"""Support frames built and sent at a time: the supports' part of the recording's memory is a chunk's (about 40 kB a
-frame for 100 supports: geoms, colours, rams), whatever the run's length."""
+SUPPORT_CHUNK_GEOMS = 250_000
+"""Support geoms (each geom of a support's base and canopy at one frame) built and sent at a time: the supports' part
+of the recording's memory is a chunk's, about 130 bytes a geom at its peak (30 MB), whatever the run's length; 200
+frames of a face of 200 supports."""
 _GREY = np.array([150, 150, 150], float)
 _RED = np.array([230, 30, 30], float)
 _LOWERED_RGBA = np.array([240, 160, 40, 255], np.uint8)
@@ -154,10 +155,11 @@ def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: Blocks, rate
                   base: BodyGeoms, canopy_body: BodyGeoms) -> None:
     """Every support's geoms (the MJCF piece's base and canopy bodies; a lowered support's canopy in orange) and ram at
     each time one changes, at most SUPPORT_FRAME_HZ (the last state of each interval, so that an event's end shows at
-    once; every time at FULL rate), built and sent SUPPORT_CHUNK_FRAMES at a time."""
+    once; every time at FULL rate), built and sent SUPPORT_CHUNK_GEOMS geoms at a time."""
     frame_hz = rate_hz if rate_hz is FULL else min(rate_hz, SUPPORT_FRAME_HZ)
     x_t = _advance_axis(scn)
-    chunks = latest_frames(supports, "support", SUPPORT_COLUMNS[2:], frame_hz, SUPPORT_CHUNK_FRAMES)
+    chunks = latest_frames(supports, "support", SUPPORT_COLUMNS[2:], frame_hz,
+                           SUPPORT_CHUNK_GEOMS // (len(base) + len(canopy_body)))
     for k, (times, state) in enumerate(chunks):
         n_t, n_s = state["ram"].shape
         p = np.stack([state["p_t_e"], state["p_t_n"], state["p_t_u"]], axis=-1)  # (n_t, n_s, 3) ram connection

@@ -78,17 +78,18 @@ def latest_rows(t: np.ndarray, ident: np.ndarray, at: np.ndarray | None = None
         rows[:, j] = mine[np.maximum(np.searchsorted(t[mine], times, side="right") - 1, 0)]
     return times, ids, rows
 
-def latest_frames(data: Blocks, ident: str, names: Sequence[str], rate_hz: float | None, frames: int
+def latest_frames(data: Blocks, ident: str, names: Sequence[str], rate_hz: float | None, states: int
                   ) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
     """`latest_rows` of a (t, id)-keyed stream (t nondecreasing; one table or blocks) at the last distinct time of each
-    1/rate_hz interval (every distinct time at FULL rate), `frames` times at a time: (times (F,), {name: (F, n_id)} the
-    columns `names` of every id's latest row, ids in order), the last chunk with the rest. The same chunks whatever the
-    blocks: the stream is read twice, first for each id's first row (its state before it appears), then a block at a
-    time with each id's latest row carried across blocks and the rows of a block's last time held for the next (more
-    rows at that time may follow)."""
+    1/rate_hz interval (every distinct time at FULL rate), in chunks of F = states // n_id times (at least one):
+    (times (F,), {name: (F, n_id)} the columns `names` of every id's latest row, ids in order), the last chunk with the
+    rest. The same chunks whatever the blocks: the stream is read twice, first for each id's first row (its state
+    before it appears), then a block at a time with each id's latest row carried across blocks and the rows of a
+    block's last time held for the next (more rows at that time may follow)."""
     ids, state = _first_rows(data, ident, names)
     if ids.size == 0:
         return
+    frames = max(1, states // ids.size)
     pending: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
     held = {"t": np.zeros(0), ident: ids[:0], **{name: state[name][:0] for name in names}}
     for block in [*blocks_of(data), None]:

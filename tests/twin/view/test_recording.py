@@ -344,17 +344,20 @@ def _rows(path) -> tuple[dict[tuple, pa.Table], dict[str, int]]:
 
 
 def test_the_supports_sent_in_chunks_are_the_rows_of_one_chunk(tmp_path, monkeypatch):
-    """The supports' frames built and sent SUPPORT_CHUNK_FRAMES at a time (truth_supports in blocks): every entity of
-    the recording holds the rows, at the times, of the recording sent in one chunk; the supports' entities are cut
-    into chunks of that many frames."""
+    """The supports' frames built and sent SUPPORT_CHUNK_GEOMS geoms at a time (truth_supports in blocks): every entity
+    of the recording holds the rows, at the times, of the recording sent in one chunk; the supports' entities are cut
+    into chunks of as many frames as hold that many geoms."""
     import twin.view.recording as recording
 
     write = _default_run()
     write(tmp_path / "one.rrd", False)
     one, one_counts = _rows(tmp_path / "one.rrd")
     frames = one[("/plots/ram_length", False, (TIMELINE, "BarChart:values"))].num_rows
-    assert 20 < frames <= recording.SUPPORT_CHUNK_FRAMES  # a frame a second at most over the run: one chunk
-    monkeypatch.setattr(recording, "SUPPORT_CHUNK_FRAMES", frames // 6)
+    geoms = sum(len(_instances(RrdReader(tmp_path / "one.rrd").stream().to_chunks(), f"/world/supports/{shape}",
+                               f"{archetype}:centers")[0])
+                for shape, archetype in (("boxes", "Boxes3D"), ("cylinders", "Cylinders3D")))  # a frame's
+    assert 20 < frames and frames * geoms <= recording.SUPPORT_CHUNK_GEOMS  # the default run: one chunk
+    monkeypatch.setattr(recording, "SUPPORT_CHUNK_GEOMS", frames // 6 * geoms + geoms - 1)
     write(tmp_path / "chunks.rrd", True)
     chunks, chunk_counts = _rows(tmp_path / "chunks.rrd")
     assert one.keys() == chunks.keys()

@@ -147,7 +147,7 @@ def test_latest_rows_at_some_times_are_the_forward_filled_rows():
 def test_latest_frames_of_blocks_are_the_whole_streams_latest_rows(seed):
     """Each id's latest row at the last time of each interval (every time at FULL rate), from blocks cut anywhere (an
     id appearing late takes its first row before): latest_rows of the whole table at those times, in chunks of
-    exactly `frames` times (the last with the rest), the columns' types kept."""
+    exactly `frames` times (`states` // 7 ids; the last with the rest), the columns' types kept."""
     rng = np.random.default_rng(seed)
     n = 400
     t = np.sort(rng.choice(np.arange(160) * 0.25, n))  # 4 times a second, several rows at one time
@@ -159,8 +159,8 @@ def test_latest_frames_of_blocks_are_the_whole_streams_latest_rows(seed):
         if rate_hz is not FULL:  # the last time of each interval
             times = times[np.r_[np.diff(np.floor(times * rate_hz + 1e-9)) > 0, True]]
         rows = latest_rows(t, ident, times)[2]
-        for frames in (1, 7, 1000):
-            chunks = list(latest_frames(_blocks(rng, table), "id", ("x", "flag"), rate_hz, frames))
+        for states, frames in ((3, 1), (7, 1), (55, 7), (7000, 1000)):
+            chunks = list(latest_frames(_blocks(rng, table), "id", ("x", "flag"), rate_hz, states))
             assert [c[0].size for c in chunks[:-1]] == [frames] * (len(chunks) - 1)
             assert 0 < chunks[-1][0].size <= frames
             assert np.array_equal(np.concatenate([c[0] for c in chunks]), times)
