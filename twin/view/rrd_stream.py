@@ -3,11 +3,12 @@
 Rerun stamps what it logs with time-based ids (TUIDs: nanoseconds since the epoch plus a per-thread random
 counter), one per row and one per chunk, and adds the wall-clock timeline `log_time` to `log` calls that are
 not static. `recording_stream` lets the caller log as usual, into a scratch file; on leaving, the final file
-is written from that file's chunks as identified chunks (rerun.chunk.Chunk.from_record_batch keeps the row-id
-column and chunk id it is given) with the ids numbered in logging order under a base drawn from the recording
-id and the file name (run.rrd and estimates.rrd share a recording id and are merged by the viewer, so they
-must not share a chunk or row id), and without `log_time`. The logging stream never flushes on its own
-(ChunkBatcherConfig.NEVER), so the cut of rows into chunks is the same every time.
+is written from that file's chunks, read back a chunk at a time, as identified chunks
+(rerun.chunk.Chunk.from_record_batch keeps the row-id column and chunk id it is given) with the ids numbered in
+logging order under a base drawn from the recording id and the file name (run.rrd and estimates.rrd share a
+recording id and are merged by the viewer, so they must not share a chunk or row id), and without `log_time`. The
+logging stream never flushes on its own (ChunkBatcherConfig.NEVER), so the cut of rows into chunks is the same
+every time.
 
 Three things rerun-sdk 0.41 writes from the clock or a hash map, with no API to set them, are dealt with so:
 
@@ -23,7 +24,7 @@ from __future__ import annotations
 
 import hashlib
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -66,25 +67,25 @@ def _row_words(column: pa.Array) -> np.ndarray:
     return data[column.offset:column.offset + len(column)]
 
 
-def _identified(chunks: list[Chunk], recording: str, name: str) -> list[Chunk]:
+def _identified(chunks: Callable[[], Iterable[Chunk]], recording: str, name: str) -> Iterator[Chunk]:
     """The chunks with chunk ids numbered in file order and row ids in logging order, under `_base`, and
-    without the WALL_CLOCK timelines."""
-    batches = [chunk.to_record_batch() for chunk in chunks]
-    words = [_row_words(batch.column(ROW_ID)) for batch in batches]
+    without the WALL_CLOCK timelines, one at a time: `chunks` gives them anew for each of two passes (the row ids
+    first), so that a chunk at a time is held, whatever the recording's length."""
+    words = [_row_words(chunk.to_record_batch().column(ROW_ID)).copy() for chunk in chunks()]
     stacked = np.concatenate(words) if words else np.zeros((0, 2), np.uint64)
     rank = np.empty(len(stacked), np.uint64)
     rank[np.lexsort((stacked[:, 1], stacked[:, 0]))] = np.arange(1, len(stacked) + 1, dtype=np.uint64)
-    base, out, start = _base(recording, name), [], 0
-    for k, batch in enumerate(batches):
+    base, start = _base(recording, name), 0
+    for k, chunk in enumerate(chunks()):
+        batch = chunk.to_record_batch()
         n = batch.num_rows
         keep = [i for i, f in enumerate(batch.schema) if f.name not in WALL_CLOCK]
         schema = pa.schema([batch.schema.field(i) for i in keep])
         schema = schema.with_metadata({**batch.schema.metadata, CHUNK_ID: f"chunk_{base + 1:016X}{k:016x}".encode()})
         columns = [_tuids(base, rank[start:start + n]) if batch.schema.field(i).name == ROW_ID else batch.column(i)
                    for i in keep]
-        out += Chunk.from_record_batch(pa.RecordBatch.from_arrays(columns, schema=schema))
+        yield from Chunk.from_record_batch(pa.RecordBatch.from_arrays(columns, schema=schema))
         start += n
-    return out
 
 
 STORE_INFO, END = 1, 0
@@ -133,12 +134,12 @@ def recording_stream(path: Path, recording: str) -> Iterator[rr.RecordingStream]
             rec.flush()
         finally:
             rec.disconnect()
-        chunks = _identified(RrdReader(scratch).stream().to_chunks(), recording, path.name)
         out = rr.RecordingStream(APPLICATION_ID, recording_id=recording, send_properties=False)
         out.save(path)
         try:
-            out.send_chunks(chunks)
-            out.flush()
+            for chunk in _identified(lambda: RrdReader(scratch).stream(), recording, path.name):
+                out.send_chunks(chunk)
+                out.flush()  # written before the next is read: the sink's queue holds a chunk, not the recording
         finally:
             out.disconnect()
         _pin_store_info(path, recording)

@@ -96,3 +96,32 @@ def test_an_exception_leaves_no_recording(tmp_path):
 def test_the_recording_id_comes_from_the_scenario_and_seed():
     assert recording_id(capped("default")) == recording_id(capped("default"))
     assert recording_id(capped("default")) != recording_id(capped("default", seed=2))
+
+
+def test_the_file_is_written_from_its_chunks_one_at_a_time(tmp_path):
+    """The final file's chunks are made from the scratch file's read back one at a time (a first pass for the row ids,
+    then each chunk identified and handed on before the next is read), not from the whole recording at once; they
+    are the chunks of the file written."""
+    import twin.view.rrd_stream as rrd_stream
+
+    scratch = tmp_path / "scratch.rrd"
+    with rr.RecordingStream("test", recording_id="fixed", batcher_config=rr.ChunkBatcherConfig.NEVER()) as rec:
+        rec.save(scratch)
+        for k in range(4):
+            rec.send_columns(f"plots/x{k}", indexes=[rr.TimeColumn("sim_time", duration=np.arange(3.0))],
+                             columns=rr.Scalars.columns(scalars=np.arange(3.0)))
+    read = []
+
+    def chunks():
+        for k, chunk in enumerate(RrdReader(scratch).stream()):
+            read.append(k)
+            yield chunk
+
+    identified = rrd_stream._identified(chunks, "fixed", "run.rrd")
+    made = [next(identified)]
+    n = len(read) - 1
+    assert n > 4 and read == [*range(n), 0]  # the row ids of all, then the first chunk only
+    made += list(identified)
+    assert read == [*range(n), *range(n)] and len(made) == n
+    rows = np.concatenate([rrd_stream._row_words(c.to_record_batch().column(ROW_ID))[:, 1] for c in made])
+    assert np.array_equal(rows, np.arange(1, rows.size + 1)) and rows.size >= 12  # numbered in logging order
