@@ -83,10 +83,12 @@ def log_axes(rec: rr.RecordingStream, scn: Scenario) -> None:
 
 
 def send_pan_line(rec: rr.RecordingStream, scn: Scenario, times: np.ndarray, p_t: np.ndarray,
-                  cycle_starts: np.ndarray | None) -> None:
-    """The pan line (pans' origins p_t (T, N, 3) in t) at each of `times`."""
+                  cycle_starts: np.ndarray | None, static: bool = True) -> None:
+    """The pan line (pans' origins p_t (T, N, 3) in t) at each of `times`; `static` False for the later chunks of a
+    history sent in several (its look was logged with the first)."""
     strips = plotted(face_coordinates(scn, p_t, cycle_of(times, cycle_starts)[:, None]))
-    rec.log(f"{PLAN_ROOT}/pans", rr.LineStrips2D.from_fields(radii=0.15, colors=[150, 150, 160]), static=True)
+    if static:
+        rec.log(f"{PLAN_ROOT}/pans", rr.LineStrips2D.from_fields(radii=0.15, colors=[150, 150, 160]), static=True)
     rec.send_columns(f"{PLAN_ROOT}/pans", indexes=[time_column(times)],
                      columns=rr.LineStrips2D.columns(strips=strips).partition(np.ones(times.size, np.int64)))
 

@@ -1,8 +1,8 @@
 """The run's Rerun recording: the truth streams as a 3-D replay plus plots, written to one .rrd file.
 
 Everything is logged column-wise with `send_columns` on the duration timeline `sim_time` (seconds from the
-scenario start): one call per entity carries its whole history (the supports', a call per SUPPORT_CHUNK_GEOMS
-geoms), with the per-time instance batches given by partition lengths. The Rerun world is the tangent plane t (ENU,
+scenario start): one call per entity carries its whole history (the pans' and the supports', a call per
+CHUNK_GEOMS geoms), with the per-time instance batches given by partition lengths. The Rerun world is the tangent plane t (ENU,
 metres, Z up), the frame of the truth tables' `p_t_*` columns.
 
 Entities (fixed names, checked by tests):
@@ -57,7 +57,6 @@ from twin.view.rerun_columns import (
     col,
     decimated_rows,
     latest_frames,
-    latest_rows,
     marker_rows,
     send_bar_chart,
     series,
@@ -76,10 +75,10 @@ TRUTH_RGB = np.array([240, 120, 40], np.uint8)
 """Colour of the true shearer path (3-D and plan)."""
 SUPPORT_FRAME_HZ = 1.0
 """Most support states a second of run time in the recording: a ram at 0.1-0.3 m/s moves 0.1-0.3 m between two."""
-SUPPORT_CHUNK_GEOMS = 250_000
-"""Support geoms (each geom of a support's base and canopy at one frame) built and sent at a time: the supports' part
-of the recording's memory is a chunk's, about 130 bytes a geom at its peak (30 MB), whatever the run's length; 200
-frames of a face of 200 supports."""
+CHUNK_GEOMS = 250_000
+"""Geoms (each geom of a pan's or a support's bodies at one frame) built and sent at a time: the pans' and supports'
+part of the recording's memory is a chunk's, about 130-170 bytes a geom at its peak (40 MB), whatever the run's
+length; 200 frames of a face of 200 supports."""
 _GREY = np.array([150, 150, 150], float)
 _RED = np.array([230, 30, 30], float)
 _LOWERED_RGBA = np.array([240, 160, 40, 255], np.uint8)
@@ -123,28 +122,22 @@ def _log_floor(rec: rr.RecordingStream, floor_mesh: tuple[np.ndarray, np.ndarray
 def _log_pans(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table, cycles: pa.Table | None,
               pan: BodyGeoms) -> None:
     """Every pan's geoms (the MJCF piece's) at each pan-update time, the trough coloured by its horizontal bend against
-    the limit (grey to red), the bend per chute, and the pan line in the plan view."""
-    if pans.num_rows == 0:
-        return
-    times, _, rows = latest_rows(col(pans, "t"), col(pans, "pan"))
-    n_t, n_p = rows.shape
-    p = vec(pans, "p_t")[rows]                       # (n_t, n_p, 3)
-    q = vec(pans, "q_tp", "wxyz")[rows]              # (n_t, n_p, 4)
-    bend_h = col(pans, "bend_h")[rows]
-    bend_v = col(pans, "bend_v")[rows]
-
+    the limit (grey to red), the bend per chute, and the pan line in the plan view; built and sent CHUNK_GEOMS geoms
+    at a time."""
+    names = ("p_t_e", "p_t_n", "p_t_u", "q_tp_w", "q_tp_x", "q_tp_y", "q_tp_z", "bend_h", "bend_v")
     limit = np.radians(scn.face.bend_limit_horizontal_deg)
-    ratio = np.clip(np.nan_to_num(np.abs(bend_h), nan=0.0) / limit, 0.0, 1.0)[..., None]
-    colors = np.array(np.broadcast_to(pan.rgba, (n_t, n_p, len(pan), 4)))
-    colors[:, :, pan.index("trough"), :3] = ((1 - ratio) * _GREY + ratio * _RED).astype(np.uint8)
-    send_bodies(rec, "world/pans", times, [(pan, p, q)], colors)
-    plan.send_pan_line(rec, scn, times, p, _cycle_starts(cycles))
-    # Per-chute bends: drop the last pan (no next pan, NaN).
-    chutes_h = np.nan_to_num(np.degrees(bend_h[:, :-1]), nan=0.0)
-    chutes_v = np.nan_to_num(np.degrees(bend_v[:, :-1]), nan=0.0)
-    if n_p > 1:
-        send_bar_chart(rec, "plots/bend_horizontal_deg", times, chutes_h)
-        send_bar_chart(rec, "plots/bend_vertical_deg", times, chutes_v)
+    for k, (times, state) in enumerate(latest_frames(pans, "pan", names, FULL, CHUNK_GEOMS // len(pan))):
+        n_t, n_p = state["bend_h"].shape
+        p = np.stack([state[f"p_t_{a}"] for a in "enu"], axis=-1)  # (n_t, n_p, 3)
+        q = np.stack([state[f"q_tp_{a}"] for a in "wxyz"], axis=-1)  # (n_t, n_p, 4)
+        ratio = np.clip(np.nan_to_num(np.abs(state["bend_h"]), nan=0.0) / limit, 0.0, 1.0)[..., None]
+        colors = np.array(np.broadcast_to(pan.rgba, (n_t, n_p, len(pan), 4)))
+        colors[:, :, pan.index("trough"), :3] = ((1 - ratio) * _GREY + ratio * _RED).astype(np.uint8)
+        send_bodies(rec, "world/pans", times, [(pan, p, q)], colors, static=k == 0)
+        plan.send_pan_line(rec, scn, times, p, _cycle_starts(cycles), static=k == 0)
+        if n_p > 1:  # per-chute bends: the last pan dropped (no next pan, NaN)
+            for bend, entity in (("bend_h", "plots/bend_horizontal_deg"), ("bend_v", "plots/bend_vertical_deg")):
+                send_bar_chart(rec, entity, times, np.nan_to_num(np.degrees(state[bend][:, :-1]), nan=0.0))
 
 
 def _cycle_starts(cycles: pa.Table | None) -> np.ndarray | None:
@@ -155,11 +148,11 @@ def _log_supports(rec: rr.RecordingStream, scn: Scenario, supports: Blocks, rate
                   base: BodyGeoms, canopy_body: BodyGeoms) -> None:
     """Every support's geoms (the MJCF piece's base and canopy bodies; a lowered support's canopy in orange) and ram at
     each time one changes, at most SUPPORT_FRAME_HZ (the last state of each interval, so that an event's end shows at
-    once; every time at FULL rate), built and sent SUPPORT_CHUNK_GEOMS geoms at a time."""
+    once; every time at FULL rate), built and sent CHUNK_GEOMS geoms at a time."""
     frame_hz = rate_hz if rate_hz is FULL else min(rate_hz, SUPPORT_FRAME_HZ)
     x_t = _advance_axis(scn)
     chunks = latest_frames(supports, "support", SUPPORT_COLUMNS[2:], frame_hz,
-                           SUPPORT_CHUNK_GEOMS // (len(base) + len(canopy_body)))
+                           CHUNK_GEOMS // (len(base) + len(canopy_body)))
     for k, (times, state) in enumerate(chunks):
         n_t, n_s = state["ram"].shape
         p = np.stack([state["p_t_e"], state["p_t_n"], state["p_t_u"]], axis=-1)  # (n_t, n_s, 3) ram connection

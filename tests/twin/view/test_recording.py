@@ -343,30 +343,39 @@ def _rows(path) -> tuple[dict[tuple, pa.Table], dict[str, int]]:
             for key, batches in parts.items()}, counts
 
 
-def test_the_supports_sent_in_chunks_are_the_rows_of_one_chunk(tmp_path, monkeypatch):
-    """The supports' frames built and sent SUPPORT_CHUNK_GEOMS geoms at a time (truth_supports in blocks): every entity
-    of the recording holds the rows, at the times, of the recording sent in one chunk; the supports' entities are cut
-    into chunks of as many frames as hold that many geoms."""
+def test_the_pans_and_supports_sent_in_chunks_are_the_rows_of_one_chunk(tmp_path, monkeypatch):
+    """The pans' and supports' frames built and sent CHUNK_GEOMS geoms at a time (truth_supports in blocks): every
+    entity of the recording holds the rows, at the times, of the recording sent in one chunk; the pans' and supports'
+    entities are cut into chunks of as many frames as hold that many geoms."""
     import twin.view.recording as recording
 
     write = _default_run()
     write(tmp_path / "one.rrd", False)
     one, one_counts = _rows(tmp_path / "one.rrd")
-    frames = one[("/plots/ram_length", False, (TIMELINE, "BarChart:values"))].num_rows
-    geoms = sum(len(_instances(RrdReader(tmp_path / "one.rrd").stream().to_chunks(), f"/world/supports/{shape}",
-                               f"{archetype}:centers")[0])
-                for shape, archetype in (("boxes", "Boxes3D"), ("cylinders", "Cylinders3D")))  # a frame's
-    assert 20 < frames and frames * geoms <= recording.SUPPORT_CHUNK_GEOMS  # the default run: one chunk
-    monkeypatch.setattr(recording, "SUPPORT_CHUNK_GEOMS", frames // 6 * geoms + geoms - 1)
+    written = RrdReader(tmp_path / "one.rrd").stream().to_chunks()
+    entities = {"supports": ("/world/supports/boxes", "/world/supports/cylinders", "/world/rams", "/plots/ram_length"),
+                "pans": ("/world/pans/boxes", "/world/pans/spheres", "/plan/pans", "/plots/bend_horizontal_deg",
+                         "/plots/bend_vertical_deg")}
+    shapes = {"supports": (("boxes", "Boxes3D"), ("cylinders", "Cylinders3D")),
+              "pans": (("boxes", "Boxes3D"), ("spheres", "Ellipsoids3D"))}
+    geoms = {body: sum(len(_instances(written, f"/world/{body}/{shape}", f"{archetype}:centers")[0])
+                       for shape, archetype in shapes[body]) for body in entities}  # a frame's
+    frames = {body: one[(entities[body][-1], False, (TIMELINE, "BarChart:values"))].num_rows for body in entities}
+    assert frames["supports"] > 100 and frames["pans"] > 30
+    assert all(frames[b] * geoms[b] <= recording.CHUNK_GEOMS for b in entities)  # the default run: one chunk each
+    chunk_geoms = 10 * max(geoms.values()) + 5
+    monkeypatch.setattr(recording, "CHUNK_GEOMS", chunk_geoms)
     write(tmp_path / "chunks.rrd", True)
     chunks, chunk_counts = _rows(tmp_path / "chunks.rrd")
     assert one.keys() == chunks.keys()
     for key, table in one.items():
         assert table.equals(chunks[key]), key
-    supports = ("/world/supports/boxes", "/world/supports/cylinders", "/world/rams", "/plots/ram_length")
-    assert [(one_counts[e], chunk_counts[e]) for e in supports] == [(1, -(-frames // (frames // 6)))] * 4
-    assert {e: n for e, n in one_counts.items() if e not in supports} == \
-        {e: n for e, n in chunk_counts.items() if e not in supports}
+    for body, names in entities.items():
+        per_chunk = chunk_geoms // geoms[body]
+        assert [(one_counts[e], chunk_counts[e]) for e in names] == [(1, -(-frames[body] // per_chunk))] * len(names)
+    cut = entities["supports"] + entities["pans"]
+    assert {e: n for e, n in one_counts.items() if e not in cut} == {e: n for e, n in chunk_counts.items()
+                                                                      if e not in cut}
 
 
 def test_the_plan_view_in_the_face_frame(recording):
