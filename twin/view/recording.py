@@ -53,11 +53,11 @@ from twin.view.geometry import BodyGeoms, body_geoms, log_body, send_bodies
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
 from twin.view.rerun_columns import (
     Blocks,
+    MarkerCut,
     PathStrips,
     col,
-    decimated_rows,
+    decimated_blocks,
     latest_frames,
-    marker_rows,
     send_bar_chart,
     series,
     time_column,
@@ -193,7 +193,8 @@ BLOCK_STREAMS = ("truth_shearer", "truth_supports", "imu", "odometer", "mag", "p
 def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_hz: float | None,
                  body: BodyGeoms) -> None:
     """The shearer's geoms (the MJCF piece's, static in its body frame) under its pose, its path (3-D and plan) and
-    speed."""
+    speed; its record-rate rows turned into poses a block at a time (only the poses logged and the plotted series
+    held)."""
     log_body(rec, "world/shearer", body)
     path, plan_path = PathStrips(rate_hz), PathStrips(rate_hz)  # the whole path, at every sample
 
@@ -202,27 +203,36 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_h
         path.push(t, p, cycle)
         plan_path.push(t, plan.face_coordinates(scn, p, cycle), cycle)
 
-    sub = decimated_rows(shearer, rate_hz, draw_path)
-    if sub.num_rows == 0:
-        return
-    t, p = col(sub, "t"), vec(sub, "p_t")
     # n (ENU at the shearer) to t (ENU at the site origin): C_n^t = (C_t^e)^T C_n^e.
     c_te = mat_en(np.radians(scn.site.lat_deg), np.radians(scn.site.lon_deg))
-    c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(col(sub, "lat"), col(sub, "lon"))
-    q_tb = quat_mul(mat_to_quat(c_nt), vec(sub, "q_nb", "wxyz"))
-    # Logged as either end of the drawn body moves MARKER_STEP_M (travel or turn).
-    half = quat_rotate(q_tb, np.array([0.0, 0.5 * scn.shearer.length_m, 0.0]))
-    moved = marker_rows(t, np.hstack([p - half, p + half]), rate_hz)
-    rec.send_columns("world/shearer", indexes=[time_column(t[moved])],
-                     columns=rr.Transform3D.columns(translation=p[moved].astype(np.float32),
-                                                    quaternion=xyzw(q_tb[moved])))
+    half_length = np.array([0.0, 0.5 * scn.shearer.length_m, 0.0])
+    markers, moved, plots, pushed = MarkerCut(rate_hz), [], [], 0
+    for sub in decimated_blocks(shearer, rate_hz, draw_path):
+        if sub.num_rows == 0:
+            continue
+        t, p = col(sub, "t"), vec(sub, "p_t")
+        c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(col(sub, "lat"), col(sub, "lon"))
+        q_tb = quat_mul(mat_to_quat(c_nt), vec(sub, "q_nb", "wxyz"))
+        # Logged as either end of the drawn body moves MARKER_STEP_M (travel or turn).
+        half = quat_rotate(q_tb, half_length)
+        pose = (t, p, q_tb, col(sub, "cycle"))
+        kept = markers.push(t, np.hstack([p - half, p + half])) - pushed
+        moved.append([x[kept] for x in pose])
+        plots.append((t, np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n")), col(sub, "cycle").astype(float)))
+        pushed += t.size
+    if not plots:
+        return
+    moved.append([x[markers.finish() - pushed + t.size] for x in pose])  # the last row, unless kept
+    t_moved, p_moved, q_moved, cycle_moved = (np.concatenate(x) for x in zip(*moved))
+    rec.send_columns("world/shearer", indexes=[time_column(t_moved)],
+                     columns=rr.Transform3D.columns(translation=p_moved.astype(np.float32),
+                                                    quaternion=xyzw(q_moved)))
     rec.log("world/shearer_path", rr.LineStrips3D(path.strips(), radii=0.03, colors=TRUTH_RGB), static=True)
-    plan.log_path(rec, scn, f"{plan.PLAN_ROOT}/truth", plan_path, t[moved], p[moved], col(sub, "cycle")[moved],
-                  TRUTH_RGB)
+    plan.log_path(rec, scn, f"{plan.PLAN_ROOT}/truth", plan_path, t_moved, p_moved, cycle_moved, TRUTH_RGB)
 
-    speed = np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n"))
+    t, speed, cycle = (np.concatenate(x) for x in zip(*plots))
     series(rec, "plots/shearer_speed", t, speed[:, None], ["horizontal speed [m/s]"], rate_hz=rate_hz)
-    series(rec, "plots/cycle", t, col(sub, "cycle").astype(float)[:, None], ["cycle"], rate_hz=rate_hz, band=False)
+    series(rec, "plots/cycle", t, cycle[:, None], ["cycle"], rate_hz=rate_hz, band=False)
 
 
 def _log_face_line(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table, cycles: pa.Table) -> None:

@@ -200,34 +200,66 @@ def decimate(t: np.ndarray, rate_hz: float | None) -> np.ndarray:
     return keep if cut.last_kept else np.r_[keep, t.size - 1]
 
 
-def decimated_rows(data: Blocks, rate_hz: float | None,
-                   each: Callable[[pa.Table], None] | None = None) -> pa.Table:
-    """The rows of a stream (one table, or one or more blocks) that `decimate` keeps of its times, as one table;
-    `each` is called with every block as it is read (one pass for what else is drawn of the stream)."""
-    cut, parts, last = Decimation(rate_hz), [], None
+def decimated_blocks(data: Blocks, rate_hz: float | None,
+                     each: Callable[[pa.Table], None] | None = None) -> Iterator[pa.Table]:
+    """The rows of a stream (one table, or one or more blocks) that `decimate` keeps of its times, a block at a time
+    (the stream's last row, when decimate adds it, as one more; an empty stream as its empty block); `each` is called
+    with every block as it is read (one pass for what else is drawn of the stream)."""
+    cut, last = Decimation(rate_hz), None
     for block in blocks_of(data):
         if each is not None:
             each(block)
         if block.num_rows:
-            parts.append(block.take(pa.array(cut.push(col(block, "t")))))
+            yield block.take(pa.array(cut.push(col(block, "t"))))
             last = block.slice(block.num_rows - 1)
-        elif not parts:
-            parts.append(block)
-    if not cut.last_kept:
-        parts.append(last)
-    return pa.concat_tables(parts)
+        elif last is None:
+            last = block
+    if not cut.last_kept or last.num_rows == 0:
+        yield last
+
+
+def decimated_rows(data: Blocks, rate_hz: float | None,
+                   each: Callable[[pa.Table], None] | None = None) -> pa.Table:
+    """The rows of a stream (one table, or one or more blocks) that `decimate` keeps of its times, as one table;
+    `each` is called with every block as it is read (decimated_blocks)."""
+    return pa.concat_tables(decimated_blocks(data, rate_hz, each))
+
+
+class MarkerCut:
+    """`marker_rows` over a marker's positions given in blocks, carrying the decimation, the last position it kept
+    and the distance travelled: `push` each block, then `finish`; both return the rows decided kept, as indices over
+    all the rows pushed."""
+
+    def __init__(self, rate_hz: float | None):
+        self._time = Decimation(rate_hz)
+        self._step = Decimation(FULL if rate_hz is FULL else 1.0 / MARKER_STEP_M)
+        self._p, self._travelled, self._rows, self._last = None, 0.0, 0, -1
+
+    def push(self, t: np.ndarray, p: np.ndarray) -> np.ndarray:
+        keep = self._time.push(t)
+        start, self._rows = self._rows, self._rows + t.size
+        if keep.size == 0:
+            return keep
+        p = np.asarray(p, float)[keep]
+        step = np.diff(np.concatenate([p[:1] if self._p is None else self._p, p]), axis=0)
+        moved = np.linalg.norm(step.reshape(keep.size, -1, 3), axis=2).max(axis=1)  # the point that moves most
+        travelled = np.cumsum(np.r_[self._travelled, moved])[1:]
+        kept = start + keep[self._step.push(travelled)]
+        self._p, self._travelled = p[-1:], travelled[-1]
+        self._last = kept[-1] if kept.size else self._last
+        return kept
+
+    def finish(self) -> np.ndarray:
+        """The last row pushed, unless it was kept."""
+        return np.arange(max(self._last + 1, self._rows - 1), self._rows)
 
 
 def marker_rows(t: np.ndarray, p: np.ndarray, rate_hz: float | None) -> np.ndarray:
     """Rows of a moving marker's positions p (K, 3) (or of several points of a body, (K, 3m)) to log: at most rate_hz
     (decimate), and of those the first after each MARKER_STEP_M of travel (of the point that moves most) along the
     path (plus the last); every row at FULL rate."""
-    keep = decimate(t, rate_hz)
-    if rate_hz is FULL or keep.size < 3:
-        return keep
-    step = np.diff(np.asarray(p, float)[keep], axis=0).reshape(keep.size - 1, -1, 3)
-    travelled = np.r_[0.0, np.cumsum(np.linalg.norm(step, axis=2).max(axis=1))]  # the farthest-moving point
-    return keep[decimate(travelled, 1.0 / MARKER_STEP_M)]
+    cut = MarkerCut(rate_hz)
+    return np.r_[cut.push(np.asarray(t, float), p), cut.finish()]
 
 
 class PathStrips:

@@ -12,11 +12,13 @@ from twin.view.record_rate import FULL
 from twin.view.rerun_columns import (
     PATH_TOLERANCE_M,
     LineCut,
+    MarkerCut,
     PathStrips,
     decimate,
     decimated_rows,
     latest_frames,
     latest_rows,
+    marker_rows,
     mean_rate,
     median_interval,
     path_strips,
@@ -169,3 +171,19 @@ def test_latest_frames_of_blocks_are_the_whole_streams_latest_rows(seed):
                 got = np.concatenate([c[1][name] for c in chunks])
                 assert got.dtype == whole.dtype and got.shape == (times.size, 7) and np.array_equal(got, whole)
     assert list(latest_frames(table.slice(0, 0), "id", ("x",), 1.0, 5)) == []
+
+
+@pytest.mark.parametrize("rate_hz", [10.0, 2.0, FULL])
+def test_marker_cut_in_blocks_keeps_the_whole_tracks_rows(rate_hz):
+    """A body's two ends (K, 6) moving in steps, stops and jumps, at times with repeats: MarkerCut over blocks cut
+    anywhere keeps marker_rows' rows of the whole track, the last row included."""
+    rng = np.random.default_rng(8)
+    for _ in range(40):
+        n = int(rng.integers(1, 400))
+        t = np.cumsum(rng.choice([0.0, 0.01, 0.05, 0.2], n))
+        p = np.cumsum(rng.normal(size=(n, 6)) * rng.choice([0.0, 0.001, 0.03], (n, 1)), axis=0)
+        whole = marker_rows(t, p, rate_hz)
+        assert whole[-1] == n - 1 and (rate_hz is FULL or whole.size < n or n < 3)
+        cut = MarkerCut(rate_hz)
+        rows = [cut.push(t[part], p[part]) for part in _cuts(rng, n)]
+        assert np.array_equal(np.r_[np.concatenate(rows), cut.finish()], whole)
