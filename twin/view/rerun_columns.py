@@ -2,7 +2,9 @@
 
 One call per entity carries its whole history (time columns, scalar series, bar-chart tensors), cut to what a person
 can see (`visible_rows`: at most the record rate, and without the samples the drawn line passes within a pixel of);
-shared by the run's and the estimators' recordings.
+shared by the run's and the estimators' recordings. A long stream comes in blocks (`Blocks`); the helpers that carry
+their state across blocks give the whole stream's rows bit for bit, and `latest_frames` cuts a history of many
+instances (every pan or support at every frame) into chunks sent one call each.
 
 The record rate (twin.view.record_rate) is a rate in Hz, or FULL (None): every sample, neither decimated nor thinned.
 """
