@@ -9,7 +9,7 @@ Figures:
 * The first run of a fresh install within 2x a warm run (`longwall run`, the default scenario). A fresh install
   differs from a warm one by numba's compiled kernels only, so the first run is measured with an empty
   NUMBA_CACHE_DIR (nothing else is cached between runs).
-* Peak memory at N cycles of scenarios/panel_100.toml (seed004's face on a 110 m panel, KF + CPOEM + RTS and KF;
+* Peak memory at N cycles of scenarios/panel_100.toml (seed004's face on a 110 m panel, KF + CPOEM + RTS and fkf_rail streamed;
   `longwall run scenarios/panel_100.toml --cycles N`): 100-cycle / 5-cycle <= 1.25; the 100-cycle run within 20
   minutes. A run the resource estimate refuses (twin.config.resources) is printed with its one-line refusal.
 

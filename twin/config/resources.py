@@ -60,13 +60,14 @@ CYCLE_BYTES_PER_TRUTH_ROW = 800.0
 """The twin stage's peak memory per truth_shearer row of a cycle [bytes]: it holds about two cycles of the shearer's
 ride and truth (208 bytes a row) with their sensor draws in chunks (seed004: 1.21 GB with 937 000 rows a cycle)."""
 RECORDING_BYTES = 0.3e9
-"""The run recording's own (its blocks of the long streams, the record-rate rows, the pans)."""
-HELD_BYTES = {"support_frames": 210.0, "epochs_scored": 250.0, "epochs_batch": 2700.0}
-"""What a run's stages hold for its whole length [bytes per item]: the run recording's supports at each 1 Hz frame
-(twin.view.recording), each scored method's estimate while its errors are computed (per filter epoch, a method per
-worker at a time), and each batch method's solution and filter arrays (per filter epoch, the methods of a group and
-of the other workers at once; 001's filters streamed hold none: estimators.shearer.config.STREAMED). seed004 (200
-supports, 6.5 h, five batch methods, 234 000 epochs): the recording 1.75 GB, the estimators 3.16 GB."""
+"""The run recording's own: its blocks of the long streams, the pans' and supports' frames a chunk at a time
+(seed004's write_recording: 250 MB above its start)."""
+HELD_BYTES = {"recording_s": 3500.0, "epochs_scored": 250.0, "epochs_batch": 2700.0}
+"""What a run's stages hold for its whole length [bytes per item]: the run recording's plotted series at the record
+rate (per simulated second; seed004: 15 MB a cycle), each scored method's estimate while its errors are computed (per
+filter epoch, a method per worker at a time), and each batch method's solution and filter arrays (per filter epoch,
+the methods of a group and of the other workers at once; the streamed filters hold none:
+estimators.shearer.config.STREAMED; seed004 with five batch methods and 234 000 epochs: 3.16 GB)."""
 PASS_BYTES_PER_EPOCH = 45e3
 """A streamed filter's peak memory per filter epoch of its pass [bytes]: the pass's error states, covariances,
 predicted covariances and transitions for the smoother, its IMU rows (panel_100 over 5 cycles: 2.57 GB with two
@@ -178,13 +179,13 @@ def stage_memory(scn: Scenario, t: float, rows: dict[str, float], sensors: bool 
                  ) -> dict[str, float]:
     """Peak memory [bytes] of each stage of a face run of simulated span t (`rows` per stream): the twin (two cycles
     of the shearer's truth; support IMUs keep the supports' truth and the shearer's (t, s) whole), the run
-    recording (its supports' frames), the estimators (the scored estimates; batch methods their logs and solutions,
+    recording (its plotted series), the estimators (the scored estimates; batch methods their logs and solutions,
     each Monte Carlo worker its own)."""
     twin = BASE_MEMORY + CYCLE_BYTES_PER_TRUTH_ROW * rows["truth_shearer"] / scn.cycles
     if scn.sensors.support_imu.supports:
         twin += rows["truth_shearer"] * 16.0 + ROW_COSTS["support_imu"].memory * rows.get("support_imu", 0.0)
     out = {"twin": twin,
-           "recording": BASE_MEMORY + RECORDING_BYTES + HELD_BYTES["support_frames"] * support_count(scn) * t}
+           "recording": BASE_MEMORY + RECORDING_BYTES + HELD_BYTES["recording_s"] * t}
     methods = scn.estimators.shearer.methods
     if sensors and methods:
         epochs = t * scn.estimators.shearer.filter_rate_hz

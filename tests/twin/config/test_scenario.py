@@ -52,12 +52,12 @@ def test_seed002_face_instruments_supports_at_the_face_ends_and_mid_face():
 def test_seed004_variants_change_only_what_they_say():
     """seed004_fault adds 004's rail deviation (2825-3131 s, 1 deg per two chutes); seed004_20cycles runs 20
     cycles on a longer panel; both run INS/odometer and the rail-model filter. panel_100 runs 100 cycles on a panel
-    of 110 m with KF + CPOEM + RTS and KF (both streamed). Nothing else differs."""
+    of 110 m with KF + CPOEM + RTS and the rail-model filter (both streamed). Nothing else differs."""
     base4 = load_scenario(SCENARIO_DIR / "seed004.toml").model_dump()
     for name in SEED004_VARIANTS:
         scn = load_scenario(SCENARIO_DIR / f"{name}.toml")
         data = scn.model_dump()
-        assert data["estimators"]["shearer"]["methods"] == (["kf_cpoem_rts", "kf"] if name == "panel_100"
+        assert data["estimators"]["shearer"]["methods"] == (["kf_cpoem_rts", "fkf_rail"] if name == "panel_100"
                                                             else ["kf", "fkf_rail"])
         changed = {k for k in data if data[k] != base4[k]}
         if name == "panel_100":
