@@ -58,7 +58,8 @@ def write_experiment_recording(path: Path, result: ExperimentResult, recording: 
     decimated to about `rate_hz`; errors.parquet keeps every sample), written reproducibly as recording
     `recording` (twin.view.rrd_stream); its layout is experiment_blueprint's, which `longwall view` gives the
     viewer."""
-    from twin.view.rerun_columns import decimate, series
+    from twin.view.rerun_columns import series
+    from twin.view.row_cuts import decimate
     from twin.view.rrd_stream import recording_stream
 
     with recording_stream(path, recording) as rec:

@@ -5,7 +5,7 @@ none, e.g. an imported log; written reproducibly by twin.view.rrd_stream), so `l
 the run's layout with a second "Estimates" tab of plots (twin.view.layout). A run without truth (truth_shearer None, e.g.
 a real face's log) gets everything but the errors: paths, sigmas, flags, sensor states, fusion, detectors.
 Everything is logged column-wise with `send_columns` on the `sim_time` timeline, cut to what a person can see at the
-record rate (twin.view.rerun_columns.visible_rows: at most the rate, without the samples a plotted line passes within
+record rate (twin.view.row_cuts.visible_rows: at most the rate, without the samples a plotted line passes within
 a pixel of; flags and alarms OR-ed over each interval so a brief one stays; every sample at FULL rate).
 
 Entities, per estimator METHOD (errors as estimators.io.metrics defines them: estimate - truth in East/North/Up at
@@ -76,7 +76,8 @@ from twin.pipeline.support_estimate import ANGLES, FLAG_NAMES, SupportAttitude
 from twin.view import plan
 from twin.view.recording import run_recording_id
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
-from twin.view.rerun_columns import PathStrips, decimate, marker_rows, path_strips, series, time_column
+from twin.view.rerun_columns import series, time_column
+from twin.view.row_cuts import PathStrips, decimate, marker_rows, path_strips
 from twin.view.rrd_stream import recording_id, recording_stream
 
 POSITION_AXES = ("east", "north", "up")

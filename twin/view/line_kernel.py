@@ -1,4 +1,4 @@
-"""The compiled loop of twin.view.rerun_columns.line_rows, in a module of its own: the project's numba cache is
+"""The compiled loop of twin.view.row_cuts.line_rows, in a module of its own: the project's numba cache is
 stamped with every kernel module's source (estimators.kernel_cache), so the recordings' other code can change without
 recompiling every kernel."""
 
@@ -15,7 +15,7 @@ def line_kernel(t, y, tol, must, lo, hi, start, final):
     historians); the first row, the last (when `final`) and the rows marked `must` are kept; NaN values constrain
     nothing.
 
-    Resumable, for a series given in blocks (twin.view.rerun_columns.LineCut): row 0 is the anchor of the segment in
+    Resumable, for a series given in blocks (twin.view.row_cuts.LineCut): row 0 is the anchor of the segment in
     progress and rows 1 .. start - 1 were scanned from it already, narrowing the slope bounds lo, hi (start 1: a fresh
     anchor). Without `final` the scan stops at the last row without keeping it; lo and hi are left as they are then.
     Returns (keep (n,) bool, anchor, last row scanned from it): the rows to pass back as rows 0 (and 1) with the

@@ -25,7 +25,8 @@ import rerun as rr
 
 from estimators.face.straightness import mat_ft, pan_lines
 from twin.config.scenario import Scenario
-from twin.view.rerun_columns import PathStrips, time_column
+from twin.view.rerun_columns import time_column
+from twin.view.row_cuts import PathStrips
 
 PLAN_SCALE = 20.0
 """Exaggeration of the plan view's lateral (towards the coal wall) scale."""
@@ -114,7 +115,7 @@ def send_target_line(rec: rr.RecordingStream, scn: Scenario, pans: dict[str, np.
 def log_path(rec: rr.RecordingStream, scn: Scenario, entity: str, path: PathStrips, t_moved: np.ndarray,
              p_moved: np.ndarray, cycle_moved: np.ndarray, color) -> None:
     """A shearer path as `entity/path`: `path` holds its face_coordinates, one strip per cycle without the samples it
-    passes within PATH_TOLERANCE_M of (every sample at FULL rate; twin.view.rerun_columns.PathStrips), each logged at
+    passes within PATH_TOLERANCE_M of (every sample at FULL rate; twin.view.row_cuts.PathStrips), each logged at
     its cycle's first sample (the plan shows the cycle in progress); and its point (p_moved (K, 3) in t, in cycles
     cycle_moved) at times t_moved as `entity/position`."""
     strips = [plotted(s) for s in path.strips()]

@@ -29,7 +29,7 @@ Entities (fixed names, checked by tests):
                             path (twin.view.plan)
 * `sensors/...`, `alignment/...`, `faults/...`   the sensor streams (twin.view.sensor_recording)
 
-Time series are cut to what a person can see at the record rate (twin.view.rerun_columns.visible_rows; every sample
+Time series are cut to what a person can see at the record rate (twin.view.row_cuts.visible_rows; every sample
 at FULL rate).
 """
 
@@ -51,19 +51,8 @@ from twin.face.model import piece_model
 from twin.view import plan
 from twin.view.geometry import BodyGeoms, body_geoms, log_body, send_bodies
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
-from twin.view.rerun_columns import (
-    Blocks,
-    MarkerCut,
-    PathStrips,
-    col,
-    decimated_blocks,
-    latest_frames,
-    send_bar_chart,
-    series,
-    time_column,
-    vec,
-    xyzw,
-)
+from twin.view.rerun_columns import latest_frames, send_bar_chart, series, time_column, vec, xyzw
+from twin.view.row_cuts import Blocks, MarkerCut, PathStrips, col, decimated_blocks
 from twin.view.rrd_stream import recording_id, recording_stream
 from twin.view.sensor_recording import log_sensors
 
@@ -266,7 +255,7 @@ def write_recording(path: Path, scn: Scenario, truth: dict[str, Blocks],
 
     `truth` maps "truth_shearer", "truth_pans", "truth_supports" (required) and "truth_cycles" (optional: the
     face line at each cycle's end) to tables with the columns of `estimators.io.logformat` (truth_shearer and
-    truth_supports may come in blocks: twin.view.rerun_columns.Blocks; so may the `sensors` of BLOCK_STREAMS).
+    truth_supports may come in blocks: twin.view.row_cuts.Blocks; so may the `sensors` of BLOCK_STREAMS).
     `floor_mesh` is (vertices (V, 3) in t, triangle indices (T, 3)). `rate_hz` is the record rate
     (twin.view.rerun_columns: Hz, or FULL for every sample) of the shearer and the time series.
     """

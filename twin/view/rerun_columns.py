@@ -1,67 +1,43 @@
 """Batched Rerun logging: whole histories sent column-wise with `send_columns` on the `sim_time` timeline.
 
 One call per entity carries its whole history (time columns, scalar series, bar-chart tensors), cut to what a person
-can see (`visible_rows`: at most the record rate, and without the samples the drawn line passes within a pixel of);
-shared by the run's and the estimators' recordings. A long stream comes in blocks (`Blocks`); the helpers that carry
-their state across blocks give the whole stream's rows bit for bit, and `latest_frames` cuts a history of many
-instances (every pan or support at every frame) into chunks sent one call each.
+can see (twin.view.row_cuts.visible_rows: at most the record rate, and without the samples the drawn line passes
+within a pixel of); shared by the run's and the estimators' recordings. A long stream comes in blocks
+(twin.view.row_cuts.Blocks); `latest_frames` cuts a history of many instances (every pan or support at every frame)
+into chunks sent one call each, and `mean_rate` carries its state across blocks.
 
 The record rate (twin.view.record_rate) is a rate in Hz, or FULL (None): every sample, neither decimated nor thinned.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Iterator, Sequence
 
 import numpy as np
 import pyarrow as pa
 import rerun as rr
 
-from twin.view.line_kernel import line_kernel
 from twin.view.record_rate import FULL
+from twin.view.row_cuts import Blocks, blocks_of, col, visible_rows
 
 TIMELINE = "sim_time"
 APPLICATION_ID = "longwall-twin"
-LINE_TOLERANCE = 2e-3
-"""Largest distance between a plotted line and a sample left out of it, as a fraction of the entity's span of values
-(a pixel of a plot 500 pixels high; the stacked plots of the layout are smaller)."""
-PATH_TOLERANCE_M = 0.005
-"""Largest distance between a drawn 3-D path and a sample left out of it [m]."""
-BAND_ROWS = 10
-"""Rows at the record rate per interval of which a noisy series keeps its band (first, lowest, highest row): 1 s at
-10 Hz."""
-BAND_TURNS = 1
-"""Turns (a value changing direction) in such an interval from which it is busy (noise, a vibration faster than the
-interval): drawn by its band, the interval's extremes, as a min/max plot does."""
-MARKER_STEP_M = 0.05
-"""Distance a moving marker (the shearer, an estimate's point) travels between its logged positions [m]: it is drawn
-where it was last logged, at most this far behind."""
-
-
-Blocks = pa.Table | Iterable[pa.Table]
-"""A stream as one table, or as consecutive blocks of rows that can be read more than once (a long stream's file read a
-row group at a time: estimators.io.logformat.StreamBlocks, whose `column` gives one column over the whole file)."""
-
-
-def col(table: pa.Table, name: str) -> np.ndarray:
-    return table.column(name).to_numpy()
-
-
-def blocks_of(data: Blocks) -> Iterable[pa.Table]:
-    return [data] if isinstance(data, pa.Table) else data
 
 
 def vec(table: pa.Table, prefix: str, axes: str = "enu") -> np.ndarray:
     return np.column_stack([col(table, f"{prefix}_{a}") for a in axes]).astype(float)
+
 
 def time_column(t: np.ndarray) -> rr.TimeColumn:
     """Seconds as a duration timeline, rounded to whole nanoseconds (no truncation of 0.1 -> 99999999 ns)."""
     ns = np.round(np.asarray(t, float) * 1e9).astype(np.int64)
     return rr.TimeColumn(TIMELINE, duration=ns.astype("timedelta64[ns]"))
 
+
 def xyzw(q_wxyz: np.ndarray) -> np.ndarray:
     """Scalar-first (w, x, y, z) to Rerun's (x, y, z, w)."""
     return np.ascontiguousarray(q_wxyz[..., [1, 2, 3, 0]], dtype=np.float32)
+
 
 def latest_rows(t: np.ndarray, ident: np.ndarray, at: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -79,6 +55,7 @@ def latest_rows(t: np.ndarray, ident: np.ndarray, at: np.ndarray | None = None
         mine = mine[np.argsort(t[mine], kind="stable")]
         rows[:, j] = mine[np.maximum(np.searchsorted(t[mine], times, side="right") - 1, 0)]
     return times, ids, rows
+
 
 def latest_frames(data: Blocks, ident: str, names: Sequence[str], rate_hz: float | None, states: int
                   ) -> Iterator[tuple[np.ndarray, dict[str, np.ndarray]]]:
@@ -174,140 +151,10 @@ class TensorColumn:
     def as_arrow_array(self) -> pa.Array:
         return self._array
 
+
 def send_bar_chart(rec: rr.RecordingStream, entity: str, times: np.ndarray, values: np.ndarray) -> None:
     column = rr.ComponentColumn(rr.BarChart.descriptor_values(), TensorColumn(values))
     rec.send_columns(entity, indexes=[time_column(times)], columns=[column])
-
-class Decimation:
-    """`decimate` over a series given in blocks, carrying the last row's interval: `push` each block's times, then
-    `last_kept` says whether the series' last row is among the rows kept (decimate adds it)."""
-
-    def __init__(self, rate_hz: float | None):
-        self.rate_hz, self._bin, self.last_kept = rate_hz, -np.inf, True
-
-    def push(self, t: np.ndarray) -> np.ndarray:
-        """Indices into the block `t` of its rows that begin an interval (every row at FULL rate)."""
-        if self.rate_hz is FULL or t.size == 0:
-            return np.arange(t.size)
-        bins = np.floor(np.asarray(t, float) * self.rate_hz + 1e-9)
-        keep = np.flatnonzero(np.diff(bins, prepend=self._bin) > 0)
-        self._bin, self.last_kept = bins[-1], keep.size > 0 and keep[-1] == t.size - 1
-        return keep
-
-
-def decimate(t: np.ndarray, rate_hz: float | None) -> np.ndarray:
-    """Indices of the first sample in each 1/rate_hz interval (plus the last sample); every index at FULL rate."""
-    cut = Decimation(rate_hz)
-    keep = cut.push(t)
-    return keep if cut.last_kept else np.r_[keep, t.size - 1]
-
-
-def decimated_blocks(data: Blocks, rate_hz: float | None,
-                     each: Callable[[pa.Table], None] | None = None) -> Iterator[pa.Table]:
-    """The rows of a stream (one table, or one or more blocks) that `decimate` keeps of its times, a block at a time
-    (the stream's last row, when decimate adds it, as one more; an empty stream as its empty block); `each` is called
-    with every block as it is read (one pass for what else is drawn of the stream)."""
-    cut, last = Decimation(rate_hz), None
-    for block in blocks_of(data):
-        if each is not None:
-            each(block)
-        if block.num_rows:
-            yield block.take(pa.array(cut.push(col(block, "t"))))
-            last = block.slice(block.num_rows - 1)
-        elif last is None:
-            last = block
-    if not cut.last_kept or last.num_rows == 0:
-        yield last
-
-
-def decimated_rows(data: Blocks, rate_hz: float | None,
-                   each: Callable[[pa.Table], None] | None = None) -> pa.Table:
-    """The rows of a stream (one table, or one or more blocks) that `decimate` keeps of its times, as one table;
-    `each` is called with every block as it is read (decimated_blocks)."""
-    return pa.concat_tables(decimated_blocks(data, rate_hz, each))
-
-
-class MarkerCut:
-    """`marker_rows` over a marker's positions given in blocks, carrying the decimation, the last position it kept
-    and the distance travelled: `push` each block, then `finish`; both return the rows decided kept, as indices over
-    all the rows pushed."""
-
-    def __init__(self, rate_hz: float | None):
-        self._time = Decimation(rate_hz)
-        self._step = Decimation(FULL if rate_hz is FULL else 1.0 / MARKER_STEP_M)
-        self._p, self._travelled, self._rows, self._last = None, 0.0, 0, -1
-
-    def push(self, t: np.ndarray, p: np.ndarray) -> np.ndarray:
-        keep = self._time.push(t)
-        start, self._rows = self._rows, self._rows + t.size
-        if keep.size == 0:
-            return keep
-        p = np.asarray(p, float)[keep]
-        step = np.diff(np.concatenate([p[:1] if self._p is None else self._p, p]), axis=0)
-        moved = np.linalg.norm(step.reshape(keep.size, -1, 3), axis=2).max(axis=1)  # the point that moves most
-        travelled = np.cumsum(np.r_[self._travelled, moved])[1:]
-        kept = start + keep[self._step.push(travelled)]
-        self._p, self._travelled = p[-1:], travelled[-1]
-        self._last = kept[-1] if kept.size else self._last
-        return kept
-
-    def finish(self) -> np.ndarray:
-        """The last row pushed, unless it was kept."""
-        return np.arange(max(self._last + 1, self._rows - 1), self._rows)
-
-
-def marker_rows(t: np.ndarray, p: np.ndarray, rate_hz: float | None) -> np.ndarray:
-    """Rows of a moving marker's positions p (K, 3) (or of several points of a body, (K, 3m)) to log: at most rate_hz
-    (decimate), and of those the first after each MARKER_STEP_M of travel (of the point that moves most) along the
-    path (plus the last); every row at FULL rate."""
-    cut = MarkerCut(rate_hz)
-    return np.r_[cut.push(np.asarray(t, float), p), cut.finish()]
-
-
-class PathStrips:
-    """`path_strips` over a path given in blocks (each cycle's line carried on: LineCut), and the time of each
-    cycle's first sample: `push` each block, then `strips` and `start_times` (the strips' order if the cycles come in
-    order)."""
-
-    def __init__(self, rate_hz: float | None):
-        self.rate_hz = rate_hz
-        self._lines: dict[int, LineCut] = {}
-        self._kept: dict[int, list[np.ndarray]] = {}
-        self._first: dict[int, tuple[int, float]] = {}
-        self._rows = 0
-
-    def push(self, t: np.ndarray, p: np.ndarray, cycle: np.ndarray | None = None) -> None:
-        cycle = np.zeros(t.size, np.int64) if cycle is None else cycle
-        for c, first in zip(*np.unique(cycle, return_index=True)):
-            c = int(c)
-            rows = np.flatnonzero(cycle == c)
-            self._first.setdefault(c, (self._rows + first, float(t[first])))
-            if self.rate_hz is FULL:
-                self._kept.setdefault(c, []).append(p[rows])
-            else:
-                line = self._lines.setdefault(c, LineCut(PATH_TOLERANCE_M))
-                self._kept.setdefault(c, []).append(line.push(t[rows], p[rows])[1])
-        self._rows += t.size
-
-    def strips(self) -> list[np.ndarray]:
-        """The path as float32 strips, one per cycle in cycle order."""
-        for c, line in self._lines.items():
-            self._kept[c].append(line.finish()[1])
-        self._lines = {}
-        return [np.concatenate(self._kept[c]).astype(np.float32) for c in sorted(self._kept)]
-
-    def start_times(self) -> np.ndarray:
-        """Each cycle's first sample time, in the order of the samples."""
-        return np.array([t for _, t in sorted(self._first.values())])
-
-
-def path_strips(t: np.ndarray, p: np.ndarray, cycle: np.ndarray | None, rate_hz: float | None) -> list[np.ndarray]:
-    """A path (K, 3) as float32 strips, one per cycle (one without `cycle`), each without the samples it passes within
-    PATH_TOLERANCE_M of (the line through the others, in time: stops and reversals are kept); every sample at FULL
-    rate."""
-    path = PathStrips(rate_hz)
-    path.push(np.asarray(t, float), np.asarray(p, float), cycle)
-    return path.strips()
 
 
 def median_interval(data: Blocks) -> tuple[float, int]:
@@ -347,128 +194,6 @@ def mean_rate(data: Blocks, columns: list[str], rate_hz: float | None) -> tuple[
         sums.append(values[:m].reshape(m // step, step, len(columns)).sum(axis=1))
         carry, start = values[m:], start + block.num_rows
     return np.concatenate(times), np.concatenate(sums)[:n // step] / (step * dt)
-
-
-class LineCut:
-    """`line_rows` over a series given in blocks, the same rows bit for bit: between blocks it holds the greedy scan's
-    anchor, the last row scanned from it and its slope bounds (line_kernel), and the block's last row (whose NaN edge
-    waits for the next row). `push` and `finish` return the rows decided kept: (indices over all the rows pushed,
-    their values (k, n))."""
-
-    def __init__(self, tolerance: float | np.ndarray):
-        self.tolerance = tolerance
-        self._t = np.zeros(0)
-        self._y = self._index = self._must = self._lo = self._hi = None
-        self._scanned, self._rows = 0, 0
-
-    def push(self, t: np.ndarray, values: np.ndarray, must: np.ndarray | None = None,
-             final: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        t, y = np.asarray(t, float), np.asarray(values, float)
-        y = y.reshape(t.size, -1) if t.size else y.reshape(0, int(np.prod(y.shape[1:])))
-        if self._y is None:
-            m = y.shape[1]
-            self._y, self._index, self._must = np.zeros((0, m)), np.zeros(0, np.int64), np.zeros(0, bool)
-            self._lo, self._hi = np.full(m, -np.inf), np.full(m, np.inf)
-            self._tol = np.broadcast_to(np.asarray(self.tolerance, float), (m,)).copy()
-        t, y = np.r_[self._t, t], np.concatenate([self._y, y])
-        index = np.r_[self._index, self._rows + np.arange(t.size - self._t.size)]
-        edge = np.r_[self._must, np.zeros(index.size - self._index.size, bool) if must is None else must]
-        self._rows += index.size - self._index.size
-        if not t.size:
-            return index, y
-        nan = np.isnan(y)
-        turned = (nan[1:] != nan[:-1]).any(axis=1)  # between the scanned rows too: their edges are not read
-        edge[1:] |= turned
-        edge[:-1] |= turned
-        n = t.size if final else t.size - 1  # the last row's edge waits for the next row
-        keep, a, end = line_kernel(t[:n], np.ascontiguousarray(y[:n]), self._tol, edge[:n], self._lo, self._hi,
-                                   max(self._scanned, 1), final)
-        reported = min(self._scanned, 1)  # the anchor was, when it was kept
-        decided = np.flatnonzero(keep[reported:]) + reported
-        carried = np.unique([a, end, *range(n, t.size)]) if n else np.arange(t.size)
-        self._t, self._y, self._index, self._must = t[carried], y[carried], index[carried], edge[carried]
-        self._scanned = min(n, 1 + (end > a))
-        return index[decided], y[decided]
-
-    def finish(self) -> tuple[np.ndarray, np.ndarray]:
-        """The rows kept at the series' end (its last among them)."""
-        if self._y is None:
-            return np.zeros(0, np.int64), np.zeros((0, 1))
-        return self.push(np.zeros(0), np.zeros((0, self._y.shape[1])), final=True)
-
-
-def line_rows(t: np.ndarray, values: np.ndarray, tolerance: float | np.ndarray,
-              must: np.ndarray | None = None) -> np.ndarray:
-    """Indices of the rows of `values` (K,) or (K, n) over times `t` that a line drawn through them keeps within
-    `tolerance` (per column, or one for all) of every row left out; rows where a value turns NaN or back, rows marked
-    in `must` (K,) bool, the first and the last are kept."""
-    line = LineCut(tolerance)
-    rows = line.push(t, values, must)[0]
-    return np.r_[rows, line.finish()[0]]
-
-
-def _intervals(t: np.ndarray, width_s: float) -> np.ndarray:
-    """The interval of width width_s seconds each of the (sorted) times falls in, numbered from 0."""
-    group = np.floor(np.asarray(t, float) / width_s + 1e-9)
-    return np.cumsum(np.r_[True, np.diff(group) > 0]) - 1
-
-
-def band_rows(t: np.ndarray, values: np.ndarray, width_s: float) -> np.ndarray:
-    """Indices of the rows that hold, in each interval of width_s seconds, the first row and each column's lowest and
-    highest value (the band a person sees of a series that swings faster than the eye follows), and the rows where a
-    value turns NaN or back."""
-    t = np.asarray(t, float)
-    y = np.asarray(values, float).reshape(t.size, -1)
-    if t.size < 3:
-        return np.arange(t.size)
-    ident = _intervals(t, width_s)
-    starts = np.flatnonzero(np.r_[True, np.diff(ident) > 0])
-    keep = np.zeros(t.size, bool)
-    keep[starts] = True
-    nan = np.isnan(y)
-    turned = (nan[1:] != nan[:-1]).any(axis=1)
-    keep[1:] |= turned
-    keep[:-1] |= turned
-    for extreme, blank in ((np.maximum, -np.inf), (np.minimum, np.inf)):
-        filled = np.where(nan, blank, y)
-        at = (filled == extreme.reduceat(filled, starts, axis=0)[ident]) & ~nan
-        first = np.zeros(t.size, bool)  # the first row at each column's extreme in each interval
-        for j in range(y.shape[1]):
-            rows = np.flatnonzero(at[:, j])
-            if rows.size:  # none where the column is NaN throughout
-                first[rows[np.r_[True, np.diff(ident[rows]) > 0]]] = True
-        keep |= first
-    return np.flatnonzero(keep)
-
-
-def visible_rows(t: np.ndarray, values: np.ndarray, rate_hz: float | None, band: bool = True) -> np.ndarray:
-    """Rows of a plotted series a person can tell apart (every row at FULL rate): at most rate_hz (decimate), and of
-    those the rows a line drawn through keeps within LINE_TOLERANCE of the entity's span of every row left out
-    (line_rows); with `band`, in each busy interval of BAND_ROWS / rate_hz seconds (1 s at 10 Hz: the line keeps
-    more than half its rows and the values turn BAND_TURNS times or more: noise, vibration), the interval's band
-    instead when that is fewer rows (band_rows: its first row and extremes, what a min/max plot draws of it). Without
-    `band` (0/1 flags, steps) the line keeps every edge."""
-    keep = decimate(t, rate_hz)
-    if rate_hz is FULL or keep.size < 3:
-        return keep
-    y = np.asarray(values, float).reshape(len(t), -1)[keep]
-    t = np.asarray(t, float)[keep]
-    finite = y[np.isfinite(y)]
-    span = float(finite.max() - finite.min()) if finite.size else 0.0
-    line = line_rows(t, y, LINE_TOLERANCE * span)
-    if not band:
-        return keep[line]
-    extremes = band_rows(t, y, BAND_ROWS / rate_hz)
-    ident = _intervals(t, BAND_ROWS / rate_hz)
-    n = ident[-1] + 1
-    # A turn: a row where a column changes direction (noise: at every other row).
-    slope = np.sign(np.diff(y, axis=0))
-    turns = np.r_[False, ((slope[1:] * slope[:-1]) < 0).any(axis=1), False]
-    on_line = np.bincount(ident[line], minlength=n)
-    noisy = ((2 * on_line > np.bincount(ident, minlength=n)) & (np.bincount(ident, turns, n) >= BAND_TURNS)
-             & (np.bincount(ident[extremes], minlength=n) < on_line))
-    rows = np.union1d(line[~noisy[ident[line]]], extremes[noisy[ident[extremes]]])
-    return keep[rows]
 
 
 def series(rec: rr.RecordingStream, entity: str, t: np.ndarray, values: np.ndarray, names: list[str], *,

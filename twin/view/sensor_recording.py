@@ -15,23 +15,14 @@ import pyarrow.compute  # noqa: F401  (pa.compute)
 import rerun as rr
 
 from twin.view.record_rate import FULL
-from twin.view.rerun_columns import (
-    Blocks,
-    blocks_of,
-    col,
-    decimate,
-    decimated_rows,
-    mean_rate,
-    send_bar_chart,
-    series,
-    vec,
-)
+from twin.view.rerun_columns import mean_rate, send_bar_chart, series, vec
+from twin.view.row_cuts import Blocks, blocks_of, col, decimate, decimated_rows
 
 
 def log_sensors(rec: rr.RecordingStream, sensors: dict[str, Blocks], rate_hz: float | None) -> None:
     """Every sensor channel as time series (fast streams averaged to about rate_hz), fault windows as
     0/1 steps, the ram readings as a bar chart per support. The imu, pushram and pressure streams may come in blocks
-    (twin.view.rerun_columns.Blocks), the others as tables."""
+    (twin.view.row_cuts.Blocks), the others as tables."""
     if "imu" in sensors:
         tt, rates = mean_rate(sensors["imu"], [f"{p}_{a}" for p in ("dtheta", "dv") for a in "xyz"], rate_hz)
         for k, (name, label) in enumerate((("gyro", "rad/s"), ("accel", "m/s^2"))):

@@ -17,7 +17,8 @@ from estimators.io.logformat import (
 )
 from twin.config.scenario import Face, Scenario
 from twin.view.recording import write_recording
-from twin.view.rerun_columns import MARKER_STEP_M, TIMELINE, decimate
+from twin.view.rerun_columns import TIMELINE
+from twin.view.row_cuts import MARKER_STEP_M, decimate
 
 
 def synthetic_truth(n_pans: int = 4, n_supports: int = 4, n_updates: int = 3, shearer_s: float = 5.0,

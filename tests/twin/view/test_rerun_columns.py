@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from twin.view.record_rate import FULL, parse_record_rate, rate_label
-from twin.view.rerun_columns import (
+from twin.view.row_cuts import (
     BAND_ROWS,
     LINE_TOLERANCE,
     MARKER_STEP_M,

@@ -9,18 +9,15 @@ import pytest
 
 from twin.view.line_kernel import line_kernel
 from twin.view.record_rate import FULL
-from twin.view.rerun_columns import (
+from twin.view.rerun_columns import latest_frames, latest_rows, mean_rate, median_interval
+from twin.view.row_cuts import (
     PATH_TOLERANCE_M,
     LineCut,
     MarkerCut,
     PathStrips,
     decimate,
     decimated_rows,
-    latest_frames,
-    latest_rows,
     marker_rows,
-    mean_rate,
-    median_interval,
     path_strips,
 )
 from twin.view.sensor_recording import sample_times
