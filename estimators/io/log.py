@@ -256,7 +256,8 @@ def log_pieces(run_dir: Path) -> Iterator[tuple[dict[str, dict[str, np.ndarray]]
     others = {s.name: _Cursor(StreamBlocks(run_dir, s)) for s in present[1:]}
     imu_blocks = iter(StreamBlocks(run_dir, IMU))
     block = next(imu_blocks)
-    for after in (*imu_blocks, None):
+    while block is not None:
+        after = next(imu_blocks, None)  # one block ahead: whether this one is the last
         t_last = float(block.column("t")[-1].as_py()) if block.num_rows and after is not None else np.inf
         rows = {name: c.until(t_last) for name, c in others.items()}
         piece = {IMU.name: _columns(block)} | {name: r for name, r in rows.items() if r is not None}

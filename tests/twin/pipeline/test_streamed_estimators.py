@@ -57,6 +57,27 @@ def test_the_log_in_pieces_is_the_whole_log_once(run_dir):
         assert all(piece[s]["t"].size == 0 or piece[s]["t"][-1] <= t_imu for s in piece)
 
 
+def test_the_log_in_pieces_reads_a_row_group_ahead(run_dir, monkeypatch):
+    """The first piece comes once the IMU's first two row groups are read (one ahead, to know it is not the last):
+    the log is not read whole before it starts."""
+    import estimators.io.log as log_module
+
+    read = {}
+
+    class Counted(log_module.StreamBlocks):
+        def __iter__(self):
+            for block in super().__iter__():
+                read[self.stream.name] = read.get(self.stream.name, 0) + 1
+                yield block
+
+    _, out, _ = run_dir
+    monkeypatch.setattr(log_module, "StreamBlocks", Counted)
+    pieces = log_pieces(out)
+    next(pieces)
+    assert read["imu"] == 2 and all(n <= 2 for n in read.values()), read
+    assert sum(1 for _ in pieces) > 20
+
+
 def test_streamed_estimates_are_the_batch_methods_rows(run_dir):
     scn, out, metrics = run_dir
     batch = estimate(load_log(out), positioning_config(scn), METHODS)
