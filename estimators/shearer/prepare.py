@@ -242,11 +242,13 @@ class Preparer:
             return prep
         if not self.started and not self._initial(final):
             return prep
+        passes = len(prep.segments)
         self._segments(final)
         n_kf = prep.n_kf
         epochs = np.searchsorted(prep.t_kf, log.survey_t[1:])
         prep.survey_epochs = np.minimum(epochs, n_kf) if final else epochs
-        if log.ram_t.size and len(cfg.support_u_m) >= 2:
+        # The push-ram log is read by the passes just found (their fixes): made when there are some.
+        if log.ram_t.size and len(cfg.support_u_m) >= 2 and len(prep.segments) > passes:
             prep.rams = RamLog.from_rows(log.ram_t, log.ram_support, log.ram_extension, log.ram_valid,
                                          cfg.support_u_m, cfg.ram_noise_sd)
         return prep
