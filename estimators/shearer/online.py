@@ -87,9 +87,9 @@ class OnlinePositioning:
         per_epoch = prep.steps * prep.n_samples
         for a, b in prep.segments[self.done:]:
             one = self.passes.run(prep, log, a, b)
+            t = prep.t_kf[a + 1:b + 1]
             smoothed = isinstance(one, KfPass) and one.nav_s is not None
             nav, sd = (one.nav_s, one.sd_s) if smoothed else (one.nav, one.sd)
-            t = prep.t_kf[a + 1:b + 1]
             if isinstance(self.passes, RailPasses):
                 solution = self.passes.pass_solution(prep, a, one)
             else:

@@ -45,6 +45,11 @@ def _machine_memory() -> int:
         return 20 * GIB
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity, as a container or `taskset` limits it)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
+
+
 MAX_MEMORY_BYTES = int(0.8 * _machine_memory())
 """80 % of the machine's RAM (os.sysconf; of 20 GiB where it cannot be read): a run that swaps or is killed by the
 kernel's OOM killer hours in is worse than a refusal."""
@@ -189,7 +194,7 @@ def stage_memory(scn: Scenario, t: float, rows: dict[str, float], sensors: bool 
     methods = scn.estimators.shearer.methods
     if sensors and methods:
         epochs = t * scn.estimators.shearer.filter_rate_hz
-        at_once = min(len(methods), _cores())
+        at_once = min(len(methods), usable_cores())
         batch = [m for m in methods if m not in STREAMED]
         streamed = PASS_BYTES_PER_EPOCH * epochs / (2 * scn.cycles) * min(len(methods) - len(batch), at_once)
         if batch:  # the log and the whole-run arrays of the batch methods, which run first (TASKS)
@@ -199,9 +204,6 @@ def stage_memory(scn: Scenario, t: float, rows: dict[str, float], sensors: bool 
         out["estimators"] = BASE_MEMORY + (streamed + HELD_BYTES["epochs_scored"] * epochs * at_once) * workers
     return out
 
-
-def _cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def paper_resources(exp: Experiment | Turntable) -> Resources:

@@ -11,7 +11,6 @@ The command line (twin.cli) parses its flags into these calls and prints what th
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
 from dataclasses import dataclass
@@ -32,7 +31,7 @@ from estimators.io.logformat import (
     read_stream,
 )
 from twin.config.experiments import Experiment
-from twin.config.resources import check_resources, estimate_resources
+from twin.config.resources import check_resources, estimate_resources, usable_cores
 from twin.config.scenario import (
     Scenario,
     ScenarioError,
@@ -87,11 +86,6 @@ class Run:
     def estimate(self, method: str) -> pa.Table:
         """Estimator `method`'s solution (estimates/METHOD.parquet): t, position, velocity, attitude, sigma, flags."""
         return read_estimate(self.dir, method, ESTIMATE)
-
-
-def usable_cores() -> int:
-    """The cores this process may run on (its CPU affinity, as a container or `taskset` limits it)."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
 
 
 def default_scenario() -> Path:
