@@ -32,6 +32,7 @@ from estimators.io.logformat import (
     FLAG_ZUPT,
     LogError,
 )
+from estimators.io.stream_median import StreamMedian
 from estimators.nav import earth
 from estimators.nav.rotations import (
     quat_conj,
@@ -71,16 +72,21 @@ def slerp(t_src: np.ndarray, q_src: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 class TruthTrack:
     """The truth_shearer stream, given whole (a table or mapping of arrays) or as blocks of consecutive rows (e.g.
-    estimators.io.logformat.StreamBlocks, read again at each call), interpolated at estimate times (`at`). Only one
-    block is held at a time; the answers for the last KEEP sets of times are kept, since the methods of
-    a run are scored, and drawn, at the same filter epochs. Block by block equals whole, bit for bit: each time is
-    interpolated between the same two samples, and the longitude unwrapped with its correction summed in order."""
+    estimators.io.logformat.StreamBlocks, iterable again), interpolated at estimate times (`at`). Only one block is
+    held at a time, and a cursor stays on it: a call whose earliest time is not before that block's start goes on
+    from it (a run scored a pass at a time reads the truth once), an earlier one reads the blocks again from the
+    first. The answers for the last KEEP sets of times are kept, since the methods of a run are scored, and drawn,
+    at the same filter epochs. Block by block equals whole, bit for bit: each time is interpolated between the same
+    two samples, and the longitude unwrapped with its correction summed in order."""
 
     KEEP = 2
 
     def __init__(self, blocks):
         self.blocks = [blocks] if isinstance(blocks, Mapping | pa.Table) else blocks
         self._kept: list[tuple[np.ndarray, dict[str, np.ndarray]]] = []
+        self._cursor = None  # the generator of prepared blocks, positioned after self._block
+        self._block = None  # (cols, lo, hi) of the block the cursor is on; None before the first
+        self._t_first = np.nan  # the first sample's time
 
     def at(self, t: np.ndarray) -> dict[str, np.ndarray]:
         """truth_at's dict at times t, plus "cycle" (of the sample at or before each time) when the truth has it."""
@@ -92,11 +98,10 @@ class TruthTrack:
         self._kept = [(t.copy(), true), *self._kept][:self.KEEP]
         return true
 
-    def _interpolate(self, t: np.ndarray) -> dict[str, np.ndarray]:
-        out: dict[str, np.ndarray] = {}
-        todo = np.ones(t.size, bool)
+    def _prepared(self):
+        """Each block's (cols, lo, hi): its columns after the previous block's last sample, the longitude
+        unwrapped from the run's first sample; the times it interpolates are lo <= t < hi."""
         prev = None  # the previous block's last sample, its longitude unwrapped, the correction summed to it
-        t_span = [np.nan, np.nan]
         for block in self.blocks:
             cols = {k: column(block, k) for k in ("t", "lat", "lon", "h")}
             if not cols["t"].size:
@@ -105,7 +110,7 @@ class TruthTrack:
             if "cycle" in (block.keys() if isinstance(block, Mapping) else block.column_names):
                 cols["cycle"] = column(block, "cycle")
             if prev is None:
-                t_span[0] = cols["t"][0]
+                self._t_first = cols["t"][0]
                 lo, carry, lon_first = -np.inf, 0.0, cols["lon"][:1]
             else:
                 cols = {k: np.concatenate([prev[k], v]) for k, v in cols.items()}
@@ -119,17 +124,32 @@ class TruthTrack:
             np.copyto(correction, 0.0, where=np.abs(dd) < np.pi)
             summed = np.cumsum(np.concatenate([[carry], correction]))
             cols["lon"] = np.concatenate([lon_first, lon[1:] + summed[1:]])
-            hi = cols["t"][-1]
-            self._fill(out, cols, t, todo & (t >= lo) & (t < hi), todo)
             prev = {k: v[-1:] for k, v in cols.items()} | {"lon": lon[-1:], "carry": summed[-1],
                                                            "lon_unwrapped": cols["lon"][-1:]}
-            last, t_span[1] = cols, hi
-        if prev is None:
+            yield cols, lo, cols["t"][-1]
+
+    def _interpolate(self, t: np.ndarray) -> dict[str, np.ndarray]:
+        out: dict[str, np.ndarray] = {}
+        todo = np.ones(t.size, bool)
+        if self._block is None or (t.size and t.min() < self._block[1]):
+            self._cursor, self._block = self._prepared(), None
+        while True:
+            if self._block is not None:
+                cols, lo, hi = self._block
+                self._fill(out, cols, t, todo & (t >= lo) & (t < hi), todo)
+                if not (todo & (t >= hi)).any():
+                    break
+            block = next(self._cursor, None)
+            if block is None:
+                break
+            self._block = block
+        if self._block is None:
             raise LogError("truth_shearer holds no samples to score against")
-        if t.size and (t.min() < t_span[0] - 1e-9 or t.max() > t_span[1] + 1e-9):
+        cols, _, hi = self._block
+        if t.size and (t.min() < self._t_first - 1e-9 or t.max() > hi + 1e-9):
             raise LogError(f"estimate times {t.min():.6g} .. {t.max():.6g} s lie outside the truth span "
-                           f"{t_span[0]:.6g} .. {t_span[1]:.6g} s")
-        self._fill(out, last, t, todo.copy(), todo)  # the times at the last sample
+                           f"{self._t_first:.6g} .. {hi:.6g} s")
+        self._fill(out, cols, t, todo.copy(), todo)  # the times at the last sample
         return out
 
     @staticmethod
@@ -208,6 +228,36 @@ def attitude_errors(estimate, truth_shearer) -> tuple[np.ndarray, np.ndarray]:
 STAT_KEYS = ("samples", "rmse_e", "rmse_n", "rmse_u", "max_e", "max_n", "max_horizontal", "max_3d", "sep")
 
 
+class ErrorStats:
+    """`error_stats` over position errors pushed in blocks (K, 3) [m]: the sums, largest values and the 3-D norms'
+    median (estimators.io.stream_median, exact in bounded memory) carried from block to block. One block gives
+    error_stats' numbers bit for bit; more blocks sum the squares block by block (the last bits may differ)."""
+
+    def __init__(self):
+        self.samples = 0
+        self.sum_sq = np.zeros(3)
+        self.peaks = np.zeros(4)  # the largest |east|, |north|, horizontal and 3-D error
+        self.norms = StreamMedian()
+
+    def push(self, err_enu: np.ndarray) -> ErrorStats:
+        err = np.asarray(err_enu, float).reshape(-1, 3)
+        if err.shape[0]:
+            norm = np.linalg.norm(err, axis=1)
+            self.samples += err.shape[0]
+            self.sum_sq += np.sum(err ** 2, axis=0)
+            self.peaks = np.maximum(self.peaks, [np.abs(err[:, 0]).max(), np.abs(err[:, 1]).max(),
+                                                 np.hypot(err[:, 0], err[:, 1]).max(), norm.max()])
+            self.norms.push(norm)
+        return self
+
+    def stats(self) -> dict[str, float]:
+        if not self.samples:
+            return {"samples": 0, **{k: float("nan") for k in STAT_KEYS[1:]}}
+        rmse = np.sqrt(self.sum_sq / self.samples)
+        return {"samples": self.samples, **dict(zip(STAT_KEYS[1:4], map(float, rmse))),
+                **dict(zip(STAT_KEYS[4:8], map(float, self.peaks))), "sep": self.norms.median()}
+
+
 def error_stats(err_enu: np.ndarray) -> dict[str, float]:
     """RMSE per axis, the largest |east|, |north|, horizontal and 3-D error, and the SEP of position errors
     (K, 3) [m].
@@ -216,20 +266,65 @@ def error_stats(err_enu: np.ndarray) -> dict[str, float]:
     here the empirical median of the 3-D error norm |e_k| over the samples (001 section 4, Table 3), not the
     Gaussian approximation from the standard deviations. Empty input gives NaN statistics and 0 samples.
     """
-    err = np.asarray(err_enu, float).reshape(-1, 3)
-    if err.shape[0] == 0:
-        return {"samples": 0, **{k: float("nan") for k in STAT_KEYS[1:]}}
-    rmse = np.sqrt(np.mean(err ** 2, axis=0))
-    norm = np.linalg.norm(err, axis=1)
-    return {"samples": int(err.shape[0]), "rmse_e": float(rmse[0]), "rmse_n": float(rmse[1]),
-            "rmse_u": float(rmse[2]), "max_e": float(np.abs(err[:, 0]).max()),
-            "max_n": float(np.abs(err[:, 1]).max()), "max_horizontal": float(np.hypot(err[:, 0], err[:, 1]).max()),
-            "max_3d": float(norm.max()), "sep": float(np.median(norm))}
+    return ErrorStats().push(err_enu).stats()
 
 
 def cycle_label(cycle: int) -> str:
     """A cutting cycle (truth_cycles' 0-based `cycle`) as tables and plots name it: A1 for cycle 0 (001 Table 3)."""
     return f"A{int(cycle) + 1}"
+
+
+class CycleScore:
+    """`cycle_metrics` over (t, err_enu) pushed in blocks of increasing time (a pass at a time). A cycle's
+    statistics are final, and its errors let go, once the times pass its end."""
+
+    def __init__(self, truth_cycles):
+        self.starts, self.cut_ends, self.ends = (column(truth_cycles, k) for k in ("t", "t_cut_end", "t_end"))
+        self.cycles = column(truth_cycles, "cycle").astype(int)
+        n = self.cycles.size
+        self.windows: list[ErrorStats | dict] = [ErrorStats() for _ in range(n)]
+        self.cuts: list[ErrorStats | dict] = [ErrorStats() for _ in range(n)]
+        self.all, self.all_cuts = ErrorStats(), ErrorStats()
+        self.t_first = self.t_last = float("nan")
+
+    def push(self, t: np.ndarray, err_enu: np.ndarray) -> CycleScore:
+        t = np.asarray(t, float)
+        err = np.asarray(err_enu, float).reshape(-1, 3)
+        if not t.size:
+            return self
+        if t.min() < self.t_last:
+            raise ValueError(f"CycleScore: a block from t = {t.min():.6g} s after one to {self.t_last:.6g} s; "
+                             "push blocks in time order")
+        last = self.cycles.size - 1
+        in_cuts = np.zeros(t.size, bool)
+        for j in np.flatnonzero((np.maximum(self.ends, self.cut_ends) >= t.min()) & (self.starts <= t.max())):
+            window = (t >= self.starts[j]) & ((t <= self.ends[j]) if j == last else (t < self.ends[j]))
+            cut = (t >= self.starts[j]) & (t <= self.cut_ends[j])
+            in_cuts |= cut
+            for acc, rows in ((self.windows[j], window), (self.cuts[j], cut)):
+                if rows.any():  # (a final window has no more rows)
+                    acc.push(err[rows])
+        self.all.push(err)
+        self.all_cuts.push(err[in_cuts])
+        if np.isnan(self.t_first):
+            self.t_first = float(t[0])
+        self.t_last = float(t[-1])
+        for j in range(last):  # final: no later time falls in the window [t, t_end) or the cut [t, t_cut_end]
+            if isinstance(self.windows[j], ErrorStats) and self.ends[j] <= self.t_last:
+                self.windows[j] = self.windows[j].stats()
+            if isinstance(self.cuts[j], ErrorStats) and self.cut_ends[j] < self.t_last:
+                self.cuts[j] = self.cuts[j].stats()
+        return self
+
+    def rows(self) -> list[dict]:
+        def stats(acc: ErrorStats | dict) -> dict:
+            return acc if isinstance(acc, dict) else acc.stats()
+
+        rows = [{"cycle": int(cycle), "t_start": float(t0), "t_end": float(t1), **stats(window),
+                 "straight_cut": stats(cut)}
+                for cycle, t0, t1, window, cut in zip(self.cycles, self.starts, self.ends, self.windows, self.cuts)]
+        return rows + [{"cycle": "all", "t_start": self.t_first, "t_end": self.t_last, **self.all.stats(),
+                        "straight_cut": self.all_cuts.stats()}]
 
 
 def cycle_metrics(t: np.ndarray, err_enu: np.ndarray, truth_cycles) -> list[dict]:
@@ -239,24 +334,9 @@ def cycle_metrics(t: np.ndarray, err_enu: np.ndarray, truth_cycles) -> list[dict
     (half-open, the last cycle closed), "all" is every sample. Each dict holds cycle, t_start, t_end, the
     `STAT_KEYS` of the window and, under "straight_cut", the same statistics over t .. t_cut_end only: the A-B
     straight cut of 001 Fig. 3 (for "all": the union of the straight cuts). 001 Table 3 reports the SEP per
-    cycle (A1-A4).
+    cycle (A1-A4). In blocks: `CycleScore`.
     """
-    t = np.asarray(t, float)
-    err = np.asarray(err_enu, float).reshape(-1, 3)
-    starts, cut_ends, ends = (column(truth_cycles, k) for k in ("t", "t_cut_end", "t_end"))
-    cycles = column(truth_cycles, "cycle").astype(int)
-    rows, in_cuts = [], np.zeros(t.size, bool)
-    for j, (cycle, t0, t_cut, t1) in enumerate(zip(cycles, starts, cut_ends, ends)):
-        last = j == cycles.size - 1
-        window = (t >= t0) & ((t <= t1) if last else (t < t1))
-        cut = (t >= t0) & (t <= t_cut)
-        in_cuts |= cut
-        rows.append({"cycle": int(cycle), "t_start": float(t0), "t_end": float(t1), **error_stats(err[window]),
-                     "straight_cut": error_stats(err[cut])})
-    rows.append({"cycle": "all", "t_start": float(t[0]) if t.size else float("nan"),
-                 "t_end": float(t[-1]) if t.size else float("nan"), **error_stats(err),
-                 "straight_cut": error_stats(err[in_cuts])})
-    return rows
+    return CycleScore(truth_cycles).push(t, err_enu).rows()
 
 
 # ----------------------------------------------------------------------------------------------- consistency
@@ -297,47 +377,96 @@ def _finite(x) -> float | None:
     return x if np.isfinite(x) else None
 
 
+def _residual(row: dict[str, np.ndarray], fix: dict[str, float], t_fix: float) -> dict:
+    """survey_residuals' entry for one estimate row (lat, lon, h, t, sd_pos (3,)) against one fix."""
+    d = geodetic_to_enu_offset(row["lat"], row["lon"], row["h"], fix["lat"], fix["lon"], fix["h"])[0]
+    var = row["sd_pos"] ** 2 + np.array([fix["sd_horizontal"]] * 2 + [fix["sd_vertical"]]) ** 2
+    return {"t_fix": float(t_fix), "t_estimate": float(row["t"][0]), "east": float(d[0]), "north": float(d[1]),
+            "up": float(d[2]), "horizontal": float(np.hypot(d[0], d[1])),
+            "nis": _finite(np.sum(d ** 2 / var)) if np.all(var > 0) else None}
+
+
+class SelfAssessment:
+    """`self_assessment` over an estimate's rows pushed in blocks of increasing time (a pass at a time): the
+    counts, sums and extremes carried, with the last row (the step into the next block, and the estimate just
+    before a fix at a block's start). One block gives self_assessment's numbers bit for bit; more sum the
+    distance block by block (the last bits may differ)."""
+
+    FIX_KEYS = ("lat", "lon", "h", "sd_horizontal", "sd_vertical")
+
+    def __init__(self, survey=None):
+        self.survey = survey
+        self.t_fix = column(survey, "t") if survey is not None else np.zeros(0)
+        self.residuals: dict[int, dict] = {}  # by the fix's row, once its estimate row has come
+        self.samples, self.distance_m = 0, 0.0
+        self.max_sd_h, self.finite_sd_h = np.nan, False  # the largest horizontal sigma (NaN skipped); any finite
+        self.flags = dict.fromkeys(FLAG_COUNTS, 0)
+        self.t_start, self.last = float("nan"), None  # the last row: t, lat, lon, h (1,), sd_pos (3,), sd_att
+
+    def push(self, estimate) -> SelfAssessment:
+        t = column(estimate, "t")
+        if not t.size:
+            return self
+        lat, lon, h = (column(estimate, k) for k in ("lat", "lon", "h"))
+        sd_pos, sd_att = columns(estimate, "sd_pos"), np.degrees(columns(estimate, "sd_att"))
+        if self.last is None:
+            self.t_start = float(t[0])
+            steps = geodetic_to_enu_offset(lat[1:], lon[1:], h[1:], lat[:-1], lon[:-1], h[:-1])
+        else:
+            steps = geodetic_to_enu_offset(lat, lon, h, *(np.concatenate([self.last[k], v[:-1]])
+                                                          for k, v in (("lat", lat), ("lon", lon), ("h", h))))
+        self.distance_m += np.linalg.norm(steps, axis=1).sum()
+        sd_h = np.hypot(sd_pos[:, 0], sd_pos[:, 1])
+        if not np.isnan(sd_h).all():
+            self.max_sd_h = np.fmax(self.max_sd_h, np.nanmax(sd_h))
+        self.finite_sd_h |= bool(np.isfinite(sd_h).any())
+        flags = column(estimate, "flags").astype(np.int64)
+        for name, bit in FLAG_COUNTS.items():
+            self.flags[name] += int(np.count_nonzero(flags & bit))
+        self.samples += t.size
+        for k in np.flatnonzero(self.t_fix <= t[-1]):  # the fixes whose last estimate row before them has come
+            if k in self.residuals:
+                continue
+            i = int(np.searchsorted(t, self.t_fix[k], side="left")) - 1
+            row = self.last if i < 0 else {"t": t[i:i + 1], "lat": lat[i:i + 1], "lon": lon[i:i + 1],
+                                           "h": h[i:i + 1], "sd_pos": sd_pos[i]}
+            self.residuals[k] = row and _residual(row, self._fix(k), self.t_fix[k])
+        self.last = {"t": t[-1:], "lat": lat[-1:], "lon": lon[-1:], "h": h[-1:], "sd_pos": sd_pos[-1],
+                     "sd_att": sd_att[-1]}
+        return self
+
+    def _fix(self, k: int) -> dict[str, float]:
+        return {key: column(self.survey, key)[k] for key in self.FIX_KEYS}
+
+    def result(self) -> dict:
+        if self.last is None:
+            return {"samples": 0}
+        sd_pos, sd_att = self.last["sd_pos"], self.last["sd_att"]
+        out = {"samples": self.samples, "t_start": self.t_start, "t_end": float(self.last["t"][0]),
+               "distance_m": float(self.distance_m),
+               "final_sd_pos_m": {a: _finite(v) for a, v in zip(("east", "north", "up"), sd_pos)},
+               "final_sd_att_deg": {a: _finite(v) for a, v in zip(ENU, sd_att)},
+               "final_sd_horizontal_m": _finite(np.hypot(sd_pos[0], sd_pos[1])),
+               "max_sd_horizontal_m": _finite(self.max_sd_h) if self.finite_sd_h else None,
+               "flags": dict(self.flags)}
+        if self.survey is not None:
+            late = {k: _residual(self.last, self._fix(k), self.t_fix[k])
+                    for k in range(self.t_fix.size) if k not in self.residuals}
+            out["survey_residuals"] = [r for _, r in sorted((self.residuals | late).items()) if r]
+        return out
+
+
 def survey_residuals(estimate, survey) -> list[dict]:
     """The estimate against each surveyed fix after its first epoch, before the fix is applied: the estimate at
     the last epoch before the fix's time minus the surveyed point [m] East/North/Up, and its normalized square
     over the estimate's and the survey's variances (chi-square with 3 dof for a consistent filter; None without
     sigmas). A smoother's rows already hold the fix, so its residuals are small by construction."""
-    t = column(estimate, "t")
-    rows = []
-    for k, t_fix in enumerate(column(survey, "t")):
-        i = int(np.searchsorted(t, t_fix, side="left")) - 1
-        if i < 0:
-            continue
-        fix = {key: column(survey, key)[k] for key in ("lat", "lon", "h", "sd_horizontal", "sd_vertical")}
-        d = geodetic_to_enu_offset(column(estimate, "lat")[i:i + 1], column(estimate, "lon")[i:i + 1],
-                                   column(estimate, "h")[i:i + 1], fix["lat"], fix["lon"], fix["h"])[0]
-        var = columns(estimate, "sd_pos")[i] ** 2 + np.array([fix["sd_horizontal"]] * 2 + [fix["sd_vertical"]]) ** 2
-        rows.append({"t_fix": float(t_fix), "t_estimate": float(t[i]), "east": float(d[0]), "north": float(d[1]),
-                     "up": float(d[2]), "horizontal": float(np.hypot(d[0], d[1])),
-                     "nis": _finite(np.sum(d ** 2 / var)) if np.all(var > 0) else None})
-    return rows
+    return SelfAssessment(survey).push(estimate).result().get("survey_residuals", [])
 
 
 def self_assessment(estimate, survey=None) -> dict:
     """What an estimate (ESTIMATE columns) says of itself, needing no truth: its span, the distance along its path
     [m] (3-D, summed over the epochs), its final and largest one-sigma (position [m] E/N/U and horizontal,
     attitude [deg]; None without covariance), how many epochs set each flag of FLAG_COUNTS, and its residuals
-    against the survey's fixes (`survey_residuals`, with a survey table)."""
-    t = column(estimate, "t")
-    if t.size == 0:
-        return {"samples": 0}
-    lat, lon, h = (column(estimate, k) for k in ("lat", "lon", "h"))
-    steps = geodetic_to_enu_offset(lat[1:], lon[1:], h[1:], lat[:-1], lon[:-1], h[:-1])
-    sd_pos, sd_att = columns(estimate, "sd_pos"), np.degrees(columns(estimate, "sd_att"))
-    sd_h = np.hypot(sd_pos[:, 0], sd_pos[:, 1])
-    flags = column(estimate, "flags").astype(np.int64)
-    out = {"samples": int(t.size), "t_start": float(t[0]), "t_end": float(t[-1]),
-           "distance_m": float(np.linalg.norm(steps, axis=1).sum()),
-           "final_sd_pos_m": {a: _finite(v) for a, v in zip(("east", "north", "up"), sd_pos[-1])},
-           "final_sd_att_deg": {a: _finite(v) for a, v in zip(ENU, sd_att[-1])},
-           "final_sd_horizontal_m": _finite(sd_h[-1]),
-           "max_sd_horizontal_m": _finite(np.nanmax(sd_h)) if np.isfinite(sd_h).any() else None,
-           "flags": {name: int(np.count_nonzero(flags & bit)) for name, bit in FLAG_COUNTS.items()}}
-    if survey is not None:
-        out["survey_residuals"] = survey_residuals(estimate, survey)
-    return out
+    against the survey's fixes (`survey_residuals`, with a survey table). In blocks: `SelfAssessment`."""
+    return SelfAssessment(survey).push(estimate).result()

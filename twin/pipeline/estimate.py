@@ -188,12 +188,16 @@ class EstimateWriter:
         for appender in appenders.values():
             appender.close()
         last = self.last.pop(name)
-        table = read_stream(*estimate_file(self.run_dir, name), metrics.SCORED_ESTIMATE)
+        own = metrics.SelfAssessment(self.survey)
+        score = None if self.truth is None else metrics.CycleScore(NO_CYCLES if self.cycles is None else self.cycles)
+        for block in StreamBlocks(*estimate_file(self.run_dir, name), metrics.SCORED_ESTIMATE):
+            own.push(block)
+            if score is not None:
+                score.push(*metrics.position_errors(block, self.truth))
         entry = {"truth": self.truth is not None}
-        if self.truth is not None:
-            entry["cycles"] = metrics.cycle_metrics(*metrics.position_errors(table, self.truth),
-                                                    NO_CYCLES if self.cycles is None else self.cycles)
-        entry |= {"notes": notes, "self": metrics.self_assessment(table, self.survey)}
+        if score is not None:
+            entry["cycles"] = score.rows()
+        entry |= {"notes": notes, "self": own.result()}
         return entry | (_calibration(last, self.states_truth) if last.cal is not None else {}), list(appenders)
 
 

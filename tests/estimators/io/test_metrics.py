@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import numpy as np
+import pyarrow as pa
 import pytest
 
+from estimators.io import stream_median
 from estimators.io.logformat import ESTIMATE, TRUTH_CYCLES, LogError, make_table
 from estimators.io.metrics import (
     attitude_errors,
@@ -14,7 +16,11 @@ from estimators.io.metrics import (
     nees,
     nees_band,
     position_errors,
+    CycleScore,
+    SelfAssessment,
     TruthTrack,
+    column,
+    self_assessment,
     slerp,
     truth_at,
 )
@@ -78,6 +84,40 @@ def test_truth_in_blocks_is_the_whole_truth_bit_for_bit():
         assert track.at(t.copy()) is part  # the same epochs again: kept, not read again
     with pytest.raises(LogError, match="outside the truth span"):
         TruthTrack(blocks).at(np.array([truth["t"][-1] + 1.0]))
+
+
+class CountedBlocks:
+    """Blocks iterable again, counting the blocks read."""
+
+    def __init__(self, blocks):
+        self.blocks, self.read = blocks, 0
+
+    def __iter__(self):
+        for block in self.blocks:
+            self.read += 1
+            yield block
+
+
+def test_truth_queried_in_pieces_reads_the_blocks_once_and_equals_the_whole():
+    """Pieces of ascending times (a pass at a time; a piece may start on the previous piece's block) go on from
+    the block the track is on: the blocks are read once, and each piece equals the whole table's answer bit for bit.
+    A piece earlier than that block reads the blocks again from the first, and is right too."""
+    truth = straight_truth(2001, 0.05)
+    rng = np.random.default_rng(5)
+    t = np.sort(np.concatenate([rng.uniform(0, truth["t"][-1], 900), truth["t"][[0, -1]]]))
+    whole = truth_at(truth, t)
+    edges = [0, 3, 400, 401, 1200, 1999, truth["t"].size]
+    blocks = CountedBlocks([{k: v[a:b] for k, v in truth.items()} for a, b in zip(edges[:-1], edges[1:])])
+    track = TruthTrack(blocks)
+    cuts = [0, 1, 150, 151, 420, 899, t.size]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        part = track.at(t[a:b])
+        for k in ("lat", "lon", "h", "q_nb"):
+            np.testing.assert_array_equal(part[k], whole[k][a:b], err_msg=f"{k} over rows {a}..{b}")
+    assert blocks.read == len(edges) - 1
+    back = track.at(t[10:30])  # before the block the track is on: read again from the first
+    np.testing.assert_array_equal(back["lat"], whole["lat"][10:30])
+    assert blocks.read > len(edges) - 1
 
 
 def test_constant_east_offset_gives_rmse_and_sep():
@@ -158,6 +198,65 @@ def test_cycle_metrics_windows():
     assert first["max_e"] == pytest.approx(0.3) and first["max_n"] == 0.0
     assert total["samples"] == t.size and total["straight_cut"]["samples"] == 9 + 8
     assert total["rmse_u"] == pytest.approx(np.sqrt(32 / 60))
+
+
+def assert_same_numbers(blocked, whole, where: str = "") -> None:
+    """Equal structures; sums (rmse, distance) to 1e-12 relative, everything else exactly."""
+    if isinstance(whole, dict):
+        assert blocked.keys() == whole.keys(), where
+        for k in whole:
+            assert_same_numbers(blocked[k], whole[k], f"{where}/{k}")
+    elif isinstance(whole, list):
+        assert len(blocked) == len(whole), where
+        for i, (b, w) in enumerate(zip(blocked, whole)):
+            assert_same_numbers(b, w, f"{where}[{i}]")
+    elif isinstance(whole, float) and ("rmse" in where or "distance" in where):
+        assert blocked == pytest.approx(whole, rel=1e-12, nan_ok=True), where
+    else:
+        assert blocked == whole or (blocked != blocked and whole != whole), where
+
+
+@pytest.mark.parametrize("spill", [False, True])
+def test_scores_in_blocks_equal_the_whole(monkeypatch, spill):
+    """CycleScore and SelfAssessment over an estimate pushed a few rows or a pass at a time (cuts inside cycles,
+    on a cycle's end, on a straight cut's end, at a survey fix) give cycle_metrics and self_assessment of the
+    whole: the sums to the last bits, counts, largest values and medians (held, or spilled to the scratch file)
+    exactly; a cycle's errors are let go once the times pass its end; blocks out of time order are refused."""
+    if spill:
+        monkeypatch.setattr(stream_median, "IN_MEMORY", 40)
+    truth = straight_truth()
+    t = np.arange(0.05, 99.0, 0.25)
+    rng = np.random.default_rng(11)
+    estimate = offset_estimate(truth, t, [0.2, -0.1, 0.05], sd=0.03)
+    lat = column(estimate, "lat") + rng.normal(0.0, 1e-7, t.size)
+    sd = np.abs(rng.normal(0.1, 0.02, t.size))
+    sd[5:40] = np.nan
+    flags = rng.integers(0, 256, t.size).astype(np.int32)
+    estimate = estimate.set_column(estimate.column_names.index("lat"), "lat", pa.array(lat))
+    estimate = estimate.set_column(estimate.column_names.index("sd_pos_e"), "sd_pos_e", pa.array(sd))
+    estimate = estimate.set_column(estimate.column_names.index("flags"), "flags", pa.array(flags))
+    cycles = make_table(TRUTH_CYCLES, {
+        "cycle": np.arange(3), "direction": np.array([1, -1, 1]), "t": np.array([0.0, 30.0, 60.0]),
+        "t_cut_end": np.array([12.05, 40.0, 75.0]), "t_sump_end": np.array([15.0, 45.0, 80.0]),
+        "t_push_end": np.array([16.0, 46.0, 81.0]), "t_end": np.array([30.0, 60.0, 99.0]),
+        "s_sump": np.full(3, 5.0)})
+    survey = {"t": np.array([0.0, 30.0, 30.01, 61.3, 120.0]), **{k: column(estimate, k)[[0, 50, 90, 200, -1]]
+                                                                 for k in ("lat", "lon", "h")},
+              "sd_horizontal": np.full(5, 0.2), "sd_vertical": np.full(5, 0.3)}
+    t_err, err = position_errors(estimate, truth)
+    whole_cycles, whole_self = cycle_metrics(t_err, err, cycles), self_assessment(estimate, survey)
+    assert len(whole_self["survey_residuals"]) == 4 and whole_self["max_sd_horizontal_m"] is not None
+    for edges in ([0, 1, 2, 48, 119, 120, 200, 321, t.size], [0, 120, 240, t.size], [0, t.size]):
+        score, own = CycleScore(cycles), SelfAssessment(survey)
+        for a, b in zip(edges[:-1], edges[1:]):
+            score.push(t_err[a:b], err[a:b])
+            own.push(estimate.slice(a, b - a))
+            if t_err[b - 1] >= 60.0:
+                assert all(isinstance(w, dict) for w in score.windows[:2])  # cycles 0 and 1 are final
+        assert_same_numbers(score.rows(), whole_cycles, f"cycles cut at {edges}")
+        assert_same_numbers(own.result(), whole_self, f"self cut at {edges}")
+    with pytest.raises(ValueError, match="time order"):
+        CycleScore(cycles).push(t_err[50:60], err[50:60]).push(t_err[:10], err[:10])
 
 
 def test_nees_inside_band_when_consistent_outside_when_not():
