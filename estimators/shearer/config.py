@@ -10,10 +10,11 @@ import numpy as np
 
 from estimators.faults.detectors import DetectorConfig
 
-STREAMED = ("kf_cpoem_rts", "fkf_rail", "kf_rts", "kf_cpoem", "kf")
+STREAMED = ("kf_cpoem_rts", "rts_offline", "dr_compensated", "fkf_rail", "kf_rts", "kf_cpoem", "kf", "dr")
 """The methods `estimate` runs online over the log's pieces when it is given them (estimators.shearer.online: 001's
-filter and 004's federated rail-model filter a pass at a time, the batch method's rows bit for bit), unless another
-requested method reads the batch run (kf_cpoem_rts feeds rts_offline and dr_compensated)."""
+filters and dead reckoning and 004's federated rail-model filter a pass at a time, rts_offline backward over the
+passes kept on disk; the batch method's rows bit for bit). 003's magnetometer filters (ckf_mag, afkf) run on the
+whole log."""
 
 DEG = np.pi / 180
 

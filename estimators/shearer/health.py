@@ -83,6 +83,11 @@ def check_track(t: np.ndarray, llh: np.ndarray, v_n: np.ndarray, q_nb: np.ndarra
     return Track(finite, speed > cfg.health_max_speed_m_s, jump, speed, ratio)
 
 
+def track_lost(sol: Solution, cfg: Config, has_sd: bool | None = None) -> np.ndarray:
+    """Epochs at which a solution lost track (check_track; `has_sd` as there)."""
+    return check_track(sol.t, sol.llh, sol.v_n, sol.q_nb, sol.sd, sol.sd[:, SD_POS], cfg, has_sd).lost
+
+
 def filter_lost(t: np.ndarray, nav: np.ndarray, sd: np.ndarray, cfg: Config) -> np.ndarray:
     """Epochs at which a filter run lost track (check_track), from its navigation rows (K, N_NAV; the IMU point)
     and the one-sigma of its error states (K, N_STATES): the check a filter makes of each pass as it runs."""

@@ -21,7 +21,7 @@ from estimators.shearer.adaptive_federated_mag import run_mag
 from estimators.shearer.config import STREAMED, Config, PositioningError
 from estimators.shearer.health import Assessment, assess
 from estimators.shearer.online import OnlinePositioning
-from estimators.shearer.positioning import dead_reckoning, rts_offline, run_kf
+from estimators.shearer.positioning import PassStore, dead_reckoning, rts_offline, run_kf
 from estimators.shearer.prepare import Prepared, prepare
 from estimators.shearer.rail_kinematics import run_rail
 from estimators.shearer.solution import Solution, join_rows
@@ -56,18 +56,18 @@ def _run_group(log: Log, cfg: Config, prep: Prepared, sink: Sink | None, group: 
     out: dict[str, Solution] = {}
     if set(group) <= set(TASKS[0]):
         with tempfile.TemporaryDirectory(prefix="longwall-rts-") as tmp:
-            keep = Path(tmp) if "rts_offline" in group else None
-            _, smoothed, fwd = run_kf(log, cfg, prep, cpoem=True, smooth=True, keep_dir=keep)
+            store = PassStore(Path(tmp)) if "rts_offline" in group else None
+            _, smoothed = run_kf(log, cfg, prep, cpoem=True, smooth=True, store=store)
             if "kf_cpoem_rts" in group:
                 out["kf_cpoem_rts"] = smoothed
             if "rts_offline" in group:
-                out["rts_offline"] = rts_offline(prep, cfg, fwd, smoothed.notes)
+                out["rts_offline"] = rts_offline(prep, cfg, store, smoothed.notes)
         if "dr_compensated" in group:
             out["dr_compensated"] = dead_reckoning(log, cfg, prep, smoothed.cal[-1])
     elif group[0] in ("kf", "kf_cpoem"):
-        out[group[0]], _, _ = run_kf(log, cfg, prep, cpoem=group[0] == "kf_cpoem", smooth=False)
+        out[group[0]], _ = run_kf(log, cfg, prep, cpoem=group[0] == "kf_cpoem", smooth=False)
     elif group[0] == "kf_rts":
-        _, out["kf_rts"], _ = run_kf(log, cfg, prep, cpoem=False, smooth=True)
+        _, out["kf_rts"] = run_kf(log, cfg, prep, cpoem=False, smooth=True)
     elif group[0] == "dr":
         out["dr"] = dead_reckoning(log, cfg, prep)
     elif group[0] in ("ckf_mag", "afkf"):
@@ -85,22 +85,51 @@ def _run_group(log: Log, cfg: Config, prep: Prepared, sink: Sink | None, group: 
     return out
 
 
-def _run_online(cfg: Config, pieces: Pieces, sink: Sink, name: str) -> dict:
-    """A method of STREAMED run online over the log's pieces, each pass (after epoch 0's row) through the health
-    monitor to `sink` as it ends: the batch method's rows and notes, a pass held at a time."""
-    online = OnlinePositioning(cfg, name)
-    health = Assessment(cfg, name, covariance=True)
-    first = True
+def _online(cfg: Config, pieces: Pieces, sink: Sink | None, name: str, **kwargs
+            ) -> tuple[OnlinePositioning, Assessment, Solution]:
+    """Method `name` run online over the log's pieces (OnlinePositioning with `kwargs`), each pass (after epoch 0's
+    row) through the health monitor to `sink` as it ends (None: not written), a pass held at a time: the run, its
+    health monitor and its last pass."""
+    online = OnlinePositioning(cfg, name, **kwargs)
+    health = Assessment(cfg, name, covariance=not name.startswith("dr"))
+    last = None
     for piece, final in pieces():
         for one in online.feed(piece, final):
             # Epoch 0 goes with the first pass: its rows computed alone would differ in the last bit (BLAS).
-            sol = join_rows([online.initial, one.solution]) if first else one.solution
+            sol = join_rows([online.initial, one.solution]) if last is None else one.solution
             health.check(sol)
-            sink.rows(name, sol)
-            first = False
-    if first:
+            if sink is not None:
+                sink.rows(name, sol)
+            last = sol
+    if last is None:
         raise PositioningError(f"{name}: the log holds no pass to filter (no odometer travel after the start)")
-    return {name: sink.done(name, online.finish() + health.notes())}
+    return online, health, last
+
+
+def _run_online(cfg: Config, pieces: Pieces, sink: Sink, group: tuple[str, ...]) -> dict:
+    """A group of TASKS run online over the log's pieces: each method's rows and notes those of the batch group's,
+    to `sink` a pass at a time. The smoother's group reads the log twice: kf_cpoem_rts keeps its passes on disk for
+    rts_offline (run backward over them, then written forward), and its final calibration drives dr_compensated."""
+    if not set(group) <= set(TASKS[0]):
+        online, health, _ = _online(cfg, pieces, sink, group[0])
+        return {group[0]: sink.done(group[0], online.finish() + health.notes())}
+    out, lead = {}, "kf_cpoem_rts"
+    with tempfile.TemporaryDirectory(prefix="longwall-rts-") as tmp:
+        store = PassStore(Path(tmp)) if "rts_offline" in group else None
+        online, health, last = _online(cfg, pieces, sink if lead in group else None, lead, store=store)
+        notes = online.finish()
+        if lead in group:
+            out[lead] = sink.done(lead, notes + health.notes())
+        if store is not None:
+            health = Assessment(cfg, "rts_offline", covariance=True)
+            for sol in store.smoothed(online.preparer.prep.t_kf, cfg):
+                health.check(sol)
+                sink.rows("rts_offline", sol)
+            out["rts_offline"] = sink.done("rts_offline", notes + health.notes())
+    if "dr_compensated" in group:
+        online, health, _ = _online(cfg, pieces, sink, "dr_compensated", cal=last.cal[-1])
+        out["dr_compensated"] = sink.done("dr_compensated", online.finish() + health.notes())
+    return {name: out[name] for name in group}
 
 
 Task = tuple[str, tuple[str, ...]]
@@ -120,7 +149,7 @@ def _worker_start() -> None:
 def _run_task(task: Task) -> dict:
     log, cfg, prep, sink, pieces = _SHARED
     kind, group = task
-    return _run_group(log, cfg, prep, sink, group) if kind == "batch" else _run_online(cfg, pieces, sink, group[0])
+    return _run_group(log, cfg, prep, sink, group) if kind == "batch" else _run_online(cfg, pieces, sink, group)
 
 
 def _run_tasks(tasks: list[Task], workers: int) -> list[dict]:
@@ -155,7 +184,7 @@ def estimate(log: Log | None, cfg: Config, methods: tuple[str, ...] = METHODS, w
     for task in TASKS:
         group = tuple(m for m in task if m in methods)
         if group:
-            online = sink is not None and pieces is not None and len(group) == 1 and group[0] in STREAMED
+            online = sink is not None and pieces is not None and set(group) <= set(STREAMED)
             tasks.append(("online" if online else "batch", group))
     prep = prepare(log, cfg) if any(kind == "batch" for kind, _ in tasks) else None
     _SHARED = (log, cfg, prep, sink, pieces)

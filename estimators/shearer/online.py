@@ -10,8 +10,10 @@ estimators.shearer.positioning.KfPasses filters them. A pass's rows are the batc
 rows of the pass under way, the odometer from the last known epoch, the push-ram readings since the last pass's points,
 and the epochs' times, distance and channel (17 bytes an epoch).
 
-Methods: ``kf_cpoem_rts`` and ``kf_rts`` (each pass smoothed at its end, the output), ``kf_cpoem`` and ``kf`` (the forward
-filter) of 001, and 004's ``fkf_rail`` (estimators.shearer.rail_kinematics.RailPasses; it reads the face survey stream too).
+Methods: ``kf_cpoem_rts`` and ``kf_rts`` (each pass smoothed at its end, the output; with a PassStore each pass kept for
+rts_offline), ``kf_cpoem`` and ``kf`` (the forward filter), ``dr`` and ``dr_compensated`` (the dead reckoning, the
+latter with a filter's final calibration) of 001, and 004's ``fkf_rail`` (estimators.shearer.rail_kinematics.RailPasses;
+it reads the face survey stream too).
 """
 
 from __future__ import annotations
@@ -24,13 +26,13 @@ import numpy as np
 from estimators.io.log import ImuBuffer, log_from_columns
 from estimators.io.logformat import FLAG_SMOOTHED, IMU, ODOMETER, SURVEY
 from estimators.shearer.config import Config, PositioningError
-from estimators.shearer.health import filter_lost
-from estimators.shearer.positioning import KfPass, KfPasses
+from estimators.shearer.health import filter_lost, track_lost
+from estimators.shearer.positioning import DeadReckoningPasses, KfPass, KfPasses, PassStore
 from estimators.shearer.prepare import Preparer
 from estimators.shearer.rail_kinematics import RailPasses
-from estimators.shearer.solution import Solution, make_solution
+from estimators.shearer.solution import Solution, make_solution, rows_of
 
-ONLINE_METHODS = ("kf_cpoem_rts", "kf_cpoem", "kf_rts", "kf", "fkf_rail")
+ONLINE_METHODS = ("kf_cpoem_rts", "kf_cpoem", "kf_rts", "kf", "fkf_rail", "dr", "dr_compensated")
 """The methods that run online."""
 
 _EMPTY = {stream.name: {c.name: np.zeros(0, c.dtype) for c in stream.columns} for stream in (IMU, ODOMETER, SURVEY)}
@@ -51,13 +53,18 @@ class PassEstimate:
 class OnlinePositioning:
     """One method of ONLINE_METHODS run online (module docstring)."""
 
-    def __init__(self, cfg: Config, method: str = "kf_cpoem_rts"):
+    def __init__(self, cfg: Config, method: str = "kf_cpoem_rts", store: PassStore | None = None,
+                 cal: np.ndarray | None = None):
+        """`store`: where a kf_cpoem_rts run keeps its passes for rts_offline; `cal`: dr_compensated's calibration
+        (estimators.shearer.odometer_filter's vector, a filter's last row)."""
         if method not in ONLINE_METHODS:
             raise PositioningError(f"{method}: not a method that runs online; choose one of {', '.join(ONLINE_METHODS)}")
-        self.cfg, self.method = cfg, method
+        if (cal is not None) != (method == "dr_compensated"):
+            raise ValueError(f"{method}: a calibration goes with dr_compensated, and only with it")
+        self.cfg, self.method, self.store, self.cal = cfg, method, store, cal
         self.imu = ImuBuffer()
         self.preparer = Preparer(cfg, self.imu)
-        self.passes: KfPasses | RailPasses | None = None
+        self.passes: KfPasses | RailPasses | DeadReckoningPasses | None = None
         self.done = 0
         """Passes run."""
         self.initial: Solution | None = None
@@ -78,26 +85,38 @@ class OnlinePositioning:
             if self.method == "fkf_rail":
                 self.passes = RailPasses(log, self.cfg, prep, self.cfg.isolate_by, whole=False)
                 self.initial = self.passes.first_row(prep)
+            elif self.method.startswith("dr"):
+                self.passes = DeadReckoningPasses(self.cfg, prep, log.survey_llh[0], self.cal)
             else:
                 self.passes = KfPasses(log, self.cfg, prep, cpoem=self.method.startswith("kf_cpoem"),
-                                       smooth=self.method.endswith("_rts"))
+                                       smooth=self.method.endswith("_rts"), keep=self.store and self.store.keep)
                 self.initial = self.passes.first_row(prep)
                 self.initial.flags |= FLAG_SMOOTHED if self.method.endswith("_rts") else 0
+                if self.store is not None:
+                    self.store.start(self.passes)
         out = []
         per_epoch = prep.steps * prep.n_samples
         for a, b in prep.segments[self.done:]:
-            one = self.passes.run(prep, log, a, b)
             t = prep.t_kf[a + 1:b + 1]
-            smoothed = isinstance(one, KfPass) and one.nav_s is not None
-            nav, sd = (one.nav_s, one.sd_s) if smoothed else (one.nav, one.sd)
-            if isinstance(self.passes, RailPasses):
-                solution = self.passes.pass_solution(prep, a, one)
+            if isinstance(self.passes, DeadReckoningPasses):
+                rows = self.passes.run(prep, a, b)
+                if self.initial is None:
+                    self.initial = rows_of(rows, slice(0, 1))
+                solution = rows_of(rows, slice(1, None))
+                lost = track_lost(solution, self.cfg, has_sd=False)
             else:
-                flags = one.flags[1:] | (FLAG_SMOOTHED if smoothed else 0)
-                solution = make_solution(t, self.cfg, nav[1:], sd[1:], flags, one.cal[1:], [])
+                one = self.passes.run(prep, log, a, b)
+                smoothed = isinstance(one, KfPass) and one.nav_s is not None
+                nav, sd = (one.nav_s, one.sd_s) if smoothed else (one.nav, one.sd)
+                if isinstance(self.passes, RailPasses):
+                    solution = self.passes.pass_solution(prep, a, one)
+                else:
+                    flags = one.flags[1:] | (FLAG_SMOOTHED if smoothed else 0)
+                    solution = make_solution(t, self.cfg, nav[1:], sd[1:], flags, one.cal[1:], [])
+                lost = filter_lost(t, nav[1:], sd[1:], self.cfg)
             cut = next((slice(max(first - 1 - (a + 1), 0), last - a) for first, last in prep.cuts
                         if a < first and last <= b), None)
-            out.append(PassEstimate(solution, cut, not filter_lost(t, nav[1:], sd[1:], self.cfg).any()))
+            out.append(PassEstimate(solution, cut, not lost.any()))
             self.done += 1
             self.imu.forget_before(b * per_epoch - 1)
             self.preparer.forget_before(a)

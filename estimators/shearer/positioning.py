@@ -19,7 +19,7 @@ Methods (estimators.shearer.methods runs them by name, each an estimates/NAME st
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import NamedTuple
 
@@ -45,7 +45,7 @@ from estimators.shearer.health import (
 )
 from estimators.shearer.position_fixes import Fixes, fixes_for, segment_points
 from estimators.shearer.prepare import Mech, Prepared
-from estimators.shearer.solution import N_SD, Solution, make_solution
+from estimators.shearer.solution import N_SD, Solution, join_rows, make_solution, rows_of
 from estimators.sins.strapdown import Mechanization
 
 
@@ -115,21 +115,13 @@ def _sd(p: np.ndarray) -> np.ndarray:
 
 
 class _Forward:
-    """Storage of one forward run: per-epoch navigation, calibration and state sigmas (full covariances only per
-    segment, on disk for the offline smoother)."""
+    """Storage of one forward run: per-epoch navigation, calibration, state sigmas and flags."""
 
-    def __init__(self, n: int, keep_dir: Path | None):
+    def __init__(self, n: int):
         self.nav = np.zeros((n + 1, es.N_NAV))
         self.cal = np.zeros((n + 1, es.N_CAL))
         self.sd = np.zeros((n + 1, es.N_STATES))
         self.flags = np.zeros(n + 1, np.int32)
-        self.keep_dir = keep_dir
-        self.saved: list[tuple[int, int]] = []
-
-    def save_segment(self, a: int, x_post, p_post, p_pred, phi) -> None:
-        if self.keep_dir is not None:
-            np.savez(self.keep_dir / f"{a}.npz", x_post=x_post, p_post=p_post, p_pred=p_pred, phi=phi)
-            self.saved.append((a, a + x_post.shape[0] - 1))
 
 
 class _Segment(NamedTuple):
@@ -259,16 +251,16 @@ class KfPasses:
         return notes
 
 
-def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
-           keep_dir: Path | None = None) -> tuple[Solution, Solution | None, _Forward]:
+def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool, store: PassStore | None = None
+           ) -> tuple[Solution, Solution | None]:
     """One forward run (KfPasses over the log's passes); with `smooth`, the online RTS at each pass end (its output
-    and CPOEM points)."""
+    and CPOEM points); with `store`, each pass kept for rts_offline."""
     n = prep.t_kf.size - 1
-    fwd = _Forward(n, keep_dir)
-    passes = KfPasses(log, cfg, prep, cpoem, smooth,
-                      None if keep_dir is None else lambda a, seg: fwd.save_segment(a, seg.x_post, seg.p_post,
-                                                                                   seg.p_pred, seg.phi))
+    fwd = _Forward(n)
+    passes = KfPasses(log, cfg, prep, cpoem, smooth, None if store is None else store.keep)
     fwd.nav[0], fwd.sd[0] = passes.nav, _sd(passes.p)
+    if store is not None:
+        store.start(passes)
     smooth_nav = fwd.nav.copy() if smooth else None
     smooth_sd = fwd.sd.copy() if smooth else None
     for a, b in prep.segments:
@@ -283,30 +275,87 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
     smoothed = None
     if smooth:
         smoothed = make_solution(prep.t_kf, cfg, smooth_nav, smooth_sd, fwd.flags | FLAG_SMOOTHED, fwd.cal, notes)
-    return forward, smoothed, fwd
+    return forward, smoothed
 
 
-def rts_offline(prep: Prepared, cfg: Config, fwd: _Forward, notes: list[str]) -> Solution:
-    """One backward pass (001 eqs. 29-31) over the whole forward run, segment by segment from the end (`notes`: the
-    forward run's).
+class PassStore:
+    """A forward run kept on disk for rts_offline, a file a pass (KfPasses' `keep`): the smoother's per-epoch
+    matrices and the forward rows. `smoothed` runs the offline smoother over them; a pass's arrays are in memory
+    one at a time, so its memory does not grow with the run."""
 
-    Row 0 of a stored segment is the previous segment's last epoch: its update is that segment's last row, and
-    the smoothed value at a segment's last epoch is the one the later segment's pass computed."""
-    nav, cal, sd = fwd.nav.copy(), fwd.cal.copy(), fwd.sd.copy()
-    segs = [(a, b, fwd.keep_dir / f"{a}.npz") for a, b in fwd.saved]
-    last_update = {b: np.load(path)["x_post"][-1] for a, b, path in segs}
-    known = None
-    for a, b, path in reversed(segs):
-        known = _smooth_stored(path, last_update.get(a, np.zeros(es.N_STATES)), known, nav[a:b], cal[a:b], sd[a:b])
-    return make_solution(prep.t_kf, cfg, nav, sd, fwd.flags | FLAG_SMOOTHED, cal, notes)
+    def __init__(self, folder: Path):
+        self.folder = folder
+        self.saved: list[tuple[int, int]] = []  # the passes kept: epochs a..b
+        self.first: dict[str, np.ndarray] | None = None  # epoch 0's forward row
+
+    def start(self, passes: KfPasses) -> None:
+        """Epoch 0's forward row: the start state and its sigmas, no calibration, no flag."""
+        self.first = {"nav": passes.nav[None].copy(), "cal": np.zeros((1, es.N_CAL)), "sd": _sd(passes.p)[None],
+                      "flags": np.zeros(1, np.int32)}
+
+    def keep(self, a: int, seg: _Segment) -> None:
+        np.savez(self._path(a), x_post=seg.x_post, p_post=seg.p_post, p_pred=seg.p_pred, phi=seg.phi,
+                 nav=seg.nav[1:], cal=seg.cal[1:], sd=_sd(seg.p_post[1:]), flags=seg.flags[1:])
+        self.saved.append((a, a + seg.x_post.shape[0] - 1))
+
+    def _path(self, a: int, kind: str = "forward") -> Path:
+        return self.folder / f"{kind}_{a}.npz"
+
+    def _rows(self, a: int, kind: str = "forward") -> dict[str, np.ndarray]:
+        with np.load(self._path(a, kind)) as data:
+            return {k: data[k] for k in ROW_KEYS}
+
+    def smoothed(self, t_kf: np.ndarray, cfg: Config) -> Iterator[Solution]:
+        """rts_offline's rows (001 eqs. 29-31: one backward pass over the whole forward run, pass by pass from the
+        end), a pass at a time in time order, epoch 0's row with the first.
+
+        Row 0 of a stored pass is the previous pass's last epoch: its update is that pass's last row, and the smoothed
+        value at a pass's last epoch is the one the later pass's smoother computed; the run's last epoch keeps its
+        forward value. Each pass's smoothed rows go to a file of their own on the way back."""
+        if not self.saved:  # no pass: the start
+            yield make_solution(t_kf[:1], cfg, self.first["nav"], self.first["sd"], self.first["flags"] | FLAG_SMOOTHED,
+                                self.first["cal"], [])
+            return
+        last_update = {}
+        for a, b in self.saved:
+            with np.load(self._path(a)) as data:
+                last_update[b] = data["x_post"][-1]
+        known = None
+        for i in range(len(self.saved) - 1, -1, -1):
+            a, b = self.saved[i]
+            own = self._rows(a)
+            start = self.first if i == 0 else {k: v[-1:] for k, v in self._rows(self.saved[i - 1][0]).items()}
+            rows = {k: np.concatenate([start[k], own[k][:-1]]) for k in ROW_KEYS}  # epochs a..b-1
+            with np.load(self._path(a)) as data:  # each array read fresh from the file: changed in place
+                known = _smooth_stored(data, last_update.get(a, np.zeros(es.N_STATES)), known, rows)
+            np.savez(self._path(a, "smoothed"), **rows)
+        for i, (a, b) in enumerate(self.saved):
+            rows = self._rows(a, "smoothed")
+            end = self._rows(self.saved[i + 1][0], "smoothed") if i + 1 < len(self.saved) else self._rows(a)
+            rows = {k: np.concatenate([v if i == 0 else v[1:], end[k][:1] if i + 1 < len(self.saved) else end[k][-1:]])
+                    for k, v in rows.items()}
+            yield make_solution(t_kf[a if i == 0 else a + 1:b + 1], cfg, rows["nav"], rows["sd"],
+                                rows["flags"] | FLAG_SMOOTHED, rows["cal"], [])
 
 
-def _smooth_stored(path: Path, x_first: np.ndarray, known: tuple[np.ndarray, np.ndarray] | None, nav: np.ndarray,
-                   cal: np.ndarray, sd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """rts_offline's backward pass over one stored segment (its row 0's update x_first; `known` the smoothed state and
-    covariance at its last epoch, from the later segment), applied to its rows but the last of nav, cal, sd in place;
-    returns the smoothed state and covariance at its first epoch. One segment's arrays at a time: they go on return."""
-    data = np.load(path)  # each array read fresh from the file: changed in place
+ROW_KEYS = ("nav", "cal", "sd", "flags")
+"""The forward rows PassStore keeps of each pass."""
+
+
+def rts_offline(prep: Prepared, cfg: Config, store: PassStore, notes: list[str]) -> Solution:
+    """The offline smoother (PassStore.smoothed) over a whole forward run kept in `store` (`notes`: the forward
+    run's)."""
+    sol = join_rows(list(store.smoothed(prep.t_kf, cfg)))
+    sol.notes = list(notes)
+    return sol
+
+
+def _smooth_stored(data, x_first: np.ndarray, known: tuple[np.ndarray, np.ndarray] | None,
+                   rows: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The offline smoother's backward pass over one stored pass (`data`: its matrices; its row 0's update x_first;
+    `known` the smoothed state and covariance at its last epoch, from the later pass), applied to the forward
+    `rows` of its epochs but the last (nav, cal, sd) in place; returns the smoothed state and covariance at its
+    first epoch."""
     x_post, p_pred, phi, p_post = data["x_post"], data["p_pred"], data["phi"], data["p_post"]
     x_post[0] = x_first
     x_run = x_post.copy()
@@ -314,35 +363,51 @@ def _smooth_stored(path: Path, x_first: np.ndarray, known: tuple[np.ndarray, np.
         x_run[-1], p_post[-1] = known
     x_s, p_s = np.empty_like(x_post), p_post  # p smoothed in place, as in run_kf
     rts_backward(x_run, p_post, np.zeros_like(x_post), p_pred, phi, x_s, p_s)
-    _apply_rows(nav, cal, x_s[:-1] - x_post[:-1])
-    sd[:] = _sd(p_s[:-1])
+    _apply_rows(rows["nav"], rows["cal"], x_s[:-1] - x_post[:-1])
+    rows["sd"][:] = _sd(p_s[:-1])
     return x_s[0].copy(), p_s[0].copy()
 
 
-def dead_reckoning(log: Log, cfg: Config, prep: Prepared, cal: np.ndarray | None = None) -> Solution:
-    """001's traditional method: the free SINS attitude carries the odometer distance along body y (with `cal`,
-    the biases, odometer mounting and scale of a filter are applied first). The SINS runs pass by pass
-    (estimators.sins.strapdown.Mechanization)."""
-    gyro = cal[es.CAL_GYRO] if cal is not None else np.zeros(3)
-    accel = cal[es.CAL_ACCEL] if cal is not None else np.zeros(3)
-    dt = 1.0 / (1.0 / prep.imu_dt)
-    sins = Mechanization(prep.nav0[es.LAT], prep.nav0[es.LON], prep.nav0[es.HGT], np.zeros(3), prep.nav0[es.QUAT],
-                         cfg.n_samples)
-    q = np.empty((prep.t_kf.size, 4))
-    for a, b in prep.segments:
+class DeadReckoningPasses:
+    """001's traditional method pass by pass: the free SINS attitude carries the odometer distance along body y
+    (with `cal`, the biases, odometer mounting and scale of a filter are applied first), the SINS and the position
+    carried from pass to pass. `run` gives a pass's rows as `dead_reckoning` of the whole log has them, bit for
+    bit (the sums in the same order)."""
+
+    def __init__(self, cfg: Config, prep: Prepared, body0_llh: np.ndarray, cal: np.ndarray | None = None):
+        cal = np.zeros(es.N_CAL) if cal is None else cal
+        self.gyro, self.accel, self.scale = cal[es.CAL_GYRO], cal[es.CAL_ACCEL], cal[es.CAL_SCALE]
+        self.dt = 1.0 / (1.0 / prep.imu_dt)
+        self.sins = Mechanization(prep.nav0[es.LAT], prep.nav0[es.LON], prep.nav0[es.HGT], np.zeros(3),
+                                  prep.nav0[es.QUAT], cfg.n_samples)
+        self.y_m_b = quat_to_mat(rotvec_to_quat(cal[es.CAL_MOUNT]))[:, 1]  # odometer axis in b (C_m^b: rotvec)
+        self.body0 = body0_llh
+        self.enu = np.zeros((1, 3))  # the body point at the last epoch run, in the tangent plane at body0
+        self.notes: list[str] = []  # (dead reckoning has nothing to say of itself)
+
+    def run(self, prep: Prepared, a: int, b: int) -> Solution:
+        """Epochs a..b (row 0 at epoch a: at epoch 0 the start, at rest; else the previous pass's last)."""
         t, dtheta_b, dv_b, first_row = prep.epoch_increments(a, b)
         try:
-            q[a:b + 1] = sins.run(t, dtheta_b - gyro * dt, dv_b - accel * dt, first_row).q_nb[::prep.steps]
+            q_nb = self.sins.run(t, dtheta_b - self.gyro * self.dt, dv_b - self.accel * self.dt,
+                                 first_row).q_nb[::prep.steps]
         except ValueError as err:
             raise PositioningError(f"imu: {err}") from None
-    mount = cal[es.CAL_MOUNT] if cal is not None else np.zeros(3)
-    scale = cal[es.CAL_SCALE] if cal is not None else 0.0
-    y_m_b = quat_to_mat(rotvec_to_quat(mount))[:, 1]  # odometer axis in b (C_m^b as a rotation vector)
-    dd = np.diff(prep.odo) / (1 + scale)
-    step_n = quat_rotate(q[:-1], np.broadcast_to(y_m_b, (dd.size, 3))) * dd[:, None]
-    enu = np.concatenate([np.zeros((1, 3)), np.cumsum(step_n, axis=0)])
-    body0 = log.survey_llh[0]
-    llh = np.column_stack(earth.enu_to_lla(enu, *body0))
-    v = np.concatenate([np.zeros((1, 3)), step_n / np.diff(prep.t_kf)[:, None]])
-    nan = np.full((prep.t_kf.size, N_SD), np.nan)
-    return Solution(prep.t_kf, llh, v, q, nan, np.zeros(prep.t_kf.size, np.int32))
+        dd = np.diff(prep.odo[a:b + 1]) / (1 + self.scale)
+        step_n = quat_rotate(q_nb[:-1], np.broadcast_to(self.y_m_b, (dd.size, 3))) * dd[:, None]
+        enu = np.cumsum(np.concatenate([self.enu, step_n]), axis=0)
+        self.enu = enu[-1:]
+        t_kf = prep.t_kf[a:b + 1]
+        v_n = np.concatenate([np.zeros((1, 3)), step_n / np.diff(t_kf)[:, None]])
+        return Solution(t_kf, np.column_stack(earth.enu_to_lla(enu, *self.body0)), v_n, q_nb,
+                        np.full((t_kf.size, N_SD), np.nan), np.zeros(t_kf.size, np.int32))
+
+    def finish(self, prep: Prepared) -> list[str]:
+        return self.notes
+
+
+def dead_reckoning(log: Log, cfg: Config, prep: Prepared, cal: np.ndarray | None = None) -> Solution:
+    """001's traditional method over a prepared log (DeadReckoningPasses over its passes)."""
+    passes = DeadReckoningPasses(cfg, prep, log.survey_llh[0], cal)
+    rows = [passes.run(prep, a, b) for a, b in prep.segments]
+    return join_rows([rows[0]] + [rows_of(r, slice(1, None)) for r in rows[1:]])

@@ -56,9 +56,9 @@ def make_solution(t_kf: np.ndarray, cfg: Config, nav: np.ndarray, sd_all: np.nda
 
 
 def join_rows(parts: list[Solution]) -> Solution:
-    """Consecutive pieces of a filter's solution (with calibration; fusion and detector columns where they have
-    them) as one, without notes."""
-    sol = Solution(*(np.concatenate([getattr(p, k) for p in parts])
+    """Consecutive pieces of a method's solution (calibration where they have it; fusion and detector columns
+    where they have them) as one, without notes."""
+    sol = Solution(*(None if getattr(parts[0], k) is None else np.concatenate([getattr(p, k) for p in parts])
                      for k in ("t", "llh", "v_n", "q_nb", "sd", "flags", "cal", "sd_cal")))
     for extra in ("fusion", "detectors"):
         have = [getattr(p, extra) for p in parts if getattr(p, extra) is not None]
@@ -100,3 +100,9 @@ def state_columns(sol: Solution) -> dict[str, np.ndarray]:
             out[f"{name}_{a}"] = sol.cal[:, cal.start + i]
             out[f"sd_{name}_{a}"] = sol.sd_cal[:, cal.start + i]
     return out
+
+
+def rows_of(sol: Solution, rows: slice) -> Solution:
+    """Rows of a solution (its navigation, one-sigmas, flags and sensor states; no notes)."""
+    return Solution(*(None if getattr(sol, k) is None else getattr(sol, k)[rows]
+                      for k in ("t", "llh", "v_n", "q_nb", "sd", "flags", "cal", "sd_cal")))

@@ -248,8 +248,8 @@ def test_a_pass_gives_the_same_estimate_whether_or_not_it_keeps_the_smoothers_ro
     scn, log = default_log
     cfg = positioning_config(scn)
     prep = prepare(log, cfg)
-    plain, none, _ = run_kf(log, cfg, prep, cpoem=False, smooth=False)
-    kept, smoothed, _ = run_kf(log, cfg, prep, cpoem=False, smooth=True)
+    plain, none = run_kf(log, cfg, prep, cpoem=False, smooth=False)
+    kept, smoothed = run_kf(log, cfg, prep, cpoem=False, smooth=True)
     assert none is None and smoothed is not None
     for key in ("llh", "v_n", "q_nb", "sd", "flags", "cal"):
         assert np.array_equal(getattr(plain, key), getattr(kept, key)), key

@@ -73,12 +73,12 @@ def test_over_a_limit_is_one_line_naming_the_figure_the_limit_and_the_keys(data,
 
 def test_cycles_are_bounded_by_the_panel_and_the_resource_estimate_not_a_cap():
     """More cycles than the old cap of 200 load when the panel holds them, and the resource estimate decides whether
-    the run fits this machine: the default's batch methods (dr, rts_offline, dr_compensated) hold the whole run, so 250
-    cycles of the default face do not; panel_100's streamed filters over 200 cycles of its face do."""
-    data = changed("default", "cycles", 250)
-    data["face"]["panel_length_m"] = 250.0
+    the run fits this machine: 003's magnetometer filters (afkf, ckf_mag) hold the whole log, so 1000 cycles of
+    seed003's face do not; 50 do, and so do panel_100's streamed methods over 200 cycles of its face."""
+    data = changed("seed003", "cycles", 1000)
+    data["face"]["panel_length_m"] = 1200.0
     scn = parse_any(data, "long.toml")
-    assert scn.cycles == 250
+    assert scn.cycles == 1000
     with pytest.raises(ScenarioError, match="peak memory"):
         check_resources("long.toml", estimate_resources(scn))
     check_resources("fewer.toml", estimate_resources(parse_any(data | {"cycles": 50}, "fewer.toml")))
