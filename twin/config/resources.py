@@ -67,12 +67,12 @@ ride and truth (208 bytes a row) with their sensor draws in chunks (seed004: 1.2
 RECORDING_BYTES = 0.3e9
 """The run recording's own: its blocks of the long streams, the pans' and supports' frames a chunk at a time
 (seed004's write_recording: 250 MB above its start)."""
-HELD_BYTES = {"recording_s": 3500.0, "epochs_scored": 250.0, "epochs_batch": 2700.0}
+HELD_BYTES = {"recording_s": 3500.0, "epochs_batch": 2700.0}
 """What a run's stages hold for its whole length [bytes per item]: the run recording's plotted series at the record
-rate (per simulated second; seed004: 15 MB a cycle), each scored method's estimate while its errors are computed (per
-filter epoch, a method per worker at a time), and each batch method's solution and filter arrays (per filter epoch,
-the methods of a group and of the other workers at once; the streamed filters hold none:
-estimators.shearer.config.STREAMED; seed004 with five batch methods and 234 000 epochs: 3.16 GB)."""
+rate (per simulated second; seed004: 15 MB a cycle), and each batch method's solution and filter arrays (per filter
+epoch, the methods of a group and of the other workers at once; the streamed methods hold none and are scored a row
+group at a time: estimators.shearer.config.STREAMED, twin.pipeline.estimate.EstimateWriter; seed004 with five batch
+methods and 234 000 epochs: 3.16 GB, streamed: 2.11 GB)."""
 PASS_BYTES_PER_EPOCH = 45e3
 """A streamed filter's peak memory per filter epoch of its pass [bytes]: the pass's error states, covariances,
 predicted covariances and transitions for the smoother, its IMU rows (panel_100 over 5 cycles: 2.57 GB with two
@@ -201,7 +201,7 @@ def stage_memory(scn: Scenario, t: float, rows: dict[str, float], sensors: bool 
             batch_bytes = (sum(rows.get(k, 0.0) * ROW_COSTS[k].memory for k in BATCH_LOG_STREAMS)
                            + HELD_BYTES["epochs_batch"] * epochs * min(len(batch), 2 * at_once))
             streamed = max(streamed, batch_bytes)
-        out["estimators"] = BASE_MEMORY + (streamed + HELD_BYTES["epochs_scored"] * epochs * at_once) * workers
+        out["estimators"] = BASE_MEMORY + streamed * workers
     return out
 
 
