@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import importlib
 import multiprocessing
-import signal
 from collections.abc import Sequence
 from dataclasses import dataclass
+
+from estimators.workers import leave_signals_to_parent
 
 
 @dataclass(frozen=True)
@@ -50,8 +51,7 @@ def _worker_start(compiled) -> None:
 
     global _compiled
     _compiled = compiled
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    leave_signals_to_parent()
 
     class Raise(event.Listener):
         def on_start(self, event) -> None:

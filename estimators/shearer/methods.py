@@ -10,7 +10,6 @@
 from __future__ import annotations
 
 import multiprocessing
-import signal
 import tempfile
 from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
@@ -25,6 +24,7 @@ from estimators.shearer.positioning import PassStore, dead_reckoning, rts_offlin
 from estimators.shearer.prepare import Prepared, prepare
 from estimators.shearer.rail_kinematics import run_rail
 from estimators.shearer.solution import Solution, join_rows
+from estimators.workers import leave_signals_to_parent
 
 METHODS = ("dr", "dr_compensated", "kf", "kf_rts", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag", "afkf",
            "fkf_rail")
@@ -140,12 +140,6 @@ _SHARED: tuple[Log | None, Config, Prepared | None, Sink | None, Pieces | None] 
 groups), sink and the log's pieces (online methods)."""
 
 
-def _worker_start() -> None:
-    """A worker leaves Ctrl-C and SIGTERM to its parent, which stops the pool and says so once."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-
-
 def _run_task(task: Task) -> dict:
     log, cfg, prep, sink, pieces = _SHARED
     kind, group = task
@@ -155,7 +149,7 @@ def _run_task(task: Task) -> dict:
 def _run_tasks(tasks: list[Task], workers: int) -> list[dict]:
     """The tasks on `workers` forked processes, which share the parent's log and prepared increments (copy on
     write) and its compiled kernels; results in the order of `tasks`. An exception in a task is raised here."""
-    pool = multiprocessing.get_context("fork").Pool(min(workers, len(tasks)), initializer=_worker_start)
+    pool = multiprocessing.get_context("fork").Pool(min(workers, len(tasks)), initializer=leave_signals_to_parent)
     try:
         pending = [pool.apply_async(_run_task, (task,)) for task in tasks]
         results = [p.get() for p in pending]

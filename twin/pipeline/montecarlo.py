@@ -12,7 +12,6 @@ from __future__ import annotations
 import logging
 import os
 import shutil
-import signal
 import socket
 import tempfile
 from collections.abc import Callable
@@ -26,6 +25,7 @@ import numpy as np
 import pyarrow as pa
 
 from estimators.io.logformat import STREAMS, read_stream, write_stream
+from estimators.workers import leave_signals_to_parent
 from twin.config.scenario import Scenario
 from twin.pipeline.estimate import run_estimators
 
@@ -172,14 +172,9 @@ _worker_context: TrialContext | None = None
 """A pool worker's context, loaded once by `_load_worker_context`."""
 
 
-def _ignore_interrupts() -> None:
-    """A pool worker leaves Ctrl-C to the parent (which terminates it): no traceback per worker."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 def _load_worker_context(run_dir: Path, scn: Scenario) -> None:
     global _worker_context
-    _ignore_interrupts()
+    leave_signals_to_parent()
     _worker_context = load_trial_context(run_dir, scn)
 
 
