@@ -8,7 +8,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 
-from twin.pipeline.montecarlo import ProcessTrials, _ignore_interrupts
+from estimators.workers import leave_signals_to_parent
+from twin.pipeline.montecarlo import ProcessTrials
 
 
 def _interrupted_and_alive() -> str:
@@ -19,7 +20,7 @@ def _interrupted_and_alive() -> str:
 
 def test_workers_ignore_ctrl_c_and_an_interrupted_parent_stops_them_at_once(capfd):
     trials = ProcessTrials(2)
-    trials._pool = ProcessPoolExecutor(2, mp_context=get_context("spawn"), initializer=_ignore_interrupts)
+    trials._pool = ProcessPoolExecutor(2, mp_context=get_context("spawn"), initializer=leave_signals_to_parent)
     assert trials._pool.submit(_interrupted_and_alive).result(timeout=120) == "alive"
     assert "Traceback" not in capfd.readouterr().err
     futures = [trials._pool.submit(time.sleep, 60) for _ in range(2)]
