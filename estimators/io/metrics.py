@@ -98,41 +98,11 @@ class TruthTrack:
         self._kept = [(t.copy(), true), *self._kept][:self.KEEP]
         return true
 
-    def _prepared(self):
-        """Each block's (cols, lo, hi): its columns after the previous block's last sample, the longitude
-        unwrapped from the run's first sample; the times it interpolates are lo <= t < hi."""
-        prev = None  # the previous block's last sample, its longitude unwrapped, the correction summed to it
-        for block in self.blocks:
-            cols = {k: column(block, k) for k in ("t", "lat", "lon", "h")}
-            if not cols["t"].size:
-                continue
-            cols["q_nb"] = columns(block, "q_nb", "wxyz")
-            if "cycle" in (block.keys() if isinstance(block, Mapping) else block.column_names):
-                cols["cycle"] = column(block, "cycle")
-            if prev is None:
-                self._t_first = cols["t"][0]
-                lo, carry, lon_first = -np.inf, 0.0, cols["lon"][:1]
-            else:
-                cols = {k: np.concatenate([prev[k], v]) for k, v in cols.items()}
-                lo, carry, lon_first = cols["t"][0], prev["carry"], prev["lon_unwrapped"]
-            # np.unwrap's correction, summed in order from the run's first sample
-            lon = cols["lon"]
-            dd = np.diff(lon)
-            correction = np.mod(dd + np.pi, 2 * np.pi) - np.pi
-            np.copyto(correction, np.pi, where=(correction == -np.pi) & (dd > 0))
-            correction -= dd
-            np.copyto(correction, 0.0, where=np.abs(dd) < np.pi)
-            summed = np.cumsum(np.concatenate([[carry], correction]))
-            cols["lon"] = np.concatenate([lon_first, lon[1:] + summed[1:]])
-            prev = {k: v[-1:] for k, v in cols.items()} | {"lon": lon[-1:], "carry": summed[-1],
-                                                           "lon_unwrapped": cols["lon"][-1:]}
-            yield cols, lo, cols["t"][-1]
-
     def _interpolate(self, t: np.ndarray) -> dict[str, np.ndarray]:
         out: dict[str, np.ndarray] = {}
         todo = np.ones(t.size, bool)
         if self._block is None or (t.size and t.min() < self._block[1]):
-            self._cursor, self._block = self._prepared(), None
+            self._cursor, self._block = truth_windows(self.blocks), None
         while True:
             if self._block is not None:
                 cols, lo, hi = self._block
@@ -142,6 +112,8 @@ class TruthTrack:
             block = next(self._cursor, None)
             if block is None:
                 break
+            if block[1] == -np.inf:
+                self._t_first = block[0]["t"][0]
             self._block = block
         if self._block is None:
             raise LogError("truth_shearer holds no samples to score against")
@@ -169,6 +141,38 @@ class TruthTrack:
         if "cycle" in out:
             out["cycle"][sel] = cols["cycle"][np.clip(np.searchsorted(t_src, ts, side="right") - 1, 0, None)]
         todo &= ~sel
+
+
+def truth_windows(blocks):
+    """TruthTrack's blocks as (cols, lo, hi): a block's columns after the previous block's last sample, the
+    longitude unwrapped from the run's first sample; the times it interpolates are lo <= t < hi (lo -inf for the
+    first block). A function of the blocks, not a method: a generator held by the object it reads would keep it
+    alive until a cyclic collection."""
+    prev = None  # the previous block's last sample, its longitude unwrapped, the correction summed to it
+    for block in blocks:
+        cols = {k: column(block, k) for k in ("t", "lat", "lon", "h")}
+        if not cols["t"].size:
+            continue
+        cols["q_nb"] = columns(block, "q_nb", "wxyz")
+        if "cycle" in (block.keys() if isinstance(block, Mapping) else block.column_names):
+            cols["cycle"] = column(block, "cycle")
+        if prev is None:
+            lo, carry, lon_first = -np.inf, 0.0, cols["lon"][:1]
+        else:
+            cols = {k: np.concatenate([prev[k], v]) for k, v in cols.items()}
+            lo, carry, lon_first = cols["t"][0], prev["carry"], prev["lon_unwrapped"]
+        # np.unwrap's correction, summed in order from the run's first sample
+        lon = cols["lon"]
+        dd = np.diff(lon)
+        correction = np.mod(dd + np.pi, 2 * np.pi) - np.pi
+        np.copyto(correction, np.pi, where=(correction == -np.pi) & (dd > 0))
+        correction -= dd
+        np.copyto(correction, 0.0, where=np.abs(dd) < np.pi)
+        summed = np.cumsum(np.concatenate([[carry], correction]))
+        cols["lon"] = np.concatenate([lon_first, lon[1:] + summed[1:]])
+        prev = {k: v[-1:] for k, v in cols.items()} | {"lon": lon[-1:], "carry": summed[-1],
+                                                       "lon_unwrapped": cols["lon"][-1:]}
+        yield cols, lo, cols["t"][-1]
 
 
 def truth_at(truth_shearer, t: np.ndarray) -> dict[str, np.ndarray]:
