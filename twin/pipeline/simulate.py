@@ -320,25 +320,34 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     # a chunk needs only the pan line up to its end, and each starts with the shearer at rest.
     bounds = shearer_chunks(scn, timeline)
     pending: list[Future] = []
+    taking: list[Future] = []  # the chunks the sink is taking on its own thread, oldest first
     handed = [0]
 
     def hand_over(keep: int) -> None:
-        """Hand the finished chunks, oldest first, to the sink until at most `keep` are pending."""
+        """Hand the finished chunks, oldest first, to the sink until at most `keep` are pending. The sink takes them
+        on a thread of its own while the face simulates on (taken() waits for it); live taps see each chunk after
+        its readings, as the sink's."""
         while len(pending) > keep:
             chunk = pending.pop(0).result()
             if loop is not None:
                 loop.observe(chunk)
-            shearer_sink(chunk)
-            if live is not None:
-                live.shearer(chunk)
+            taking.append(sinking.submit(shearer_sink, chunk))
             handed[0] += 1
-            report("shearer", handed[0] / (len(bounds) - 1))
+            if live is not None:
+                taken()
+                live.shearer(chunk)
+
+    def taken() -> None:
+        """Wait for the sink to have taken every chunk handed over (the support rows' sink reads what it holds)."""
+        while taking:
+            taking.pop(0).result()
+            report("shearer", (handed[0] - len(taking)) / (len(bounds) - 1))
 
     half = scn.shearer.length_m / 2
     supports_told = 0  # the recorder's support row blocks the live taps have seen
     # The support rows are let go once the sink has them, unless the alignment system's estimator reads them.
     release = supports_sink is not None and (loop is None or not loop.reads_support_rows)
-    with ThreadPoolExecutor(max_workers=1) as pool:
+    with ThreadPoolExecutor(max_workers=1) as pool, ThreadPoolExecutor(max_workers=1) as sinking:
         for plan in timeline.cycles:
             if loop is not None:  # the shears whose paths this cycle's offsets come from, handed over
                 hand_over(keep=max(0, len(pending) - max(0, loop.shears_needed(plan.cycle) - handed[0])))
@@ -357,6 +366,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
                 if t_due >= plan.t_push_end - MIN_EVENT_S or not event(t_due, None, plan.t_push_end, repush=k > 0):
                     break
             report("face", (plan.cycle + 1) / len(timeline.cycles))
+            taken()
             if live is not None or supports_sink is not None:
                 rows = recorder.support_rows(supports_told)
                 for tap in (live.supports if live is not None else None, supports_sink):
@@ -376,6 +386,7 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
             # The face runs at most one chunk ahead of the ride: memory stays that of two chunks.
             hand_over(keep=1)
         hand_over(keep=0)
+        taken()
     if loop is not None:
         loop.finish()
     legs_until(timeline.duration)

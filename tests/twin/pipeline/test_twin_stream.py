@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import hashlib
+import threading
 
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
 import estimators.io.logformat as lf
-from tests.conftest import simulated
+from tests.conftest import capped, simulated
+from twin.pipeline.simulate import simulate_stream
 from twin.pipeline.twin_stream import SHEARER_STREAMS, stream_twin
 from twin.sensors.streams import imu_truth, sensor_streams
 
@@ -92,3 +94,30 @@ def test_live_taps_get_the_files_rows_as_they_are_drawn(streamed, tmp_path):
         for key in parts[0]:
             np.testing.assert_array_equal(np.concatenate([p[key] for p in parts]), table.column(key).to_numpy(),
                                           err_msg=f"{name}.{key}")
+
+
+class SinkFailed(Exception):
+    pass
+
+
+def test_the_face_simulates_on_while_the_sink_takes_a_chunk():
+    """The sink takes a ride chunk on a thread of its own: the first chunk's sink returns only once the face has
+    reported a later cycle (it would wait in vain on the face's thread); an error in a later sink stops the run."""
+    scn = capped("default", cycles=3)
+    taken: list[float] = []
+    face_moved = threading.Event()
+
+    def progress(stage: str, frac: float) -> None:
+        if stage == "face" and taken:
+            face_moved.set()
+
+    def sink(rows: dict[str, np.ndarray]) -> None:
+        taken.append(float(rows["t"][0]))
+        if len(taken) == 1:
+            assert face_moved.wait(timeout=120), "the face did not simulate on while the sink took a chunk"
+        else:
+            raise SinkFailed
+
+    with pytest.raises(SinkFailed):
+        simulate_stream(scn, sink, progress)
+    assert taken[0] == 0.0 and len(taken) >= 2
