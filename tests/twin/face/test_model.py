@@ -52,6 +52,8 @@ def test_ride_model_steps_at_the_ride_rate_on_its_shoes():
     assert np.isclose(model.opt.timestep, 1 / scn.rates.ride_hz)
     shoes = [model.site(f"shoe_{s}").pos for s in ("rear", "front")]
     assert np.isclose(np.linalg.norm(shoes[1] - shoes[0]), scn.shearer.shoe_spacing_m)
+    # simulate_ride steps it without the collision pass: none of its geoms may collide with anything.
+    assert not model.geom_contype.any() and not model.geom_conaffinity.any()
 
 
 def natural_frequency_and_damping(decay: np.ndarray, dt: float) -> tuple[float, float]:
