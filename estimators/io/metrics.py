@@ -118,11 +118,20 @@ class TruthTrack:
         if self._block is None:
             raise LogError("truth_shearer holds no samples to score against")
         cols, _, hi = self._block
-        if t.size and (t.min() < self._t_first - 1e-9 or t.max() > hi + 1e-9):
-            raise LogError(f"estimate times {t.min():.6g} .. {t.max():.6g} s lie outside the truth span "
-                           f"{self._t_first:.6g} .. {hi:.6g} s")
+        self.check_span(t, self._t_first, hi)
         self._fill(out, cols, t, todo.copy(), todo)  # the times at the last sample
         return out
+
+    def windows(self):
+        """truth_windows over the track's blocks."""
+        return truth_windows(self.blocks)
+
+    @staticmethod
+    def check_span(t: np.ndarray, first: float, last: float) -> None:
+        """LogError (one line) when a time lies outside the truth's span first .. last."""
+        if t.size and (t.min() < first - 1e-9 or t.max() > last + 1e-9):
+            raise LogError(f"estimate times {t.min():.6g} .. {t.max():.6g} s lie outside the truth span "
+                           f"{first:.6g} .. {last:.6g} s")
 
     @staticmethod
     def _fill(out: dict[str, np.ndarray], cols: dict[str, np.ndarray], t: np.ndarray, sel: np.ndarray,

@@ -15,7 +15,6 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
 
 from estimators.faults.hydraulic_checks import HydraulicLayout
 from estimators.faults.ram_checks import RamLayout
@@ -32,7 +31,6 @@ from estimators.io.logformat import (
     StreamBlocks,
     estimate_file,
     make_table,
-    read_estimate,
     read_stream,
 )
 from estimators.kalman.error_state import CAL_MOUNT, CAL_SCALE
@@ -247,7 +245,7 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers
             return EstimateTables(run_dir, stream, written[stream.name])
 
         thresholds = detector_thresholds(scn)
-        detectors = {name: (read_estimate(run_dir, name, ESTIMATE_DETECTORS), thresholds)
+        detectors = {name: (StreamBlocks(*estimate_file(run_dir, name, ESTIMATE_DETECTORS)), thresholds)
                      for name in written[ESTIMATE_DETECTORS.name]}
         write_estimate_recording(Path(run_dir) / "estimates.rrd", scn, truth, tables(ESTIMATE), tables(ESTIMATE_STATES),
                                  states_truth, rate_hz=record_rate_hz, fusion=tables(ESTIMATE_FUSION),
@@ -256,16 +254,16 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers
 
 
 class EstimateTables(Mapping):
-    """A run's estimate files of one kind (ESTIMATE, ESTIMATE_STATES, ...) by method, each read when it is looked
-    up: a recording of many methods holds one table at a time."""
+    """A run's estimate files of one kind (ESTIMATE, ESTIMATE_STATES, ...) by method, each read a row group at a time
+    (StreamBlocks) when it is iterated: a recording holds a block of one method at a time."""
 
     def __init__(self, run_dir: Path, stream: Stream, methods: list[str]):
         self.run_dir, self.stream, self.methods = Path(run_dir), stream, methods
 
-    def __getitem__(self, method: str) -> pa.Table:
+    def __getitem__(self, method: str) -> StreamBlocks:
         if method not in self.methods:
             raise KeyError(method)
-        return read_estimate(self.run_dir, method, self.stream)
+        return StreamBlocks(*estimate_file(self.run_dir, method, self.stream))
 
     def __iter__(self) -> Iterator[str]:
         return iter(self.methods)

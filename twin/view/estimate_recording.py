@@ -59,6 +59,7 @@ and for the supports' canopy attitude (twin.pipeline.support_estimate.SupportAtt
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 
 import numpy as np
@@ -66,7 +67,7 @@ import pyarrow as pa
 import rerun as rr
 
 from estimators.io.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_ZUPT, NONORTH_AXES
-from estimators.io.metrics import attitude_errors, column, columns, position_errors, truth_at
+from estimators.io.metrics import TruthTrack, attitude_errors, column, columns, position_errors
 from estimators.nav import earth
 from estimators.shearer.federated_filter import MAG_DISTURBED, MAG_GATED, MAG_USED
 from estimators.shearer.methods import METHODS
@@ -76,9 +77,19 @@ from twin.pipeline.support_estimate import ANGLES, FLAG_NAMES, SupportAttitude
 from twin.view import plan
 from twin.view.recording import run_recording_id
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
-from twin.view.rerun_columns import series, time_column
-from twin.view.row_cuts import PathStrips, decimate, marker_rows, path_strips
+from twin.view.rerun_columns import PlottedSeries, RowBatches, SeriesBlock, series, time_column
+from twin.view.row_cuts import (
+    Blocks,
+    IntervalReduce,
+    MarkerCut,
+    PathStrips,
+    RowsOf,
+    blocks_of,
+    decimate,
+    decimated_blocks,
+)
 from twin.view.rrd_stream import recording_id, recording_stream
+from twin.view.truth_along import TruthAlong
 
 POSITION_AXES = ("east", "north", "up")
 ATTITUDE_AXES = ("e", "n", "u")
@@ -103,144 +114,218 @@ def _names(group: str) -> list[str]:
     return [f"{group}_{a}" for a in axes] if axes else [group]
 
 
-def plot_rows(table: pa.Table, rate_hz: float | None) -> tuple[pa.Table, np.ndarray]:
-    """The rows kept for plotting (first of each 1/rate_hz interval and the last; all at FULL rate) and their
-    times."""
-    keep = decimate(column(table, "t"), rate_hz)
-    sub = table.take(pa.array(keep))
-    return sub, column(sub, "t")
+def _record_rows(data: Blocks, rate_hz: float | None,
+                 each: Callable[[pa.Table], None] | None = None) -> Iterator[tuple[pa.Table, np.ndarray]]:
+    """A stream's rows at the record rate (decimated_blocks: the first of each 1/rate_hz interval and the last; all
+    at FULL rate) a block at a time, with their times; `each` is called with every block read."""
+    for sub in decimated_blocks(data, rate_hz, each):
+        yield sub, column(sub, "t")
 
 
-def _log_band(rec: rr.RecordingStream, entity: str, t: np.ndarray, sd: np.ndarray, label: str,
-              rate_hz: float | None) -> None:
-    """+- one-sigma of (K,) values as two series, unless there is no sigma at all (NaN throughout)."""
-    if np.isfinite(sd).any():
-        series(rec, entity, t, np.column_stack([sd, -sd]), [f"+1 sigma {label}", f"-1 sigma {label}"],
-               rate_hz=rate_hz)
+def _has_rows(data: Blocks) -> bool:
+    return any(block.num_rows for block in blocks_of(data))
 
 
-def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth_shearer, method: str, table: pa.Table,
+def _flag_rows(t: np.ndarray, flags: np.ndarray, bits) -> tuple[np.ndarray, np.ndarray]:
+    """OR-ed flags (K,) as 0/1 series, a column per (label, bit) of `bits`."""
+    flags = np.asarray(flags, np.int64)
+    return t, np.column_stack([(flags & bit) != 0 for _, bit in bits]).reshape(t.size, len(bits)).astype(float)
+
+
+def _flag_series(data: Blocks, name: str, bits, rate_hz: float | None) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """A stream's flag column `name` OR-ed over each plot interval (a single-sample fix is not decimated away, and the
+    0/1 steps keep their edges in visible_rows) as 0/1 series (_flag_rows), a block at a time."""
+    flags = IntervalReduce(rate_hz, np.bitwise_or)
+    for block in blocks_of(data):
+        yield _flag_rows(*flags.push(column(block, "t"), np.asarray(block.column(name).to_numpy(), np.int64)), bits)
+    yield _flag_rows(*flags.finish(), bits)
+
+
+def _estimate_plots(method: str, truth: bool) -> dict[str, list[str]]:
+    names = {}
+    if truth:
+        names[f"plots/errors/{method}/horizontal"] = [f"{method} [m]"]
+        for axis, a in zip(POSITION_AXES, ATTITUDE_AXES):
+            names[f"plots/errors/{method}/{axis}"] = [f"{method} {axis} [m]"]
+            names[f"plots/attitude_errors/{method}/{a}"] = [f"{method} phi_{a} [deg]"]
+    for axis, a in zip(POSITION_AXES, ATTITUDE_AXES):
+        names[f"plots/sigma/{method}/position/{axis}"] = [f"{sign}1 sigma {method} {axis} [m]" for sign in "+-"]
+        names[f"plots/sigma/{method}/attitude/{a}"] = [f"{sign}1 sigma {method} phi_{a} [deg]" for sign in "+-"]
+    names[f"plots/flags/{method}"] = [f"{method} {label}" for label, _ in FLAG_SERIES]
+    return names
+
+
+def _estimate_series(method: str, truth: TruthTrack | None, estimate: Blocks, rate_hz: float | None,
+                     each: Callable[[pa.Table], None] | None = None) -> Iterator[SeriesBlock]:
+    """_estimate_plots' series a block at a time: errors against the truth (read forwards once), sigmas, flags."""
+    along = None if truth is None else TruthAlong(truth)
+    flags = _flag_series(estimate, "flags", FLAG_SERIES, rate_hz)
+    for sub, t in _record_rows(estimate, rate_hz, each):
+        block = {}
+        if along is not None:
+            err, phi = position_errors(sub, along)[1], attitude_errors(sub, along)[1]
+            block[f"plots/errors/{method}/horizontal"] = (t, np.hypot(err[:, 0], err[:, 1])[:, None])
+            for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
+                block[f"plots/errors/{method}/{axis}"] = (t, err[:, i:i + 1])
+                block[f"plots/attitude_errors/{method}/{a}"] = (t, np.degrees(phi[:, i:i + 1]))
+        sd_pos, sd_att = columns(sub, "sd_pos"), np.degrees(columns(sub, "sd_att"))
+        for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
+            block[f"plots/sigma/{method}/position/{axis}"] = (t, np.column_stack([sd_pos[:, i], -sd_pos[:, i]]))
+            block[f"plots/sigma/{method}/attitude/{a}"] = (t, np.column_stack([sd_att[:, i], -sd_att[:, i]]))
+        yield block
+    for rows in flags:
+        yield {f"plots/flags/{method}": rows}
+
+
+def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth: TruthTrack | None, method: str, estimate: Blocks,
                   rate_hz: float | None, color: np.ndarray) -> None:
-    if table.num_rows == 0:
+    """An estimate's path and point (3-D and plan) and its plots, from its file read twice a block at a time: first
+    the path, the points and the plots' ranges, then the plots cut and sent."""
+    if not _has_rows(estimate):
         return
     site = scn.site
-    t_all = column(table, "t")
-    p_all = earth.lla_to_enu(column(table, "lat"), column(table, "lon"), column(table, "h"), np.radians(site.lat_deg),
-                             np.radians(site.lon_deg), site.height_m)
-    # With truth one strip per cycle, the cycle of the truth sample at or before each estimate time.
-    cycle = None
-    if truth_shearer is not None:
-        cycle = truth_at(truth_shearer, t_all)["cycle"]
-    rec.log(f"world/estimates/{method}/path", rr.LineStrips3D(path_strips(t_all, p_all, cycle, rate_hz), radii=0.03,
-                                                              colors=color), static=True)
-    moved = marker_rows(t_all, p_all, rate_hz)
-    rec.log(f"world/estimates/{method}/position", rr.Points3D.from_fields(radii=0.15, colors=color), static=True)
-    rec.send_columns(f"world/estimates/{method}/position", indexes=[time_column(t_all[moved])],
-                     columns=rr.Points3D.columns(positions=p_all[moved].astype(np.float32)))
-    cycle = np.zeros(t_all.size, np.int64) if cycle is None else cycle
-    plan_path = PathStrips(rate_hz)
-    plan_path.push(t_all, plan.face_coordinates(scn, p_all, cycle), cycle)
-    plan.log_path(rec, scn, f"{plan.PLAN_ROOT}/estimates/{method}", plan_path, t_all[moved], p_all[moved],
-                  cycle[moved], color)
-    sub, t = plot_rows(table, rate_hz)
+    along = None if truth is None else TruthAlong(truth)  # the cycle of the truth sample at or before each estimate
+    path, plan_path, markers = PathStrips(rate_hz), PathStrips(rate_hz), MarkerCut(rate_hz)
+    entity = f"world/estimates/{method}/position"
+    points = RowBatches(lambda t, p: rec.send_columns(entity, indexes=[time_column(t)],
+                                                      columns=rr.Points3D.columns(positions=p.astype(np.float32))),
+                        lambda: rec.log(entity, rr.Points3D.from_fields(radii=0.15, colors=color), static=True))
+    plan_entity = f"{plan.PLAN_ROOT}/estimates/{method}"
+    plan_points = plan.position_batches(rec, scn, plan_entity, color)
+    last = []
 
-    if truth_shearer is not None:
-        _, err = position_errors(sub, truth_shearer)
-        _, phi = attitude_errors(sub, truth_shearer)
-        series(rec, f"plots/errors/{method}/horizontal", t, np.hypot(err[:, 0], err[:, 1])[:, None],
-               [f"{method} [m]"], rate_hz=rate_hz)
-        for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
-            series(rec, f"plots/errors/{method}/{axis}", t, err[:, i:i + 1], [f"{method} {axis} [m]"],
-                   rate_hz=rate_hz)
-            series(rec, f"plots/attitude_errors/{method}/{a}", t, np.degrees(phi[:, i:i + 1]),
-                   [f"{method} phi_{a} [deg]"], rate_hz=rate_hz)
-    sd_pos, sd_att = columns(sub, "sd_pos"), np.degrees(columns(sub, "sd_att"))
-    for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
-        _log_band(rec, f"plots/sigma/{method}/position/{axis}", t, sd_pos[:, i], f"{method} {axis} [m]", rate_hz)
-        _log_band(rec, f"plots/sigma/{method}/attitude/{a}", t, sd_att[:, i], f"{method} phi_{a} [deg]", rate_hz)
+    def draw_path(block: pa.Table) -> None:
+        if not block.num_rows:
+            return
+        t = column(block, "t")
+        p = earth.lla_to_enu(column(block, "lat"), column(block, "lon"), column(block, "h"),
+                             np.radians(site.lat_deg), np.radians(site.lon_deg), site.height_m)
+        cycle = None if along is None else along.at(t)["cycle"]
+        path.push(t, p, cycle)
+        cycle = np.zeros(t.size, np.int64) if cycle is None else cycle
+        plan_path.push(t, plan.face_coordinates(scn, p, cycle), cycle)
+        moved = markers.push(t, p) - markers_pushed[0]
+        points.add(t[moved], p[moved])
+        plan_points.add(t[moved], p[moved], cycle[moved])
+        markers_pushed[0] += t.size
+        last[:] = [t[-1:], p[-1:], cycle[-1:]]
 
-    _log_flags(rec, f"plots/flags/{method}", table, "flags", FLAG_SERIES, method, rate_hz)
-
-
-def _log_flags(rec: rr.RecordingStream, entity: str, table: pa.Table, name: str, bits, method: str,
-               rate_hz: float | None) -> None:
-    """Flags are events: OR them over each plot interval so a single-sample fix is not decimated away (and the
-    0/1 steps keep their edges in visible_rows); `bits` pairs a label with its flag bit."""
-    t_all = column(table, "t")
-    keep = decimate(t_all, rate_hz)
-    flags = np.bitwise_or.reduceat(np.asarray(table.column(name).to_numpy(), np.int64), keep)
-    series(rec, entity, t_all[keep], np.column_stack([(flags & bit) != 0 for _, bit in bits]).astype(float),
-           [f"{method} {label}" for label, _ in bits], rate_hz=rate_hz, band=False)
+    markers_pushed = [0]
+    plots = PlottedSeries(_estimate_plots(method, truth is not None), rate_hz, [f"plots/flags/{method}"])
+    plots.measure(_estimate_series(method, truth, estimate, rate_hz, draw_path))
+    if markers.finish().size:  # the last row, unless kept
+        points.add(*last[:2])
+        plan_points.add(*last)
+    rec.log(f"world/estimates/{method}/path", rr.LineStrips3D(path.strips(), radii=0.03, colors=color), static=True)
+    points.flush()
+    plan.log_path(rec, plan_entity, plan_path, color)
+    plan_points.flush()
+    # +- one-sigma series are left out when there is no sigma at all (NaN throughout).
+    plots.drop(*(e for e in plots.names if e.startswith(f"plots/sigma/{method}/") and not plots.finite(e)))
+    plots.send(rec, _estimate_series(method, truth, estimate, rate_hz))
 
 
-def _log_fusion(rec: rr.RecordingStream, truth_shearer, method: str, estimate: pa.Table, fusion: pa.Table,
+def _log_fusion(rec: rr.RecordingStream, truth: TruthTrack | None, method: str, estimate: Blocks, fusion: Blocks,
                 rate_hz: float | None) -> None:
-    sub, t = plot_rows(fusion, rate_hz)
     root = f"plots/fusion/{method}"
-    series(rec, f"{root}/r_yaw", t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None], [f"{method} sd yaw [deg]"],
-           rate_hz=rate_hz)
-    series(rec, f"{root}/yaw_innovation", t, np.degrees(column(sub, "yaw_innovation"))[:, None],
-           [f"{method} yaw innovation [deg]"], rate_hz=rate_hz)
-    _log_flags(rec, f"{root}/magnetometer", fusion, "mag_flags", MAG_SERIES, method, rate_hz)
-    beta = np.column_stack([column(sub, f"beta_{s}") for s in SUBFILTERS])
-    if not np.isfinite(beta).any():
-        return  # a centralized filter: no sub-filters
-    series(rec, f"{root}/beta", t, beta, [f"{method} beta {s}" for s in SUBFILTERS], rate_hz=rate_hz)
-    est, _ = plot_rows(estimate, rate_hz)
-    err = np.zeros((t.size, 3)) if truth_shearer is None else position_errors(est, truth_shearer)[1]
-    for i, axis in enumerate(POSITION_AXES[:2]):
-        d = np.column_stack([np.zeros(t.size)] + [column(sub, f"{s}_d_pos_{'en'[i]}") for s in SUBFILTERS])
-        series(rec, f"{root}/subfilter_errors/{axis}", t, err[:, i:i + 1] + d,
-               [f"{method} global {axis} [m]"] + [f"{method} {s} sub-filter {axis} [m]" for s in SUBFILTERS],
-               rate_hz=rate_hz)
+    names = {f"{root}/r_yaw": [f"{method} sd yaw [deg]"], f"{root}/yaw_innovation": [f"{method} yaw innovation [deg]"],
+             f"{root}/magnetometer": [f"{method} {label}" for label, _ in MAG_SERIES],
+             f"{root}/beta": [f"{method} beta {s}" for s in SUBFILTERS]}
+    for axis in POSITION_AXES[:2]:
+        names[f"{root}/subfilter_errors/{axis}"] = ([f"{method} global {axis} [m]"]
+                                                    + [f"{method} {s} sub-filter {axis} [m]" for s in SUBFILTERS])
+
+    def blocks() -> Iterator[SeriesBlock]:
+        along = None if truth is None else TruthAlong(truth)
+        estimated = RowsOf(decimated_blocks(estimate, rate_hz))
+        for sub, t in _record_rows(fusion, rate_hz):
+            block = {f"{root}/r_yaw": (t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None]),
+                     f"{root}/yaw_innovation": (t, np.degrees(column(sub, "yaw_innovation"))[:, None]),
+                     f"{root}/beta": (t, np.column_stack([column(sub, f"beta_{s}") for s in SUBFILTERS]))}
+            err = np.zeros((t.size, 3)) if along is None else position_errors(estimated.take(t.size), along)[1]
+            for i, axis in enumerate(POSITION_AXES[:2]):
+                d = np.column_stack([np.zeros(t.size)] + [column(sub, f"{s}_d_pos_{'en'[i]}") for s in SUBFILTERS])
+                block[f"{root}/subfilter_errors/{axis}"] = (t, err[:, i:i + 1] + d)
+            yield block
+        for rows in _flag_series(fusion, "mag_flags", MAG_SERIES, rate_hz):
+            yield {f"{root}/magnetometer": rows}
+
+    plots = PlottedSeries(names, rate_hz, [f"{root}/magnetometer"])
+    plots.measure(blocks())
+    if not plots.finite(f"{root}/beta"):  # a centralized filter: no sub-filters
+        plots.drop(f"{root}/beta", *(f"{root}/subfilter_errors/{axis}" for axis in POSITION_AXES[:2]))
+    plots.send(rec, blocks())
 
 
-def _log_states(rec: rr.RecordingStream, method: str, table: pa.Table, truth: dict[str, float] | None,
+def _log_states(rec: rr.RecordingStream, method: str, states: Blocks, truth: dict[str, float] | None,
                 rate_hz: float | None) -> None:
-    if table.num_rows == 0:
+    if not _has_rows(states):
         return
-    sub, t = plot_rows(table, rate_hz)
-    for group, (_, per_unit, unit) in STATE_GROUPS.items():
-        names = _names(group)
-        values = np.column_stack([column(sub, n) for n in names]) / per_unit
-        labels = [f"{n} [{unit}]" for n in names]
-        known = [n for n in names if truth and n in truth]
-        if known:
-            flat = np.broadcast_to(np.array([truth[n] for n in known]) / per_unit, (t.size, len(known)))
-            values = np.column_stack([values, flat])
-            labels += [f"{n} true [{unit}]" for n in known]
-        series(rec, f"plots/states/{method}/{group}", t, values, labels, rate_hz=rate_hz)
-        sd = np.column_stack([column(sub, f"sd_{n}") for n in names]) / per_unit
-        series(rec, f"plots/sigma/{method}/{group}", t, np.column_stack([sd, -sd]),
-               [f"{sign}1 sigma {n} [{unit}]" for sign in "+-" for n in names], rate_hz=rate_hz)
+    names = {}
+    for group, (_, _, unit) in STATE_GROUPS.items():
+        known = [n for n in _names(group) if truth and n in truth]
+        names[f"plots/states/{method}/{group}"] = ([f"{n} [{unit}]" for n in _names(group)]
+                                                   + [f"{n} true [{unit}]" for n in known])
+        names[f"plots/sigma/{method}/{group}"] = [f"{sign}1 sigma {n} [{unit}]" for sign in "+-" for n in _names(group)]
+
+    def blocks() -> Iterator[SeriesBlock]:
+        for sub, t in _record_rows(states, rate_hz):
+            block = {}
+            for group, (_, per_unit, _) in STATE_GROUPS.items():
+                group_names = _names(group)
+                values = np.column_stack([column(sub, n) for n in group_names]) / per_unit
+                known = [n for n in group_names if truth and n in truth]
+                if known:
+                    flat = np.broadcast_to(np.array([truth[n] for n in known]) / per_unit, (t.size, len(known)))
+                    values = np.column_stack([values, flat])
+                block[f"plots/states/{method}/{group}"] = (t, values)
+                sd = np.column_stack([column(sub, f"sd_{n}") for n in group_names]) / per_unit
+                block[f"plots/sigma/{method}/{group}"] = (t, np.column_stack([sd, -sd]))
+            yield block
+
+    PlottedSeries(names, rate_hz).log(rec, blocks)
 
 
-def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, table: pa.Table,
+DETECTOR_PEAKS = ("residual", "dual_state", "fsprt", "isolated")
+"""The detector statistics drawn by their peak in each interval of the record rate."""
+
+
+def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, detectors: Blocks,
                    thresholds: dict[str, float], rate_hz: float | None) -> None:
     """Each statistic's largest value in each interval of the record rate (an alarm is a peak: it is not decimated
     away), with its thresholds; the isolation as 0/1 in each interval."""
-    if table.num_rows == 0:
+    if not _has_rows(detectors):
         return
-    t_all = column(table, "t")
-    keep = decimate(t_all, rate_hz)
-    t = t_all[keep]
-
-    def peaks(name: str) -> np.ndarray:
-        return np.fmax.reduceat(np.asarray(column(table, name), float), keep)
-
     root = f"plots/detectors/{method}"
-    for name in ("residual", "dual_state"):
-        series(rec, f"{root}/{name}", t, np.column_stack([peaks(name), np.full(t.size, thresholds[name])]),
-               [f"{method} {name}", f"{name} threshold"], rate_hz=rate_hz)
-    series(rec, f"{root}/fsprt", t, np.column_stack([peaks("fsprt"), np.full(t.size, thresholds["t_on"]),
-                                                      np.full(t.size, thresholds["t_off"])]),
-           [f"{method} fsprt", "fsprt T1 (fault)", "fsprt T0 (clear)"], rate_hz=rate_hz)
-    series(rec, f"{root}/isolated", t, peaks("isolated")[:, None], [f"{method} isolated"], rate_hz=rate_hz,
-           band=False)
-    site = scn.site
-    p_t = earth.lla_to_enu(column(table, "lat"), column(table, "lon"), column(table, "h"), np.radians(site.lat_deg),
-                           np.radians(site.lon_deg), site.height_m).astype(np.float32)
-    rec.log(f"world/estimates/{method}/rail", rr.Points3D(p_t, radii=0.08, colors=[240, 120, 40]), static=True)
+    names = {f"{root}/{name}": [f"{method} {name}", f"{name} threshold"] for name in ("residual", "dual_state")}
+    names[f"{root}/fsprt"] = [f"{method} fsprt", "fsprt T1 (fault)", "fsprt T0 (clear)"]
+    names[f"{root}/isolated"] = [f"{method} isolated"]
+    site, rail = scn.site, []
+
+    def blocks(points: bool = False) -> Iterator[SeriesBlock]:
+        peaks = IntervalReduce(rate_hz, np.fmax)
+        for block in [*blocks_of(detectors), None]:
+            if block is None:
+                t, peak = peaks.finish()
+            else:
+                t, peak = peaks.push(column(block, "t"),
+                                     np.column_stack([column(block, name) for name in DETECTOR_PEAKS]))
+            if points and block is not None:
+                rail.append(earth.lla_to_enu(column(block, "lat"), column(block, "lon"), column(block, "h"),
+                                             np.radians(site.lat_deg), np.radians(site.lon_deg),
+                                             site.height_m).astype(np.float32))
+            peak = peak.reshape(t.size, len(DETECTOR_PEAKS))
+            flat = {name: np.full(t.size, thresholds[name]) for name in ("residual", "dual_state", "t_on", "t_off")}
+            yield {f"{root}/residual": (t, np.column_stack([peak[:, 0], flat["residual"]])),
+                   f"{root}/dual_state": (t, np.column_stack([peak[:, 1], flat["dual_state"]])),
+                   f"{root}/fsprt": (t, np.column_stack([peak[:, 2], flat["t_on"], flat["t_off"]])),
+                   f"{root}/isolated": (t, peak[:, 3:])}
+
+    plots = PlottedSeries(names, rate_hz, [f"{root}/isolated"])
+    plots.measure(blocks(points=True))
+    plots.send(rec, blocks())
+    rec.log(f"world/estimates/{method}/rail", rr.Points3D(np.concatenate(rail), radii=0.08, colors=[240, 120, 40]),
+            static=True)
 
 
 # The supports' canopy attitude (issue 8).
@@ -284,16 +369,18 @@ def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, ra
 
 
 
-def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates: dict[str, pa.Table],
-                             states: dict[str, pa.Table], states_truth: dict[str, float] | None = None,
-                             rate_hz: float | None = RECORD_RATE_HZ, fusion: dict[str, pa.Table] | None = None,
-                             detectors: dict[str, tuple[pa.Table, dict[str, float]]] | None = None,
+def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates: Mapping[str, Blocks],
+                             states: Mapping[str, Blocks], states_truth: dict[str, float] | None = None,
+                             rate_hz: float | None = RECORD_RATE_HZ, fusion: Mapping[str, Blocks] | None = None,
+                             detectors: Mapping[str, tuple[Blocks, dict[str, float]]] | None = None,
                              supports: SupportAttitude | None = None) -> None:
     """Write the estimators' outputs as `path` (normally RUN_DIR/estimates.rrd) with the recording id of
     RUN_DIR/run.rrd.
 
     `truth_shearer`: the truth_shearer table (or its columns as arrays, or an estimators.io.metrics.TruthTrack);
-    `estimates`: method name -> ESTIMATE table; `states`: method name -> ESTIMATE_STATES table (filters with sensor states only); `states_truth`:
+    `estimates`: method name -> ESTIMATE table; `states`: method name -> ESTIMATE_STATES table (filters with sensor
+    states only); each table may come in blocks (twin.view.row_cuts.Blocks: an estimate file read a row group at a
+    time, twice; the truth is read forwards with it, twin.view.truth_along); `states_truth`:
     true values of the sensor states by ESTIMATE_STATES column name in SI units (e.g. "gyro_bias_x" [rad/s],
     "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters);
     `detectors`: method name -> (ESTIMATE_DETECTORS table, thresholds by statistic: residual, dual_state, t_on,
@@ -305,17 +392,18 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
     fusion = fusion or {}
     detectors = detectors or {}
     rate_hz = check_record_rate(rate_hz)
+    truth = truth_shearer if truth_shearer is None or isinstance(truth_shearer, TruthTrack) else TruthTrack(truth_shearer)
     run_id = run_recording_id(Path(path).parent)
     with recording_stream(path, run_id or recording_id(scn)) as rec:
         if run_id is None:  # no run.rrd to merge with: this recording is the whole view
             rec.send_recording_name(scn.name)
             rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
         for method, table in estimates.items():
-            _log_estimate(rec, scn, truth_shearer, method, table, rate_hz, METHOD_RGB.get(method, METHOD_RGB["dr"]))
+            _log_estimate(rec, scn, truth, method, table, rate_hz, METHOD_RGB.get(method, METHOD_RGB["dr"]))
         for method, table in states.items():
             _log_states(rec, method, table, states_truth, rate_hz)
         for method, table in fusion.items():
-            _log_fusion(rec, truth_shearer, method, estimates[method], table, rate_hz)
+            _log_fusion(rec, truth, method, estimates[method], table, rate_hz)
         for method, (table, thresholds) in detectors.items():
             _log_detectors(rec, scn, method, table, thresholds, rate_hz)
         if supports is not None:

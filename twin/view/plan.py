@@ -25,7 +25,7 @@ import rerun as rr
 
 from estimators.face.straightness import mat_ft, pan_lines
 from twin.config.scenario import Scenario
-from twin.view.rerun_columns import time_column
+from twin.view.rerun_columns import RowBatches, time_column
 from twin.view.row_cuts import PathStrips
 
 PLAN_SCALE = 20.0
@@ -112,16 +112,20 @@ def send_target_line(rec: rr.RecordingStream, scn: Scenario, pans: dict[str, np.
                      columns=rr.LineStrips2D.columns(strips=strips).partition(np.ones(times.size, np.int64)))
 
 
-def log_path(rec: rr.RecordingStream, scn: Scenario, entity: str, path: PathStrips, t_moved: np.ndarray,
-             p_moved: np.ndarray, cycle_moved: np.ndarray, color) -> None:
+def log_path(rec: rr.RecordingStream, entity: str, path: PathStrips, color) -> None:
     """A shearer path as `entity/path`: `path` holds its face_coordinates, one strip per cycle without the samples it
     passes within PATH_TOLERANCE_M of (every sample at FULL rate; twin.view.row_cuts.PathStrips), each logged at
-    its cycle's first sample (the plan shows the cycle in progress); and its point (p_moved (K, 3) in t, in cycles
-    cycle_moved) at times t_moved as `entity/position`."""
+    its cycle's first sample (the plan shows the cycle in progress)."""
     strips = [plotted(s) for s in path.strips()]
     rec.log(f"{entity}/path", rr.LineStrips2D.from_fields(radii=0.12, colors=color), static=True)
     rec.send_columns(f"{entity}/path", indexes=[time_column(path.start_times())],
                      columns=rr.LineStrips2D.columns(strips=strips).partition(np.ones(len(strips), np.int64)))
-    rec.log(f"{entity}/position", rr.Points2D.from_fields(radii=0.6, colors=color), static=True)
-    rec.send_columns(f"{entity}/position", indexes=[time_column(t_moved)],
-                     columns=rr.Points2D.columns(positions=plotted(face_coordinates(scn, p_moved, cycle_moved))))
+
+
+def position_batches(rec: rr.RecordingStream, scn: Scenario, entity: str, color) -> RowBatches:
+    """A shearer path's point as `entity/position`: rows (times, points (k, 3) in t, their cycles) sent as the
+    plan's points, its look logged first."""
+    return RowBatches(
+        lambda t, p_t, cycle: rec.send_columns(f"{entity}/position", indexes=[time_column(t)], columns=rr.Points2D.columns(
+            positions=plotted(face_coordinates(scn, p_t, cycle)))),
+        lambda: rec.log(f"{entity}/position", rr.Points2D.from_fields(radii=0.6, colors=color), static=True))

@@ -36,6 +36,7 @@ at FULL rate).
 from __future__ import annotations
 
 import warnings
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -51,8 +52,18 @@ from twin.face.model import piece_model
 from twin.view import plan
 from twin.view.geometry import BodyGeoms, body_geoms, log_body, send_bodies
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
-from twin.view.rerun_columns import latest_frames, send_bar_chart, series, time_column, vec, xyzw
-from twin.view.row_cuts import Blocks, MarkerCut, PathStrips, col, decimated_blocks
+from twin.view.rerun_columns import (
+    PlottedSeries,
+    RowBatches,
+    SeriesBlock,
+    latest_frames,
+    send_bar_chart,
+    series,
+    time_column,
+    vec,
+    xyzw,
+)
+from twin.view.row_cuts import Blocks, MarkerCut, PathStrips, blocks_of, col, decimated_blocks
 from twin.view.rrd_stream import recording_id, recording_stream
 from twin.view.sensor_recording import log_sensors
 
@@ -182,9 +193,11 @@ BLOCK_STREAMS = ("truth_shearer", "truth_supports", "imu", "odometer", "mag", "p
 def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_hz: float | None,
                  body: BodyGeoms) -> None:
     """The shearer's geoms (the MJCF piece's, static in its body frame) under its pose, its path (3-D and plan) and
-    speed; its record-rate rows turned into poses a block at a time (only the poses logged and the plotted series
-    held)."""
+    speed, from its stream read twice a block at a time: first its record-rate rows turned into poses (those logged
+    sent SEND_ROWS at a time), the path and the plots' ranges, then the plots cut and sent."""
     log_body(rec, "world/shearer", body)
+    if not any(block.num_rows for block in blocks_of(shearer)):
+        return
     path, plan_path = PathStrips(rate_hz), PathStrips(rate_hz)  # the whole path, at every sample
 
     def draw_path(block: pa.Table) -> None:
@@ -195,33 +208,44 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_h
     # n (ENU at the shearer) to t (ENU at the site origin): C_n^t = (C_t^e)^T C_n^e.
     c_te = mat_en(np.radians(scn.site.lat_deg), np.radians(scn.site.lon_deg))
     half_length = np.array([0.0, 0.5 * scn.shearer.length_m, 0.0])
-    markers, moved, plots, pushed = MarkerCut(rate_hz), [], [], 0
-    for sub in decimated_blocks(shearer, rate_hz, draw_path):
-        if sub.num_rows == 0:
-            continue
-        t, p = col(sub, "t"), vec(sub, "p_t")
+    markers, pushed, last = MarkerCut(rate_hz), [0], []
+    poses = RowBatches(lambda t, p, q: rec.send_columns(
+        "world/shearer", indexes=[time_column(t)],
+        columns=rr.Transform3D.columns(translation=p.astype(np.float32), quaternion=xyzw(q))))
+    plan_points = plan.position_batches(rec, scn, f"{plan.PLAN_ROOT}/truth", TRUTH_RGB)
+
+    def draw_poses(sub: pa.Table) -> None:
+        """The record-rate rows' poses, those logged as either end of the drawn body moves MARKER_STEP_M (travel or
+        turn)."""
+        t, p, cycle = col(sub, "t"), vec(sub, "p_t"), col(sub, "cycle")
         c_nt = np.swapaxes(c_te, -1, -2) @ mat_en(col(sub, "lat"), col(sub, "lon"))
         q_tb = quat_mul(mat_to_quat(c_nt), vec(sub, "q_nb", "wxyz"))
-        # Logged as either end of the drawn body moves MARKER_STEP_M (travel or turn).
         half = quat_rotate(q_tb, half_length)
-        pose = (t, p, q_tb, col(sub, "cycle"))
-        kept = markers.push(t, np.hstack([p - half, p + half])) - pushed
-        moved.append([x[kept] for x in pose])
-        plots.append((t, np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n")), col(sub, "cycle").astype(float)))
-        pushed += t.size
-    if not plots:
-        return
-    moved.append([x[markers.finish() - pushed + t.size] for x in pose])  # the last row, unless kept
-    t_moved, p_moved, q_moved, cycle_moved = (np.concatenate(x) for x in zip(*moved))
-    rec.send_columns("world/shearer", indexes=[time_column(t_moved)],
-                     columns=rr.Transform3D.columns(translation=p_moved.astype(np.float32),
-                                                    quaternion=xyzw(q_moved)))
-    rec.log("world/shearer_path", rr.LineStrips3D(path.strips(), radii=0.03, colors=TRUTH_RGB), static=True)
-    plan.log_path(rec, scn, f"{plan.PLAN_ROOT}/truth", plan_path, t_moved, p_moved, cycle_moved, TRUTH_RGB)
+        kept = markers.push(t, np.hstack([p - half, p + half])) - pushed[0]
+        poses.add(t[kept], p[kept], q_tb[kept])
+        plan_points.add(t[kept], p[kept], cycle[kept])
+        pushed[0] += t.size
+        last[:] = [t[-1:], p[-1:], q_tb[-1:], cycle[-1:]]
 
-    t, speed, cycle = (np.concatenate(x) for x in zip(*plots))
-    series(rec, "plots/shearer_speed", t, speed[:, None], ["horizontal speed [m/s]"], rate_hz=rate_hz)
-    series(rec, "plots/cycle", t, cycle[:, None], ["cycle"], rate_hz=rate_hz, band=False)
+    def blocks(draw: bool = False) -> Iterator[SeriesBlock]:
+        for sub in decimated_blocks(shearer, rate_hz, draw_path if draw else None):
+            if draw and sub.num_rows:
+                draw_poses(sub)
+            t = col(sub, "t")
+            yield {"plots/shearer_speed": (t, np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n"))[:, None]),
+                   "plots/cycle": (t, col(sub, "cycle").astype(float)[:, None])}
+
+    plots = PlottedSeries({"plots/shearer_speed": ["horizontal speed [m/s]"], "plots/cycle": ["cycle"]}, rate_hz,
+                          ["plots/cycle"])
+    plots.measure(blocks(draw=True))
+    if markers.finish().size:  # the last row, unless kept
+        poses.add(*last[:3])
+        plan_points.add(last[0], last[1], last[3])
+    poses.flush()
+    rec.log("world/shearer_path", rr.LineStrips3D(path.strips(), radii=0.03, colors=TRUTH_RGB), static=True)
+    plan.log_path(rec, f"{plan.PLAN_ROOT}/truth", plan_path, TRUTH_RGB)
+    plan_points.flush()
+    plots.send(rec, blocks())
 
 
 def _log_face_line(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table, cycles: pa.Table) -> None:

@@ -11,14 +11,14 @@ The record rate (twin.view.record_rate) is a rate in Hz, or FULL (None): every s
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 import pyarrow as pa
 import rerun as rr
 
 from twin.view.record_rate import FULL
-from twin.view.row_cuts import Blocks, blocks_of, col, visible_rows
+from twin.view.row_cuts import Blocks, SeriesRange, VisibleCut, blocks_of, col
 
 TIMELINE = "sim_time"
 APPLICATION_ID = "longwall-twin"
@@ -196,11 +196,95 @@ def mean_rate(data: Blocks, columns: list[str], rate_hz: float | None) -> tuple[
     return np.concatenate(times), np.concatenate(sums)[:n // step] / (step * dt)
 
 
+SEND_ROWS = 100_000
+"""Rows of one entity sent in one call at most: a long stream's entity goes out in several chunks, not held whole."""
+
+
+class RowBatches:
+    """The rows kept of a long stream (arrays with a row per kept row), handed to `send` SEND_ROWS at a time and the
+    rest at `flush` (at least once: a stream without rows is sent empty); `first` is called before the first send
+    (to log the entity's look)."""
+
+    def __init__(self, send: Callable[..., None], first: Callable[[], None] | None = None, rows: int = SEND_ROWS):
+        self._send, self._first, self._limit = send, first, rows
+        self._held: list[tuple[np.ndarray, ...]] = []
+        self._rows, self._sent = 0, False
+
+    def add(self, *columns: np.ndarray) -> None:
+        self._held.append(columns)
+        self._rows += len(columns[0])
+        if self._rows >= self._limit:
+            self.flush()
+
+    def flush(self) -> None:
+        if self._held and (self._rows or not self._sent):
+            if not self._sent and self._first is not None:
+                self._first()
+            self._send(*(np.concatenate(c) for c in zip(*self._held)))
+            self._sent = True
+        self._held, self._rows = [], 0
+
+
+SeriesBlock = Mapping[str, tuple[np.ndarray, np.ndarray]]
+"""A block of plotted series: entity -> (times (k,), values (k, n)) of its next rows (an entity may be left out of a
+block)."""
+
+
+class PlottedSeries:
+    """Time series given in blocks (the same entities in each; a function that reads them anew for each pass), each
+    cut to `visible_rows` at `rate_hz` (twin.view.row_cuts: the same rows as a whole series') and sent
+    SEND_ROWS rows at a time: `measure` reads them once for each series' range (SeriesRange), `send` again to cut
+    and send them, each entity's look logged before its first rows. `names`: entity -> its series' names; `steps`:
+    the entities of flags and steps (band False: every edge kept)."""
+
+    def __init__(self, names: Mapping[str, list[str]], rate_hz: float | None, steps: Iterable[str] = ()):
+        self.names, self.rate_hz, self.steps = dict(names), rate_hz, set(steps)
+        self.ranges: dict[str, SeriesRange] = {}
+
+    def measure(self, blocks: Iterable[SeriesBlock]) -> None:
+        ranges = {entity: SeriesRange(self.rate_hz) for entity in self.names}
+        for block in blocks:
+            for entity, rows in block.items():
+                ranges[entity].push(*rows)
+        for measured in ranges.values():
+            measured.finish()
+        self.ranges = ranges
+
+    def finite(self, entity: str) -> bool:
+        """Whether the entity's record-rate rows hold a finite value (measured)."""
+        return self.ranges[entity].finite
+
+    def drop(self, *entities: str) -> None:
+        for entity in entities:
+            self.names.pop(entity)
+
+    def send(self, rec: rr.RecordingStream, blocks: Iterable[SeriesBlock]) -> None:
+        cuts = {entity: VisibleCut(self.rate_hz, self.ranges[entity], entity not in self.steps)
+                for entity in self.names}
+        batches = {entity: series_batches(rec, entity, names) for entity, names in self.names.items()}
+        for block in blocks:
+            for entity, rows in block.items():
+                if entity in cuts:
+                    batches[entity].add(*cuts[entity].push(*rows)[1:])
+        for entity, cut in cuts.items():
+            batches[entity].add(*cut.finish()[1:])
+            batches[entity].flush()
+
+    def log(self, rec: rr.RecordingStream, blocks: Callable[[], Iterable[SeriesBlock]]) -> None:
+        """`measure` then `send`, every entity."""
+        self.measure(blocks())
+        self.send(rec, blocks())
+
+
+def series_batches(rec: rr.RecordingStream, entity: str, names: list[str]) -> RowBatches:
+    """A series' rows (times, values (k, n)) sent as Scalars, its look (SeriesLines) logged first."""
+    return RowBatches(lambda t, values: rec.send_columns(entity, indexes=[time_column(t)],
+                                                         columns=rr.Scalars.columns(scalars=values)),
+                      lambda: rec.log(entity, rr.SeriesLines(names=names), static=True))
+
+
 def series(rec: rr.RecordingStream, entity: str, t: np.ndarray, values: np.ndarray, names: list[str], *,
            rate_hz: float | None = FULL, band: bool = True) -> None:
-    """A time series of (K, n) values, its rows cut to `visible_rows` at `rate_hz` (every row by default); `band`
-    False for flags and steps, whose every edge is kept."""
-    keep = visible_rows(t, values, rate_hz, band)
-    rec.log(entity, rr.SeriesLines(names=names), static=True)
-    rec.send_columns(entity, indexes=[time_column(np.asarray(t)[keep])],
-                     columns=rr.Scalars.columns(scalars=np.asarray(values)[keep]))
+    """A time series of (K, n) values given whole, its rows cut to `visible_rows` at `rate_hz` (every row by default);
+    `band` False for flags and steps, whose every edge is kept (PlottedSeries for one in blocks)."""
+    PlottedSeries({entity: names}, rate_hz, () if band else (entity,)).log(rec, lambda: [{entity: (t, values)}])

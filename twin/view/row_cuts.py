@@ -46,6 +46,23 @@ def blocks_of(data: Blocks) -> Iterable[pa.Table]:
     return [data] if isinstance(data, pa.Table) else data
 
 
+class RowsOf:
+    """A stream given in blocks, read on `take` k rows at a time (the blocks cut and joined as needed)."""
+
+    def __init__(self, blocks: Iterable[pa.Table]):
+        self._blocks, self._held = iter(blocks), None
+
+    def take(self, k: int) -> pa.Table:
+        parts = []
+        while k > 0 or not parts:
+            if self._held is None or (self._held.num_rows == 0 and k > 0):
+                self._held = next(self._blocks)
+            part = self._held.slice(0, k)
+            parts.append(part)
+            self._held, k = self._held.slice(part.num_rows), k - part.num_rows
+        return pa.concat_tables(parts)
+
+
 class Decimation:
     """`decimate` over a series given in blocks, carrying the last row's interval: `push` each block's times, then
     `last_kept` says whether the series' last row is among the rows kept (decimate adds it)."""
@@ -93,6 +110,43 @@ def decimated_rows(data: Blocks, rate_hz: float | None,
     """The rows of a stream (one table, or one or more blocks) that `decimate` keeps of its times, as one table;
     `each` is called with every block as it is read (decimated_blocks)."""
     return pa.concat_tables(decimated_blocks(data, rate_hz, each))
+
+
+class IntervalReduce:
+    """`reduce.reduceat(values, decimate(t, rate_hz))` at the times `t[decimate(t, rate_hz)]` over a series given in
+    blocks: the rows of each 1/rate_hz interval reduced into one (flags OR-ed: np.bitwise_or, peaks kept: np.fmax;
+    an exact reduction gives the whole series' values bit for bit), the series' last row on its own. `push` each
+    block's times and values (K, ...), then `finish`: both return the intervals completed (times, values). Held:
+    the open interval's rows."""
+
+    def __init__(self, rate_hz: float | None, reduce: np.ufunc):
+        self._time, self._reduce = Decimation(rate_hz), reduce
+        self._t, self._open = np.zeros(0), None  # the open interval's first time, its rows' values
+        self._t_last = np.zeros(0)  # the last row's time
+
+    def push(self, t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        t, values = np.asarray(t, float), np.asarray(values)
+        starts = self._time.push(t)
+        self._t_last = t[-1:] if t.size else self._t_last
+        held = 0 if self._open is None else len(self._open)
+        rows = values if self._open is None else np.concatenate([self._open, values])
+        cuts = np.unique(np.r_[0, held + starts]) if rows.size else np.zeros(1, np.int64)
+        times = np.r_[self._t, t[starts]][-cuts.size:]
+        done = (self._reduce.reduceat(rows[:cuts[-1]], cuts[:-1], axis=0) if cuts.size > 1
+                else rows[:0])
+        self._t, self._open = times[-1:], rows[cuts[-1]:]
+        return times[:-1], done
+
+    def finish(self) -> tuple[np.ndarray, np.ndarray]:
+        """The open interval, and the series' last row on its own when decimate adds it."""
+        if self._open is None:
+            return np.zeros(0), np.zeros(0)
+        if not len(self._open):
+            return self._t[:0], self._open
+        if self._time.last_kept:
+            return self._t, self._reduce.reduce(self._open, axis=0, keepdims=True)
+        return (np.r_[self._t, self._t_last],
+                np.concatenate([self._reduce.reduce(self._open[:-1], axis=0, keepdims=True), self._open[-1:]]))
 
 
 class MarkerCut:
@@ -178,6 +232,12 @@ def path_strips(t: np.ndarray, p: np.ndarray, cycle: np.ndarray | None, rate_hz:
     return path.strips()
 
 
+def _matrix(t: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Values (K,) or (K, n...) over K times as float (K, n)."""
+    y = np.asarray(values, float)
+    return y.reshape(len(t), -1) if len(t) else y.reshape(0, int(np.prod(y.shape[1:])))
+
+
 class LineCut:
     """`line_rows` over a series given in blocks, the same rows bit for bit: between blocks it holds the greedy scan's
     anchor, the last row scanned from it and its slope bounds (line_kernel), and the block's last row (whose NaN edge
@@ -192,8 +252,7 @@ class LineCut:
 
     def push(self, t: np.ndarray, values: np.ndarray, must: np.ndarray | None = None,
              final: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        t, y = np.asarray(t, float), np.asarray(values, float)
-        y = y.reshape(t.size, -1) if t.size else y.reshape(0, int(np.prod(y.shape[1:])))
+        t, y = np.asarray(t, float), _matrix(t, values)
         if self._y is None:
             m = y.shape[1]
             self._y, self._index, self._must = np.zeros((0, m)), np.zeros(0, np.int64), np.zeros(0, bool)
@@ -218,6 +277,13 @@ class LineCut:
         self._t, self._y, self._index, self._must = t[carried], y[carried], index[carried], edge[carried]
         self._scanned = min(n, 1 + (end > a))
         return index[decided], y[decided]
+
+    @property
+    def decided(self) -> int:
+        """Rows pushed whose keeping is decided (those kept returned): all before the carried row after the anchor
+        (the rows between them are left out)."""
+        k = min(self._scanned, 1)
+        return int(self._index[k]) if self._index is not None and k < self._index.size else self._rows
 
     def finish(self) -> tuple[np.ndarray, np.ndarray]:
         """The rows kept at the series' end (its last among them)."""
@@ -270,31 +336,133 @@ def band_rows(t: np.ndarray, values: np.ndarray, width_s: float) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
+class SeriesRange:
+    """Pass 1 of `visible_rows` over a series given in blocks: how many rows decimate keeps (`rows`) and the span of
+    their finite values (`span`; `finite`: whether there is one); `push` each block, then `finish`."""
+
+    def __init__(self, rate_hz: float | None):
+        self._time, self.rows = Decimation(rate_hz), 0
+        self._lo, self._hi, self._last = np.inf, -np.inf, None
+
+    def push(self, t: np.ndarray, values: np.ndarray) -> None:
+        y = _matrix(t, values)
+        self._add(y[self._time.push(np.asarray(t, float))])
+        self._last = y[-1:] if len(t) else self._last
+
+    def finish(self) -> None:
+        """The series' last row, when decimate adds it."""
+        if not self._time.last_kept:
+            self._add(self._last)
+
+    def _add(self, y: np.ndarray) -> None:
+        finite = y[np.isfinite(y)]
+        self.rows += y.shape[0]
+        if finite.size:
+            self._lo, self._hi = min(self._lo, finite.min()), max(self._hi, finite.max())
+
+    @property
+    def finite(self) -> bool:
+        return bool(self._hi >= self._lo)
+
+    @property
+    def span(self) -> float:
+        return float(self._hi - self._lo) if self.finite else 0.0
+
+
+class VisibleCut:
+    """Pass 2 of `visible_rows` over a series given in blocks, the same rows bit for bit; `measured` is pass 1
+    (SeriesRange over the same blocks). `push` each block, then `finish`: both return the rows decided kept (indices
+    over all the rows pushed, their times, their values (k, n) as float). Held between blocks: the block's last row
+    (decimate adds the series' last), the line's carried rows (LineCut) and the record-rate rows from the first
+    interval of BAND_ROWS not decided (the line has decided its rows and the next interval has begun: a few rows)."""
+
+    def __init__(self, rate_hz: float | None, measured: SeriesRange, band: bool = True):
+        self._time, self._band = Decimation(rate_hz), band
+        self._thin = rate_hz is not FULL and measured.rows >= 3  # else every row decimate keeps
+        self._line = LineCut(LINE_TOLERANCE * measured.span)
+        self._width = BAND_ROWS / rate_hz if self._thin else 0.0
+        self._rows, self._last = 0, None  # rows pushed; the last of them (index, time, values)
+        self._held: tuple[np.ndarray, ...] | None = None  # record-rate rows: index, time, values, on the line
+        self._first = 0  # the first held row's number among the line's rows
+        self._before: tuple[np.ndarray, np.ndarray] | None = None  # the row before the held ones (time, values)
+
+    def push(self, t: np.ndarray, values: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t, y = np.asarray(t, float), _matrix(t, values)
+        keep = self._time.push(t)
+        if t.size:
+            self._last = (np.array([self._rows + t.size - 1]), t[-1:], y[-1:])
+        self._rows += t.size
+        return self._cut(self._rows - t.size + keep, t[keep], y[keep], final=False)
+
+    def finish(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rows decided at the series' end (the last row pushed, when decimate adds it)."""
+        if self._last is None or self._time.last_kept:
+            m = 0 if self._last is None else self._last[2].shape[1]
+            return self._cut(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, m)), final=True)
+        return self._cut(*self._last, final=True)
+
+    def _cut(self, index: np.ndarray, t: np.ndarray, y: np.ndarray,
+             final: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Of the record-rate rows so far (these appended), those decided kept by the line and the bands."""
+        if not self._thin:
+            return index, t, y
+        on_line = self._line.push(t, y, final=final)[0]
+        held = (index, t, y, np.zeros(t.size, bool))
+        if self._held is not None:
+            held = tuple(np.concatenate([a, b]) for a, b in zip(self._held, held))
+        held[3][on_line - self._first] = True
+        decided = held[0].size if final else self._line.decided - self._first
+        if self._band:
+            done = held[0].size if final else self._decided_intervals(held[1], decided)
+            rows = self._band_cut(held, done, final)
+        else:
+            done = decided
+            rows = np.flatnonzero(held[3][:done])
+        if done:
+            self._before = (held[1][done - 1:done], held[2][done - 1:done])
+        self._held, self._first = tuple(a[done:] for a in held), self._first + done
+        return held[0][rows], held[1][rows], held[2][rows]
+
+    def _decided_intervals(self, t: np.ndarray, decided: int) -> int:
+        """Held rows in the intervals before the last one that begins at or before row `decided`."""
+        group = np.floor(t / self._width + 1e-9)
+        starts = np.flatnonzero(np.diff(group) > 0) + 1  # the held rows begin an interval
+        starts = starts[starts <= decided]
+        return int(starts[-1]) if starts.size else 0
+
+    def _band_cut(self, held: tuple[np.ndarray, ...], done: int, final: bool) -> np.ndarray:
+        """visible_rows' choice in the first `done` held rows (whole intervals): the line's rows, the band's in a busy
+        interval; computed with the rows either side of them (NaN edges and turns read their neighbours)."""
+        if not done:
+            return np.zeros(0, np.int64)
+        _, t, y, on_line = (a[:done] for a in held)
+        pad_before = self._before is not None
+        pad_after = done < held[0].size
+        t_pad = np.r_[self._before[0] if pad_before else [], t, held[1][done:done + 1]]
+        y_pad = np.concatenate([self._before[1] if pad_before else y[:0], y, held[2][done:done + 1]])
+        inner = slice(int(pad_before), int(pad_before) + done)
+        extremes = band_rows(t_pad, y_pad, self._width)
+        extremes = extremes[(extremes >= inner.start) & (extremes < inner.stop)] - inner.start
+        slope = np.sign(np.diff(y_pad, axis=0))
+        turns = np.r_[False, ((slope[1:] * slope[:-1]) < 0).any(axis=1), False][inner]
+        ident = _intervals(t, self._width)
+        n = ident[-1] + 1
+        line = np.flatnonzero(on_line)
+        noisy = ((2 * np.bincount(ident[line], minlength=n) > np.bincount(ident, minlength=n))
+                 & (np.bincount(ident, turns, n) >= BAND_TURNS)
+                 & (np.bincount(ident[extremes], minlength=n) < np.bincount(ident[line], minlength=n)))
+        return np.union1d(line[~noisy[ident[line]]], extremes[noisy[ident[extremes]]])
+
+
 def visible_rows(t: np.ndarray, values: np.ndarray, rate_hz: float | None, band: bool = True) -> np.ndarray:
     """Rows of a plotted series a person can tell apart (every row at FULL rate): at most rate_hz (decimate), and of
     those the rows a line drawn through keeps within LINE_TOLERANCE of the entity's span of every row left out
     (line_rows); with `band`, in each busy interval of BAND_ROWS / rate_hz seconds (1 s at 10 Hz: the line keeps
     more than half its rows and the values turn BAND_TURNS times or more: noise, vibration), the interval's band
     instead when that is fewer rows (band_rows: its first row and extremes, what a min/max plot draws of it). Without
-    `band` (0/1 flags, steps) the line keeps every edge."""
-    keep = decimate(t, rate_hz)
-    if rate_hz is FULL or keep.size < 3:
-        return keep
-    y = np.asarray(values, float).reshape(len(t), -1)[keep]
-    t = np.asarray(t, float)[keep]
-    finite = y[np.isfinite(y)]
-    span = float(finite.max() - finite.min()) if finite.size else 0.0
-    line = line_rows(t, y, LINE_TOLERANCE * span)
-    if not band:
-        return keep[line]
-    extremes = band_rows(t, y, BAND_ROWS / rate_hz)
-    ident = _intervals(t, BAND_ROWS / rate_hz)
-    n = ident[-1] + 1
-    # A turn: a row where a column changes direction (noise: at every other row).
-    slope = np.sign(np.diff(y, axis=0))
-    turns = np.r_[False, ((slope[1:] * slope[:-1]) < 0).any(axis=1), False]
-    on_line = np.bincount(ident[line], minlength=n)
-    noisy = ((2 * on_line > np.bincount(ident, minlength=n)) & (np.bincount(ident, turns, n) >= BAND_TURNS)
-             & (np.bincount(ident[extremes], minlength=n) < on_line))
-    rows = np.union1d(line[~noisy[ident[line]]], extremes[noisy[ident[extremes]]])
-    return keep[rows]
+    `band` (0/1 flags, steps) the line keeps every edge. A series given in blocks: SeriesRange, then VisibleCut."""
+    measured = SeriesRange(rate_hz)
+    measured.push(t, values)
+    measured.finish()
+    cut = VisibleCut(rate_hz, measured, band)
+    return np.r_[cut.push(t, values)[0], cut.finish()[0]].astype(np.int64)

@@ -11,14 +11,24 @@ from twin.view.line_kernel import line_kernel
 from twin.view.record_rate import FULL
 from twin.view.rerun_columns import latest_frames, latest_rows, mean_rate, median_interval
 from twin.view.row_cuts import (
+    BAND_ROWS,
+    BAND_TURNS,
+    LINE_TOLERANCE,
     PATH_TOLERANCE_M,
+    IntervalReduce,
     LineCut,
     MarkerCut,
     PathStrips,
+    SeriesRange,
+    VisibleCut,
+    _intervals,
+    band_rows,
     decimate,
     decimated_rows,
+    line_rows,
     marker_rows,
     path_strips,
+    visible_rows,
 )
 from twin.view.sensor_recording import sample_times
 
@@ -184,3 +194,89 @@ def test_marker_cut_in_blocks_keeps_the_whole_tracks_rows(rate_hz):
         cut = MarkerCut(rate_hz)
         rows = [cut.push(t[part], p[part]) for part in _cuts(rng, n)]
         assert np.array_equal(np.r_[np.concatenate(rows), cut.finish()], whole)
+
+
+def _visible_rows_whole(t: np.ndarray, values: np.ndarray, rate_hz: float | None, band: bool) -> np.ndarray:
+    """visible_rows as it was written for a whole series (before the blocks), the reference of the cut in blocks."""
+    keep = decimate(t, rate_hz)
+    if rate_hz is FULL or keep.size < 3:
+        return keep
+    y = np.asarray(values, float).reshape(len(t), -1)[keep]
+    t = np.asarray(t, float)[keep]
+    finite = y[np.isfinite(y)]
+    span = float(finite.max() - finite.min()) if finite.size else 0.0
+    line = line_rows(t, y, LINE_TOLERANCE * span)
+    if not band:
+        return keep[line]
+    extremes = band_rows(t, y, BAND_ROWS / rate_hz)
+    ident = _intervals(t, BAND_ROWS / rate_hz)
+    n = ident[-1] + 1
+    slope = np.sign(np.diff(y, axis=0))
+    turns = np.r_[False, ((slope[1:] * slope[:-1]) < 0).any(axis=1), False]
+    on_line = np.bincount(ident[line], minlength=n)
+    noisy = ((2 * on_line > np.bincount(ident, minlength=n)) & (np.bincount(ident, turns, n) >= BAND_TURNS)
+             & (np.bincount(ident[extremes], minlength=n) < on_line))
+    return keep[np.union1d(line[~noisy[ident[line]]], extremes[noisy[ident[extremes]]])]
+
+
+def _plotted(rng: np.random.Generator, n: int, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """A series at 50 Hz (repeated times, gaps) that is in turns noisy, smooth, flat, stepped and NaN."""
+    t = np.cumsum(rng.choice([0.0, 0.02, 0.02, 0.02, 0.5, 3.0], n, p=[0.02, 0.3, 0.3, 0.3, 0.05, 0.03]))
+    kind = np.repeat(rng.integers(0, 4, n // 50 + 1), 50)[:n]
+    y = np.where((kind == 0)[:, None], rng.normal(size=(n, m)), 0.0)  # noise
+    y += np.where((kind == 1)[:, None], np.sin(t[:, None] * rng.uniform(0.1, 3.0, m)), 0.0)  # smooth
+    y += np.where((kind == 3)[:, None], rng.integers(0, 2, (n, m)), 0.0)  # 0/1 steps
+    y[rng.random((n, m)) < 0.02] = np.nan
+    return t, y
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_visible_cut_in_blocks_keeps_the_whole_series_rows(seed):
+    """SeriesRange then VisibleCut over blocks cut anywhere keep the rows (and values) the whole series' cut keeps,
+    bit for bit, with and without bands, at record rates of 10 and 2 Hz and FULL; so does visible_rows."""
+    rng = np.random.default_rng(seed)
+    thinned = 0  # cuts that left record-rate rows out
+    for _ in range(8):
+        n, m = int(rng.integers(0, 2000)), int(rng.integers(1, 4))
+        t, y = _plotted(rng, n, m)
+        for rate_hz in (10.0, 2.0, FULL):
+            for band in (True, False):
+                whole = _visible_rows_whole(t, y, rate_hz, band)
+                thinned += int(whole.size < decimate(t, rate_hz).size)
+                assert np.array_equal(visible_rows(t, y, rate_hz, band), whole)
+                parts = _cuts(rng, n)
+                measured = SeriesRange(rate_hz)
+                for part in parts:
+                    measured.push(t[part], y[part])
+                measured.finish()
+                cut, got = VisibleCut(rate_hz, measured, band), []
+                for part in parts:
+                    got.append(cut.push(t[part], y[part]))
+                got.append(cut.finish())
+                rows, times, values = (np.concatenate(x) for x in zip(*got))
+                assert np.array_equal(rows, whole)
+                assert np.array_equal(times, t[whole]) and np.array_equal(values, y[whole], equal_nan=True)
+    assert thinned >= 8
+
+
+@pytest.mark.parametrize("rate_hz", [10.0, 2.0, FULL])
+def test_interval_reduce_in_blocks_is_reduceat_over_the_decimated_rows(rate_hz):
+    """Flags OR-ed and peaks kept over each record interval, from blocks cut anywhere: reduceat over the whole
+    series at decimate's rows (a single-sample flag between two record instants stays)."""
+    rng = np.random.default_rng(9)
+    for _ in range(30):
+        n = int(rng.integers(0, 500))
+        t = np.cumsum(rng.choice([0.0, 0.02, 0.1, 0.7], n))
+        flags = np.where(rng.random(n) < 0.05, 1 << rng.integers(0, 3, n), 0).astype(np.int32)
+        peaks = np.where(rng.random((n, 2)) < 0.1, np.nan, rng.normal(size=(n, 2)))
+        keep = decimate(t, rate_hz)
+        for values, reduce in ((flags, np.bitwise_or), (peaks, np.fmax)):
+            cut, got = IntervalReduce(rate_hz, reduce), []
+            for part in _cuts(rng, n):
+                got.append(cut.push(t[part], values[part]))
+            got.append(cut.finish())
+            times, reduced = (np.concatenate(x) for x in zip(*got))
+            assert np.array_equal(times, t[keep])
+            if n:
+                assert np.array_equal(reduced, reduce.reduceat(values, keep, axis=0), equal_nan=True)
+                assert reduced.dtype == values.dtype
