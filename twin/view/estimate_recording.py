@@ -60,6 +60,7 @@ and for the supports' canopy attitude (twin.pipeline.support_estimate.SupportAtt
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping
+from itertools import chain
 from pathlib import Path
 
 import numpy as np
@@ -85,6 +86,7 @@ from twin.view.row_cuts import (
     PathStrips,
     RowsOf,
     blocks_of,
+    bounded,
     decimate,
     decimated_blocks,
 )
@@ -118,7 +120,7 @@ def _record_rows(data: Blocks, rate_hz: float | None,
                  each: Callable[[pa.Table], None] | None = None) -> Iterator[tuple[pa.Table, np.ndarray]]:
     """A stream's rows at the record rate (decimated_blocks: the first of each 1/rate_hz interval and the last; all
     at FULL rate) a block at a time, with their times; `each` is called with every block read."""
-    for sub in decimated_blocks(data, rate_hz, each):
+    for sub in decimated_blocks(bounded(data), rate_hz, each):
         yield sub, column(sub, "t")
 
 
@@ -136,7 +138,7 @@ def _flag_series(data: Blocks, name: str, bits, rate_hz: float | None) -> Iterat
     """A stream's flag column `name` OR-ed over each plot interval (a single-sample fix is not decimated away, and the
     0/1 steps keep their edges in visible_rows) as 0/1 series (_flag_rows), a block at a time."""
     flags = IntervalReduce(rate_hz, np.bitwise_or)
-    for block in blocks_of(data):
+    for block in bounded(data):
         yield _flag_rows(*flags.push(column(block, "t"), np.asarray(block.column(name).to_numpy(), np.int64)), bits)
     yield _flag_rows(*flags.finish(), bits)
 
@@ -237,7 +239,7 @@ def _log_fusion(rec: rr.RecordingStream, truth: TruthTrack | None, method: str, 
 
     def blocks() -> Iterator[SeriesBlock]:
         along = None if truth is None else TruthAlong(truth)
-        estimated = RowsOf(decimated_blocks(estimate, rate_hz))
+        estimated = RowsOf(decimated_blocks(bounded(estimate), rate_hz))
         for sub, t in _record_rows(fusion, rate_hz):
             block = {f"{root}/r_yaw": (t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None]),
                      f"{root}/yaw_innovation": (t, np.degrees(column(sub, "yaw_innovation"))[:, None]),
@@ -304,7 +306,7 @@ def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, detector
 
     def blocks(points: bool = False) -> Iterator[SeriesBlock]:
         peaks = IntervalReduce(rate_hz, np.fmax)
-        for block in [*blocks_of(detectors), None]:
+        for block in chain(bounded(detectors), [None]):
             if block is None:
                 t, peak = peaks.finish()
             else:

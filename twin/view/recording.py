@@ -63,7 +63,7 @@ from twin.view.rerun_columns import (
     vec,
     xyzw,
 )
-from twin.view.row_cuts import Blocks, MarkerCut, PathStrips, blocks_of, col, decimated_blocks
+from twin.view.row_cuts import Blocks, MarkerCut, PathStrips, blocks_of, bounded, col, decimated_blocks
 from twin.view.rrd_stream import recording_id, recording_stream
 from twin.view.sensor_recording import log_sensors
 
@@ -228,7 +228,7 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_h
         last[:] = [t[-1:], p[-1:], q_tb[-1:], cycle[-1:]]
 
     def blocks(draw: bool = False) -> Iterator[SeriesBlock]:
-        for sub in decimated_blocks(shearer, rate_hz, draw_path if draw else None):
+        for sub in decimated_blocks(bounded(shearer), rate_hz, draw_path if draw else None):
             if draw and sub.num_rows:
                 draw_poses(sub)
             t = col(sub, "t")

@@ -1,10 +1,11 @@
 """Batched Rerun logging: whole histories sent column-wise with `send_columns` on the `sim_time` timeline.
 
-One call per entity carries its whole history (time columns, scalar series, bar-chart tensors), cut to what a person
-can see (twin.view.row_cuts.visible_rows: at most the record rate, and without the samples the drawn line passes
+An entity's history (time columns, scalar series, bar-chart tensors) goes out in one call, or in calls of SEND_ROWS
+rows for a long series given in blocks, cut to what a person can see (twin.view.row_cuts.visible_rows: at most the record rate, and without the samples the drawn line passes
 within a pixel of); shared by the run's and the estimators' recordings. A long stream comes in blocks
 (twin.view.row_cuts.Blocks); `latest_frames` cuts a history of many instances (every pan or support at every frame)
-into chunks sent one call each, and `mean_rate` carries its state across blocks.
+into chunks sent one call each, `mean_rates` carries its state across blocks, and `PlottedSeries` cuts and sends
+series given in blocks.
 
 The record rate (twin.view.record_rate) is a rate in Hz, or FULL (None): every sample, neither decimated nor thinned.
 """
@@ -175,25 +176,27 @@ def median_interval(data: Blocks) -> tuple[float, int]:
     return float(np.mean(values[ranks[:2 - n % 2]])), rows
 
 
-def mean_rate(data: Blocks, columns: list[str], rate_hz: float | None) -> tuple[np.ndarray, np.ndarray]:
+def mean_rates(data: Blocks, columns: list[str], rate_hz: float | None, interval: tuple[float, int]
+               ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Means of increments (the stream's `columns`) per second at about rate_hz: sums over runs of `step` rows / their
     duration, `step` the record interval in median sample intervals (each sample at FULL rate); (times at the runs'
-    ends, (M, len(columns))). A stream given in blocks is read twice, block by block (a run of rows may span two)."""
-    dt, rows = median_interval(data)
+    ends, (M, len(columns))) a block at a time (a run of rows may span two). `interval`: the stream's
+    median_interval."""
+    dt, rows = interval
     if rows < 2:
-        table = pa.concat_tables(blocks_of(data))
-        return col(table, "t"), np.column_stack([col(table, c) for c in columns]).astype(float)
+        for block in blocks_of(data):
+            yield col(block, "t"), np.column_stack([col(block, c) for c in columns]).astype(float)
+        return
     step = 1 if rate_hz is FULL else max(1, int(round(1.0 / (rate_hz * dt))))
     n = (rows // step) * step
-    times, sums, carry, start = [], [], np.zeros((0, len(columns))), 0
+    carry, start = np.zeros((0, len(columns))), 0
     for block in blocks_of(data):
         at = np.arange((step - 1 - start) % step, block.num_rows, step)  # the runs' last rows
-        times.append(col(block, "t")[at[at + start < n]])
         values = np.concatenate([carry, np.column_stack([col(block, c) for c in columns]).astype(float)])
         m = (values.shape[0] // step) * step
-        sums.append(values[:m].reshape(m // step, step, len(columns)).sum(axis=1))
         carry, start = values[m:], start + block.num_rows
-    return np.concatenate(times), np.concatenate(sums)[:n // step] / (step * dt)
+        yield col(block, "t")[at[at + start - block.num_rows < n]], (values[:m].reshape(m // step, step, len(columns))
+                                                                     .sum(axis=1) / (step * dt))
 
 
 SEND_ROWS = 100_000

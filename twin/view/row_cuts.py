@@ -42,8 +42,19 @@ Blocks = pa.Table | Iterable[pa.Table]
 row group at a time: estimators.io.logformat.StreamBlocks, whose `column` gives one column over the whole file)."""
 
 
+BLOCK_ROWS = 32_768
+"""Rows of a stream cut and drawn at a time (`bounded`): a row group of 131,072 rows is taken in four."""
+
+
 def blocks_of(data: Blocks) -> Iterable[pa.Table]:
     return [data] if isinstance(data, pa.Table) else data
+
+
+def bounded(data: Blocks, rows: int = BLOCK_ROWS) -> Iterator[pa.Table]:
+    """A stream's blocks cut to at most `rows` rows (slices: no copy); an empty block as it is."""
+    for block in blocks_of(data):
+        for start in range(0, max(block.num_rows, 1), rows):
+            yield block.slice(start, rows)
 
 
 class RowsOf:
@@ -103,13 +114,6 @@ def decimated_blocks(data: Blocks, rate_hz: float | None,
             last = block
     if not cut.last_kept or last.num_rows == 0:
         yield last
-
-
-def decimated_rows(data: Blocks, rate_hz: float | None,
-                   each: Callable[[pa.Table], None] | None = None) -> pa.Table:
-    """The rows of a stream (one table, or one or more blocks) that `decimate` keeps of its times, as one table;
-    `each` is called with every block as it is read (decimated_blocks)."""
-    return pa.concat_tables(decimated_blocks(data, rate_hz, each))
 
 
 class IntervalReduce:

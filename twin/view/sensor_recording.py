@@ -15,28 +15,31 @@ import pyarrow.compute  # noqa: F401  (pa.compute)
 import rerun as rr
 
 from twin.view.record_rate import FULL
-from twin.view.rerun_columns import mean_rate, send_bar_chart, series, vec
-from twin.view.row_cuts import Blocks, blocks_of, col, decimate, decimated_rows
+from twin.view.rerun_columns import PlottedSeries, mean_rates, median_interval, send_bar_chart, series, vec
+from twin.view.row_cuts import Blocks, blocks_of, bounded, col, decimate, decimated_blocks
 
 
 def log_sensors(rec: rr.RecordingStream, sensors: dict[str, Blocks], rate_hz: float | None) -> None:
     """Every sensor channel as time series (fast streams averaged to about rate_hz), fault windows as
     0/1 steps, the ram readings as a bar chart per support. The imu, pushram and pressure streams may come in blocks
     (twin.view.row_cuts.Blocks), the others as tables."""
+    # The long streams are read a block at a time, twice (PlottedSeries: their ranges, then their cut).
     if "imu" in sensors:
-        tt, rates = mean_rate(sensors["imu"], [f"{p}_{a}" for p in ("dtheta", "dv") for a in "xyz"], rate_hz)
-        for k, (name, label) in enumerate((("gyro", "rad/s"), ("accel", "m/s^2"))):
-            series(rec, f"sensors/imu/{name}", tt, rates[:, 3 * k:3 * k + 3], [f"{a} [{label}]" for a in "xyz"],
-                   rate_hz=rate_hz)
-    # Of the other long streams only the rows at the record rate are held (series decimates them the same again).
+        imu, interval = sensors["imu"], median_interval(sensors["imu"])
+        increments = [f"{p}_{a}" for p in ("dtheta", "dv") for a in "xyz"]
+        PlottedSeries({f"sensors/imu/{name}": [f"{a} [{label}]" for a in "xyz"]
+                       for name, label in (("gyro", "rad/s"), ("accel", "m/s^2"))}, rate_hz).log(rec, lambda: (
+            {"sensors/imu/gyro": (t, rates[:, :3]), "sensors/imu/accel": (t, rates[:, 3:])}
+            for t, rates in mean_rates(bounded(imu), increments, rate_hz, interval)))
+    # Of the other long streams the rows at the record rate (series decimates them the same again).
     if "odometer" in sensors:
-        odo = decimated_rows(sensors["odometer"], rate_hz)
-        series(rec, "sensors/odometer/distance", col(odo, "t"), col(odo, "distance")[:, None], ["distance [m]"],
-               rate_hz=rate_hz)
+        PlottedSeries({"sensors/odometer/distance": ["distance [m]"]}, rate_hz).log(rec, lambda: (
+            {"sensors/odometer/distance": (col(odo, "t"), col(odo, "distance")[:, None])}
+            for odo in decimated_blocks(bounded(sensors["odometer"]), rate_hz)))
     if "mag" in sensors:
-        mag = decimated_rows(sensors["mag"], rate_hz)
-        series(rec, "sensors/mag", col(mag, "t"), vec(mag, "b", "xyz") * 1e6, [f"{a} [uT]" for a in "xyz"],
-               rate_hz=rate_hz)
+        PlottedSeries({"sensors/mag": [f"{a} [uT]" for a in "xyz"]}, rate_hz).log(rec, lambda: (
+            {"sensors/mag": (col(mag, "t"), vec(mag, "b", "xyz") * 1e6)}
+            for mag in decimated_blocks(bounded(sensors["mag"]), rate_hz)))
     if "support_imu" in sensors:
         units = sensors["support_imu"]
         for j in np.unique(col(units, "support")):

@@ -16,7 +16,7 @@ class TruthAlong(TruthTrack):
 
     def __init__(self, track: TruthTrack):
         super().__init__(track.blocks)
-        self._windows = self.windows()
+        self._windows = track.windows()  # not self's: a generator held by the object it reads would keep it alive
         self._window = next(self._windows, None)
         if self._window is None:
             raise LogError("truth_shearer holds no samples to score against")

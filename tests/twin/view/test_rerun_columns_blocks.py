@@ -9,7 +9,7 @@ import pytest
 
 from twin.view.line_kernel import line_kernel
 from twin.view.record_rate import FULL
-from twin.view.rerun_columns import latest_frames, latest_rows, mean_rate, median_interval
+from twin.view.rerun_columns import latest_frames, latest_rows, mean_rates, median_interval
 from twin.view.row_cuts import (
     BAND_ROWS,
     BAND_TURNS,
@@ -24,7 +24,7 @@ from twin.view.row_cuts import (
     _intervals,
     band_rows,
     decimate,
-    decimated_rows,
+    decimated_blocks,
     line_rows,
     marker_rows,
     path_strips,
@@ -104,14 +104,14 @@ def _blocks(rng: np.random.Generator, table: pa.Table) -> list[pa.Table]:
 
 
 @pytest.mark.parametrize("rate_hz", [10.0, 33.0, 1000.0, FULL])
-def test_decimated_rows_in_blocks_are_the_decimated_rows(rate_hz):
+def test_decimated_blocks_are_the_decimated_rows(rate_hz):
     rng = np.random.default_rng(11)
     for n in (1, 2, 5, 700):
         table = _table(rng, n)
         t = table.column("t").to_numpy()
         rows = decimate(t, rate_hz)
         assert rows[-1] == n - 1 and (rate_hz is FULL or rate_hz > 100 or rows.size < n or n < 3)
-        assert decimated_rows(_blocks(rng, table), rate_hz).equals(table.take(pa.array(rows)))
+        assert pa.concat_tables(decimated_blocks(_blocks(rng, table), rate_hz)).equals(table.take(pa.array(rows)))
 
 
 @pytest.mark.parametrize("rate_hz", [10.0, 33.0, FULL])
@@ -124,7 +124,9 @@ def test_mean_rate_in_blocks_is_the_whole_streams(rate_hz):
         assert median_interval(_blocks(rng, table)) == (dt, n)
         step = 1 if rate_hz is FULL else max(1, int(round(1.0 / (rate_hz * dt))))
         k = n // step
-        times, rates = mean_rate(_blocks(rng, table), ["a", "b"], rate_hz)
+        blocks = _blocks(rng, table)
+        times, rates = (np.concatenate(x) for x in zip(*mean_rates(blocks, ["a", "b"], rate_hz,
+                                                                   median_interval(blocks))))
         assert np.array_equal(times, t[step - 1:k * step:step])
         assert np.array_equal(rates, values[:k * step].reshape(k, step, 2).sum(axis=1) / (step * dt))
 
