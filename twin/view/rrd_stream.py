@@ -67,14 +67,32 @@ def _row_words(column: pa.Array) -> np.ndarray:
     return data[column.offset:column.offset + len(column)]
 
 
-def _identified(chunks: Callable[[], Iterable[Chunk]], recording: str, name: str) -> Iterator[Chunk]:
-    """The chunks with chunk ids numbered in file order and row ids in logging order, under `_base`, and
-    without the WALL_CLOCK timelines, one at a time: `chunks` gives them anew for each of two passes (the row ids
-    first), so that a chunk at a time is held, whatever the recording's length."""
+def _ranks(chunks: Callable[[], Iterable[Chunk]]) -> np.ndarray | None:
+    """Each row's rank (from 1) in logging order, in file order; None when the file holds the rows in logging order
+    (a row's rank its number in the file: nothing held, as a stream logged from one thread is written)."""
+    last = np.zeros(2, np.uint64)
+    for chunk in chunks():
+        words = _row_words(chunk.to_record_batch().column(ROW_ID))
+        if words.size:
+            words = np.concatenate([last[None], words])
+            later = (words[1:, 0] > words[:-1, 0]) | ((words[1:, 0] == words[:-1, 0]) & (words[1:, 1] > words[:-1, 1]))
+            if not later.all():
+                break
+            last = words[-1].copy()
+    else:
+        return None
     words = [_row_words(chunk.to_record_batch().column(ROW_ID)).copy() for chunk in chunks()]
     stacked = np.concatenate(words) if words else np.zeros((0, 2), np.uint64)
     rank = np.empty(len(stacked), np.uint64)
     rank[np.lexsort((stacked[:, 1], stacked[:, 0]))] = np.arange(1, len(stacked) + 1, dtype=np.uint64)
+    return rank
+
+
+def _identified(chunks: Callable[[], Iterable[Chunk]], recording: str, name: str) -> Iterator[Chunk]:
+    """The chunks with chunk ids numbered in file order and row ids in logging order, under `_base`, and
+    without the WALL_CLOCK timelines, one at a time: `chunks` gives them anew for each of two passes (the row ids
+    first: _ranks), so that a chunk at a time is held, whatever the recording's length."""
+    rank = _ranks(chunks)
     base, start = _base(recording, name), 0
     for k, chunk in enumerate(chunks()):
         batch = chunk.to_record_batch()
@@ -82,8 +100,9 @@ def _identified(chunks: Callable[[], Iterable[Chunk]], recording: str, name: str
         keep = [i for i, f in enumerate(batch.schema) if f.name not in WALL_CLOCK]
         schema = pa.schema([batch.schema.field(i) for i in keep])
         schema = schema.with_metadata({**batch.schema.metadata, CHUNK_ID: f"chunk_{base + 1:016X}{k:016x}".encode()})
-        columns = [_tuids(base, rank[start:start + n]) if batch.schema.field(i).name == ROW_ID else batch.column(i)
-                   for i in keep]
+        ranks = (np.arange(start + 1, start + n + 1, dtype=np.uint64) if rank is None
+                 else rank[start:start + n])
+        columns = [_tuids(base, ranks) if batch.schema.field(i).name == ROW_ID else batch.column(i) for i in keep]
         yield from Chunk.from_record_batch(pa.RecordBatch.from_arrays(columns, schema=schema))
         start += n
 

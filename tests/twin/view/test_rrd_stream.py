@@ -125,3 +125,27 @@ def test_the_file_is_written_from_its_chunks_one_at_a_time(tmp_path):
     assert read == [*range(n), *range(n)] and len(made) == n
     rows = np.concatenate([rrd_stream._row_words(c.to_record_batch().column(ROW_ID))[:, 1] for c in made])
     assert np.array_equal(rows, np.arange(1, rows.size + 1)) and rows.size >= 12  # numbered in logging order
+
+
+def test_rows_out_of_logging_order_in_the_file_are_ranked_by_their_ids(tmp_path):
+    """Rows the file holds in logging order are numbered as they come (nothing held); a file whose chunks come out of
+    logging order (here read backwards) has its rows ranked by their ids: the same numbers, each for the same row."""
+    import twin.view.rrd_stream as rrd_stream
+
+    scratch = tmp_path / "scratch.rrd"
+    with rr.RecordingStream("test", recording_id="fixed", batcher_config=rr.ChunkBatcherConfig.NEVER()) as rec:
+        rec.save(scratch)
+        for k in range(3):
+            rec.send_columns(f"plots/x{k}", indexes=[rr.TimeColumn("sim_time", duration=np.arange(4.0))],
+                             columns=rr.Scalars.columns(scalars=np.arange(4.0) + 10 * k))
+    forwards = list(RrdReader(scratch).stream())
+    assert rrd_stream._ranks(lambda: forwards) is None
+    backwards = forwards[::-1]
+    rank = rrd_stream._ranks(lambda: backwards)
+    sizes = [c.num_rows for c in backwards]
+    in_file = np.cumsum([0, *sizes])
+    first_of = {c.entity_path: rank[in_file[k]] for k, c in enumerate(backwards) if c.num_rows}
+    # ranked by id: the chunks logged first (file order forwards) have the lowest ranks
+    forwards_first = {c.entity_path: 1 + int(np.sum([x.num_rows for x in forwards[:k]])) for k, c in enumerate(forwards)
+                      if c.num_rows}
+    assert first_of == forwards_first and sorted(rank) == list(range(1, rank.size + 1))
