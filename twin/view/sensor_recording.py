@@ -9,6 +9,8 @@ Entities: `sensors/imu/{gyro,accel}`, `sensors/odometer/distance`, `sensors/mag`
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 import pyarrow as pa
 import pyarrow.compute  # noqa: F401  (pa.compute)
@@ -52,7 +54,8 @@ def log_sensors(rec: rr.RecordingStream, sensors: dict[str, Blocks], rate_hz: fl
         ram = sensors["pushram"]
         times = sample_times(ram)
         shown = times[decimate(times, FULL if rate_hz is FULL else min(rate_hz, 0.2))]
-        send_bar_chart(rec, "sensors/pushram", shown, bar_grid(ram, shown, ("extension",))[0])
+        for frames, (grid,) in bar_frames(ram, shown, ("extension",)):
+            send_bar_chart(rec, "sensors/pushram", frames, grid)
     if "pressure" in sensors:
         _log_pressures(rec, sensors["pressure"], rate_hz)
     if "alignment" in sensors and sensors["alignment"].num_rows:
@@ -86,15 +89,27 @@ def _log_pressures(rec: rr.RecordingStream, pressure: Blocks, rate_hz: float | N
     highest ram pressure as time series (a support that failed to set, a leaking leg, a stalled ram stand out)."""
     times = sample_times(pressure)
     shown = times[decimate(times, FULL if rate_hz is FULL else min(rate_hz, PRESSURE_BAR_HZ))]
-    for column, grid in zip(("leg", "ram"), bar_grid(pressure, shown, ("leg", "ram"))):
-        send_bar_chart(rec, f"sensors/pressure/{column}_bars", shown, grid)
-    extremes = np.full((times.size, 2), np.nan)  # NaN-ignoring, NaN where a sample has no reading
-    for block in blocks_of(pressure):
-        at = np.searchsorted(times, col(block, "t"))
-        np.fmin.at(extremes[:, 0], at, col(block, "leg"))
-        np.fmax.at(extremes[:, 1], at, col(block, "ram"))
-    series(rec, "sensors/pressure/extremes", times, extremes, ["lowest leg [MPa]", "highest ram [MPa]"],
-           rate_hz=rate_hz)
+    for frames, grids in bar_frames(pressure, shown, ("leg", "ram")):
+        for column, grid in zip(("leg", "ram"), grids):
+            send_bar_chart(rec, f"sensors/pressure/{column}_bars", frames, grid)
+    PlottedSeries({"sensors/pressure/extremes": ["lowest leg [MPa]", "highest ram [MPa]"]}, rate_hz).log(
+        rec, lambda: ({"sensors/pressure/extremes": rows} for rows in pressure_extremes(pressure)))
+
+
+def pressure_extremes(pressure: Blocks) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """The lowest leg and highest ram pressure at each time of the stream (NaN-ignoring, NaN where a time has no
+    reading) a block at a time: (times, (k, 2)); the rows of a block's last time held for the next block's."""
+    held_t, held = np.zeros(0), np.zeros((0, 2))
+    for block in bounded(pressure):
+        t = np.r_[held_t, col(block, "t")]
+        rows = np.concatenate([held, np.column_stack([col(block, "leg"), col(block, "ram")])])
+        if not t.size:
+            continue
+        times, first = np.unique(t, return_index=True)
+        extremes = np.column_stack([np.fmin.reduceat(rows[:, 0], first), np.fmax.reduceat(rows[:, 1], first)])
+        held_t, held = times[-1:], extremes[-1:]
+        yield times[:-1], extremes[:-1]
+    yield held_t, held
 
 
 def sample_times(data: Blocks) -> np.ndarray:
@@ -105,16 +120,38 @@ def sample_times(data: Blocks) -> np.ndarray:
     return times
 
 
-def bar_grid(data: Blocks, shown: np.ndarray, columns: tuple[str, ...]) -> list[np.ndarray]:
+BAR_CELLS = 250_000
+"""Bars (times x supports) of a per-support bar chart built and sent at a time."""
+
+
+def bar_frames(data: Blocks, shown: np.ndarray, columns: tuple[str, ...], cells: int = BAR_CELLS
+               ) -> Iterator[tuple[np.ndarray, list[np.ndarray]]]:
     """A per-support stream's `columns` at the times `shown` (sorted), each as (times, supports) with NaN where a
-    support has no row (the later of two rows at one time)."""
+    support has no row (the later of two rows at one time), F = cells // supports times at a time (at least one
+    chunk): (times (F,), a grid per column), from one pass over its blocks in time order (and one for the supports)."""
     n_sup = max(int(col(block, "support").max(initial=-1)) for block in blocks_of(data)) + 1
-    grids = [np.full((shown.size, n_sup), np.nan) for _ in columns]
+    frames = max(1, cells // max(n_sup, 1))
+    chunks = max(1, -(-shown.size // frames))
+
+    def grids(k: int) -> list[np.ndarray]:
+        return [np.full((shown[k * frames:(k + 1) * frames].size, n_sup), np.nan) for _ in columns]
+
+    k, held = 0, grids(0)
     for block in blocks_of(data):
         t = col(block, "t")
         at = np.minimum(np.searchsorted(shown, t), max(shown.size - 1, 0))
         hit = np.flatnonzero(shown[at] == t) if shown.size else np.zeros(0, int)
-        support = col(block, "support")[hit]
-        for grid, column in zip(grids, columns):
-            grid[at[hit], support] = col(block, column)[hit]
-    return grids
+        at, support = at[hit], col(block, "support")[hit]
+        values = [col(block, column)[hit] for column in columns]
+        chunk = at // frames
+        last = int(chunk.max(initial=k))
+        for j in range(k, last + 1):  # the rows of a later chunk: the earlier ones are complete (time order)
+            mine = chunk == j
+            for grid, value in zip(held, values):
+                grid[at[mine] - j * frames, support[mine]] = value[mine]
+            if j < last:
+                yield shown[j * frames:(j + 1) * frames], held
+                k, held = j + 1, grids(j + 1)
+    for j in range(k, chunks):
+        yield shown[j * frames:(j + 1) * frames], held
+        held = grids(j + 1)

@@ -30,7 +30,7 @@ from twin.view.row_cuts import (
     path_strips,
     visible_rows,
 )
-from twin.view.sensor_recording import sample_times
+from twin.view.sensor_recording import bar_frames, pressure_extremes, sample_times
 
 
 def _cuts(rng: np.random.Generator, n: int) -> list[np.ndarray]:
@@ -282,3 +282,43 @@ def test_interval_reduce_in_blocks_is_reduceat_over_the_decimated_rows(rate_hz):
             if n:
                 assert np.array_equal(reduced, reduce.reduceat(values, keep, axis=0), equal_nan=True)
                 assert reduced.dtype == values.dtype
+
+
+def _per_support(rng: np.random.Generator) -> pa.Table:
+    """A per-support stream in time order: several rows at a time, some supports missing, a row repeated late."""
+    t = np.repeat(np.arange(120) * 0.5, 6)
+    support = np.tile(np.arange(6), 120)
+    keep = rng.random(t.size) < 0.8
+    t, support = np.r_[t[keep], t[-1]], np.r_[support[keep], support[keep][-1]]
+    leg = np.where(rng.random(t.size) < 0.1, np.nan, rng.normal(30, 5, t.size))
+    return pa.table({"t": t, "support": support.astype(np.int32), "leg": leg, "ram": rng.normal(10, 3, t.size)})
+
+
+@pytest.mark.parametrize("cells", [6, 40, 10_000])
+def test_bar_frames_of_blocks_are_the_whole_streams_grids(cells):
+    """Each support's latest reading at the times shown, from blocks cut anywhere, in chunks of cells // supports
+    times: the grid filled from the whole table (NaN where a support has no row at a time)."""
+    rng = np.random.default_rng(3)
+    table = _per_support(rng)
+    t, support = table.column("t").to_numpy(), table.column("support").to_numpy()
+    shown = np.unique(t)[::3]
+    whole = np.full((shown.size, 6), np.nan)
+    rows = np.flatnonzero(np.isin(t, shown))
+    whole[np.searchsorted(shown, t[rows]), support[rows]] = table.column("leg").to_numpy()[rows]
+    chunks = list(bar_frames(_blocks(rng, table), shown, ("leg", "ram"), cells))
+    assert [c[0].size for c in chunks[:-1]] == [max(1, cells // 6)] * (len(chunks) - 1)
+    assert np.array_equal(np.concatenate([c[0] for c in chunks]), shown)
+    assert np.array_equal(np.concatenate([c[1][0] for c in chunks]), whole, equal_nan=True)
+    assert len(list(bar_frames(_blocks(rng, table), shown[:0], ("leg",), cells))) == 1  # nothing shown: one empty
+
+
+def test_pressure_extremes_of_blocks_are_the_whole_streams():
+    rng = np.random.default_rng(6)
+    table = _per_support(rng)
+    t = table.column("t").to_numpy()
+    times = np.unique(t)
+    whole = np.full((times.size, 2), np.nan)
+    np.fmin.at(whole[:, 0], np.searchsorted(times, t), table.column("leg").to_numpy())
+    np.fmax.at(whole[:, 1], np.searchsorted(times, t), table.column("ram").to_numpy())
+    got_t, got = (np.concatenate(x) for x in zip(*pressure_extremes(_blocks(rng, table))))
+    assert np.array_equal(got_t, times) and np.array_equal(got, whole, equal_nan=True)
