@@ -105,8 +105,10 @@ def pressure_extremes(pressure: Blocks) -> Iterator[tuple[np.ndarray, np.ndarray
         rows = np.concatenate([held, np.column_stack([col(block, "leg"), col(block, "ram")])])
         if not t.size:
             continue
-        times, first = np.unique(t, return_index=True)
-        extremes = np.column_stack([np.fmin.reduceat(rows[:, 0], first), np.fmax.reduceat(rows[:, 1], first)])
+        times, at = np.unique(t, return_inverse=True)
+        extremes = np.full((times.size, 2), np.nan)
+        np.fmin.at(extremes[:, 0], at, rows[:, 0])  # in row order, as a whole stream's (the sign of a zero kept)
+        np.fmax.at(extremes[:, 1], at, rows[:, 1])
         held_t, held = times[-1:], extremes[-1:]
         yield times[:-1], extremes[:-1]
     yield held_t, held
