@@ -67,44 +67,61 @@ def _row_words(column: pa.Array) -> np.ndarray:
     return data[column.offset:column.offset + len(column)]
 
 
-def _ranks(chunks: Callable[[], Iterable[Chunk]]) -> np.ndarray | None:
-    """Each row's rank (from 1) in logging order, in file order; None when the file holds the rows in logging order
-    (a row's rank its number in the file: nothing held, as a stream logged from one thread is written)."""
-    last = np.zeros(2, np.uint64)
-    for chunk in chunks():
-        words = _row_words(chunk.to_record_batch().column(ROW_ID))
-        if words.size:
-            words = np.concatenate([last[None], words])
-            later = (words[1:, 0] > words[:-1, 0]) | ((words[1:, 0] == words[:-1, 0]) & (words[1:, 1] > words[:-1, 1]))
-            if not later.all():
-                break
-            last = words[-1].copy()
-    else:
-        return None
-    words = [_row_words(chunk.to_record_batch().column(ROW_ID)).copy() for chunk in chunks()]
-    stacked = np.concatenate(words) if words else np.zeros((0, 2), np.uint64)
-    rank = np.empty(len(stacked), np.uint64)
-    rank[np.lexsort((stacked[:, 1], stacked[:, 0]))] = np.arange(1, len(stacked) + 1, dtype=np.uint64)
-    return rank
+def _keys(words: np.ndarray) -> np.ndarray:
+    """Row ids (n, 2) big-endian words as 16-byte keys that sort as the ids do."""
+    return np.ascontiguousarray(words.astype(">u8")).view("S16").ravel()
+
+
+class _Ranks:
+    """Each row's rank (from 1) in logging order, for the chunks in file order, without holding every row id: the file
+    holds most rows in logging order (what `send_columns` sends, written as it goes) and a few later than logged
+    (what `log` gave the batcher, written at the flush). A first pass over the chunks holds the ids of the chunks out
+    of order ("late"), a second (only when there are some) counts the rows in order below each late id."""
+
+    def __init__(self, chunks: Callable[[], Iterable[Chunk]]):
+        last, late, self._late_chunks = b"", [], set()
+        for k, chunk in enumerate(chunks()):
+            keys = _keys(_row_words(chunk.to_record_batch().column(ROW_ID)))
+            if keys.size and (keys[0] <= last or (keys[1:] <= keys[:-1]).any()):
+                late.append(keys.copy())
+                self._late_chunks.add(k)
+            elif keys.size:
+                last = keys[-1]
+        self._late = np.sort(np.concatenate(late)) if late else np.zeros(0, "S16")
+        below = np.zeros(self._late.size, np.uint64)  # rows in order below each late id
+        if late:
+            for k, chunk in enumerate(chunks()):
+                if k not in self._late_chunks:
+                    below += np.searchsorted(_keys(_row_words(chunk.to_record_batch().column(ROW_ID))),
+                                             self._late).astype(np.uint64)
+        self._late_rank = below + np.arange(1, self._late.size + 1, dtype=np.uint64)
+        self._in_order = 0  # rows in order ranked so far
+
+    def of(self, k: int, words: np.ndarray) -> np.ndarray:
+        """The ranks of chunk k's rows (row ids `words`), the chunks asked for in file order."""
+        keys = _keys(words)
+        if k in self._late_chunks:
+            return self._late_rank[np.searchsorted(self._late, keys)]
+        ranks = (self._in_order + np.arange(1, keys.size + 1, dtype=np.uint64)
+                 + np.searchsorted(self._late, keys).astype(np.uint64))
+        self._in_order += keys.size
+        return ranks
 
 
 def _identified(chunks: Callable[[], Iterable[Chunk]], recording: str, name: str) -> Iterator[Chunk]:
     """The chunks with chunk ids numbered in file order and row ids in logging order, under `_base`, and
     without the WALL_CLOCK timelines, one at a time: `chunks` gives them anew for each of two passes (the row ids
-    first: _ranks), so that a chunk at a time is held, whatever the recording's length."""
-    rank = _ranks(chunks)
-    base, start = _base(recording, name), 0
+    first: _Ranks), so that a chunk at a time is held, whatever the recording's length."""
+    ranks = _Ranks(chunks)
+    base = _base(recording, name)
     for k, chunk in enumerate(chunks()):
         batch = chunk.to_record_batch()
-        n = batch.num_rows
         keep = [i for i, f in enumerate(batch.schema) if f.name not in WALL_CLOCK]
         schema = pa.schema([batch.schema.field(i) for i in keep])
         schema = schema.with_metadata({**batch.schema.metadata, CHUNK_ID: f"chunk_{base + 1:016X}{k:016x}".encode()})
-        ranks = (np.arange(start + 1, start + n + 1, dtype=np.uint64) if rank is None
-                 else rank[start:start + n])
-        columns = [_tuids(base, ranks) if batch.schema.field(i).name == ROW_ID else batch.column(i) for i in keep]
+        rank = ranks.of(k, _row_words(batch.column(ROW_ID)))
+        columns = [_tuids(base, rank) if batch.schema.field(i).name == ROW_ID else batch.column(i) for i in keep]
         yield from Chunk.from_record_batch(pa.RecordBatch.from_arrays(columns, schema=schema))
-        start += n
 
 
 STORE_INFO, END = 1, 0

@@ -128,24 +128,26 @@ def test_the_file_is_written_from_its_chunks_one_at_a_time(tmp_path):
 
 
 def test_rows_out_of_logging_order_in_the_file_are_ranked_by_their_ids(tmp_path):
-    """Rows the file holds in logging order are numbered as they come (nothing held); a file whose chunks come out of
-    logging order (here read backwards) has its rows ranked by their ids: the same numbers, each for the same row."""
+    """Rows the file holds in logging order are numbered as they come (one pass, only the late rows' ids held); rows
+    written later than logged (here: static logs, the batcher's, and the chunks read in a shuffled order) are ranked
+    by their ids: every row gets the rank of its id among all."""
     import twin.view.rrd_stream as rrd_stream
 
     scratch = tmp_path / "scratch.rrd"
     with rr.RecordingStream("test", recording_id="fixed", batcher_config=rr.ChunkBatcherConfig.NEVER()) as rec:
         rec.save(scratch)
-        for k in range(3):
+        for k in range(5):
+            rec.log(f"plots/x{k}", rr.SeriesLines(names=[f"x{k}"]), static=True)  # written at the flush
             rec.send_columns(f"plots/x{k}", indexes=[rr.TimeColumn("sim_time", duration=np.arange(4.0))],
                              columns=rr.Scalars.columns(scalars=np.arange(4.0) + 10 * k))
-    forwards = list(RrdReader(scratch).stream())
-    assert rrd_stream._ranks(lambda: forwards) is None
-    backwards = forwards[::-1]
-    rank = rrd_stream._ranks(lambda: backwards)
-    sizes = [c.num_rows for c in backwards]
-    in_file = np.cumsum([0, *sizes])
-    first_of = {c.entity_path: rank[in_file[k]] for k, c in enumerate(backwards) if c.num_rows}
-    # ranked by id: the chunks logged first (file order forwards) have the lowest ranks
-    forwards_first = {c.entity_path: 1 + int(np.sum([x.num_rows for x in forwards[:k]])) for k, c in enumerate(forwards)
-                      if c.num_rows}
-    assert first_of == forwards_first and sorted(rank) == list(range(1, rank.size + 1))
+    chunks = list(RrdReader(scratch).stream())
+    for late, order in ((5, np.arange(len(chunks))), (None, np.random.default_rng(0).permutation(len(chunks)))):
+        shuffled = [chunks[i] for i in order]
+        words = [rrd_stream._row_words(c.to_record_batch().column(ROW_ID)) for c in shuffled]
+        stacked = np.concatenate(words)
+        expected = np.empty(len(stacked), np.uint64)
+        expected[np.lexsort((stacked[:, 1], stacked[:, 0]))] = np.arange(1, len(stacked) + 1)
+        ranks = rrd_stream._Ranks(lambda: shuffled)
+        got = np.concatenate([ranks.of(k, w) for k, w in enumerate(words)])
+        assert np.array_equal(got, expected)
+        assert late is None or len(ranks._late) == late  # in the file's order only the logged looks are held
