@@ -67,12 +67,13 @@ ride and truth (208 bytes a row) with their sensor draws in chunks (seed004: 1.2
 RECORDING_BYTES = 0.3e9
 """The run recording's own: its blocks of the long streams, the pans' and supports' frames a chunk at a time
 (seed004's write_recording: 250 MB above its start)."""
-HELD_BYTES = {"recording_s": 3500.0, "epochs_batch": 2700.0}
-"""What a run's stages hold for its whole length [bytes per item]: the run recording's plotted series at the record
-rate (per simulated second; seed004: 15 MB a cycle), and each batch method's solution and filter arrays (per filter
-epoch, the methods of a group and of the other workers at once; the streamed methods hold none and are scored a row
-group at a time: estimators.shearer.config.STREAMED, twin.pipeline.estimate.EstimateWriter; seed004 with five batch
-methods and 234 000 epochs: 3.16 GB, streamed: 2.11 GB)."""
+HELD_BYTES = {"recording_s": 1200.0, "epochs_batch": 2700.0}
+"""What a run's stages hold for its whole length [bytes per item]: the run recording's (per simulated second: its
+series are cut and sent a block at a time, what grows is its paths and the writer's allocations; panel_100: 5 MB a
+cycle of 4,600 s between 5 and 20 cycles), and each batch method's solution and filter arrays (per filter epoch, the
+methods of a group and of the other workers at once; the streamed methods hold none and are scored a row group at a
+time: estimators.shearer.config.STREAMED, twin.pipeline.estimate.EstimateWriter; seed004 with five batch methods and
+234 000 epochs: 3.16 GB, streamed: 2.11 GB)."""
 PASS_BYTES_PER_EPOCH = 45e3
 """A streamed filter's peak memory per filter epoch of its pass [bytes]: the pass's error states, covariances,
 predicted covariances and transitions for the smoother, its IMU rows (panel_100 over 5 cycles: 2.57 GB with two
