@@ -116,6 +116,14 @@ def _names(group: str) -> list[str]:
     return [f"{group}_{a}" for a in axes] if axes else [group]
 
 
+def plot_rows(table: pa.Table, rate_hz: float | None) -> tuple[pa.Table, np.ndarray]:
+    """The rows kept for plotting (first of each 1/rate_hz interval and the last; all at FULL rate) and their
+    times."""
+    keep = decimate(column(table, "t"), rate_hz)
+    sub = table.take(pa.array(keep))
+    return sub, column(sub, "t")
+
+
 def _record_rows(data: Blocks, rate_hz: float | None,
                  each: Callable[[pa.Table], None] | None = None) -> Iterator[tuple[pa.Table, np.ndarray]]:
     """A stream's rows at the record rate (decimated_blocks: the first of each 1/rate_hz interval and the last; all
