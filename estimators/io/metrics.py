@@ -122,10 +122,6 @@ class TruthTrack:
         self._fill(out, cols, t, todo.copy(), todo)  # the times at the last sample
         return out
 
-    def windows(self):
-        """truth_windows over the track's blocks."""
-        return truth_windows(self.blocks)
-
     @staticmethod
     def check_span(t: np.ndarray, first: float, last: float) -> None:
         """LogError (one line) when a time lies outside the truth's span first .. last."""

@@ -91,7 +91,6 @@ from twin.view.row_cuts import (
     decimated_blocks,
 )
 from twin.view.rrd_stream import recording_id, recording_stream
-from twin.view.truth_along import TruthAlong
 
 POSITION_AXES = ("east", "north", "up")
 ATTITUDE_AXES = ("e", "n", "u")
@@ -168,12 +167,11 @@ def _estimate_plots(method: str, truth: bool) -> dict[str, list[str]]:
 def _estimate_series(method: str, truth: TruthTrack | None, estimate: Blocks, rate_hz: float | None,
                      each: Callable[[pa.Table], None] | None = None) -> Iterator[SeriesBlock]:
     """_estimate_plots' series a block at a time: errors against the truth (read forwards once), sigmas, flags."""
-    along = None if truth is None else TruthAlong(truth)
     flags = _flag_series(estimate, "flags", FLAG_SERIES, rate_hz)
     for sub, t in _record_rows(estimate, rate_hz, each):
         block = {}
-        if along is not None:
-            err, phi = position_errors(sub, along)[1], attitude_errors(sub, along)[1]
+        if truth is not None:
+            err, phi = position_errors(sub, truth)[1], attitude_errors(sub, truth)[1]
             block[f"plots/errors/{method}/horizontal"] = (t, np.hypot(err[:, 0], err[:, 1])[:, None])
             for i, (axis, a) in enumerate(zip(POSITION_AXES, ATTITUDE_AXES)):
                 block[f"plots/errors/{method}/{axis}"] = (t, err[:, i:i + 1])
@@ -194,7 +192,6 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth: TruthTrack | No
     if not _has_rows(estimate):
         return
     site = scn.site
-    along = None if truth is None else TruthAlong(truth)  # the cycle of the truth sample at or before each estimate
     path, plan_path, markers = PathStrips(rate_hz), PathStrips(rate_hz), MarkerCut(rate_hz)
     entity = f"world/estimates/{method}/position"
     points = RowBatches(lambda t, p: rec.send_columns(entity, indexes=[time_column(t)],
@@ -210,7 +207,7 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth: TruthTrack | No
         t = column(block, "t")
         p = earth.lla_to_enu(column(block, "lat"), column(block, "lon"), column(block, "h"),
                              np.radians(site.lat_deg), np.radians(site.lon_deg), site.height_m)
-        cycle = None if along is None else along.at(t)["cycle"]
+        cycle = None if truth is None else truth.at(t)["cycle"]  # of the truth sample at or before each estimate
         path.push(t, p, cycle)
         cycle = np.zeros(t.size, np.int64) if cycle is None else cycle
         plan_path.push(t, plan.face_coordinates(scn, p, cycle), cycle)
@@ -246,13 +243,12 @@ def _log_fusion(rec: rr.RecordingStream, truth: TruthTrack | None, method: str, 
                                                     + [f"{method} {s} sub-filter {axis} [m]" for s in SUBFILTERS])
 
     def blocks() -> Iterator[SeriesBlock]:
-        along = None if truth is None else TruthAlong(truth)
         estimated = RowsOf(decimated_blocks(bounded(estimate), rate_hz))
         for sub, t in _record_rows(fusion, rate_hz):
             block = {f"{root}/r_yaw": (t, np.degrees(np.sqrt(column(sub, "r_yaw")))[:, None]),
                      f"{root}/yaw_innovation": (t, np.degrees(column(sub, "yaw_innovation"))[:, None]),
                      f"{root}/beta": (t, np.column_stack([column(sub, f"beta_{s}") for s in SUBFILTERS]))}
-            err = np.zeros((t.size, 3)) if along is None else position_errors(estimated.take(t.size), along)[1]
+            err = np.zeros((t.size, 3)) if truth is None else position_errors(estimated.take(t.size), truth)[1]
             for i, axis in enumerate(POSITION_AXES[:2]):
                 d = np.column_stack([np.zeros(t.size)] + [column(sub, f"{s}_d_pos_{'en'[i]}") for s in SUBFILTERS])
                 block[f"{root}/subfilter_errors/{axis}"] = (t, err[:, i:i + 1] + d)
@@ -390,7 +386,7 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
     `truth_shearer`: the truth_shearer table (or its columns as arrays, or an estimators.io.metrics.TruthTrack);
     `estimates`: method name -> ESTIMATE table; `states`: method name -> ESTIMATE_STATES table (filters with sensor
     states only); each table may come in blocks (twin.view.row_cuts.Blocks: an estimate file read a row group at a
-    time, twice; the truth is read forwards with it, twin.view.truth_along); `states_truth`:
+    time, twice; the truth is read forwards with it, estimators.io.metrics.TruthTrack); `states_truth`:
     true values of the sensor states by ESTIMATE_STATES column name in SI units (e.g. "gyro_bias_x" [rad/s],
     "odo_scale"), drawn as flat series; `fusion`: method name -> ESTIMATE_FUSION table (federated filters);
     `detectors`: method name -> (ESTIMATE_DETECTORS table, thresholds by statistic: residual, dual_state, t_on,

@@ -1,5 +1,5 @@
-"""twin.view.truth_along.TruthAlong: the truth at estimate times given in order, block by block, from one forward
-read of the truth's blocks, equals estimators.io.metrics.truth_at over the whole truth, bit for bit."""
+"""estimators.io.metrics.TruthTrack at estimate times given in order, block by block, from one forward read of the
+truth's blocks (cut anywhere, empty blocks included), equals truth_at over the whole truth, bit for bit."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import pytest
 from estimators.io.logformat import LogError
 from estimators.io.metrics import TruthTrack, truth_at
 from estimators.nav.rotations import quat_normalize
-from twin.view.truth_along import TruthAlong
 
 
 def _truth(rng: np.random.Generator, n: int) -> pa.Table:
@@ -29,25 +28,25 @@ def _split(rng: np.random.Generator, n: int) -> list[np.ndarray]:
 
 
 @pytest.mark.parametrize("seed", range(4))
-def test_truth_along_blocks_equals_truth_at_of_the_whole_truth(seed):
+def test_truth_track_blocks_equals_truth_at_of_the_whole_truth(seed):
     rng = np.random.default_rng(seed)
     truth = _truth(rng, 2000)
     t_truth = truth.column("t").to_numpy()
     t = np.sort(np.r_[rng.uniform(t_truth[0], t_truth[-1], 700), t_truth[[0, 5, 999, -1]]])  # sample times too
     whole = truth_at(truth, t)
-    along = TruthAlong(TruthTrack([truth.take(pa.array(part, pa.int64())) for part in _split(rng, truth.num_rows)]))
+    along = TruthTrack([truth.take(pa.array(part, pa.int64())) for part in _split(rng, truth.num_rows)])
     parts = [along.at(t[part]) for part in _split(rng, t.size)]
     assert whole["lon"].max() > np.pi  # unwrapped across the antimeridian
     for key, value in whole.items():
         assert np.array_equal(np.concatenate([p[key] for p in parts]), value), key
 
 
-def test_truth_along_refuses_times_outside_the_truth():
+def test_truth_track_refuses_times_outside_the_truth():
     truth = _truth(np.random.default_rng(1), 300)
     last = truth.column("t").to_numpy()[-1]
     with pytest.raises(LogError, match="outside the truth span"):
-        TruthAlong(TruthTrack(truth)).at(np.array([last + 1.0]))
+        TruthTrack(truth).at(np.array([last + 1.0]))
     with pytest.raises(LogError, match="outside the truth span"):
-        TruthAlong(TruthTrack(truth)).at(np.array([-1.0]))
+        TruthTrack(truth).at(np.array([-1.0]))
     with pytest.raises(LogError, match="no samples"):
-        TruthAlong(TruthTrack(truth.slice(0, 0)))
+        TruthTrack(truth.slice(0, 0)).at(np.array([0.0]))
