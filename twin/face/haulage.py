@@ -30,19 +30,23 @@ class Leg:
     phase: int
 
 
-@dataclass
+@dataclass(frozen=True)
 class Segment:
-    """A rest-to-rest run (or a stop when `x` is empty) placed on the timeline."""
+    """A rest-to-rest run over its legs (a stop when it has none) placed on the timeline. Its speed profile's grid
+    (run_profile, GRID_M apart: 5 MB a 360 m cut) is made again where it is sampled, not held: a run's timeline
+    holds its legs only, whatever its number of cycles."""
 
     t0: float
     s0: float
     direction: int
-    t: np.ndarray  # grid times relative to t0
-    x: np.ndarray  # grid distance from s0 along direction
-    v: np.ndarray
-    phase: np.ndarray  # per grid cell
+    legs: tuple[Leg, ...]
+    accel: float
     duration: float
     cycle: int
+
+    def grid(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """run_profile's (t relative to t0, x from s0 along direction, v, phase per cell)."""
+        return run_profile(list(self.legs), self.accel)
 
 
 def run_profile(legs: list[Leg], accel: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -120,14 +124,12 @@ class Timeline:
 
     def _stop(self, t: float, s: float, duration: float, cycle: int) -> float:
         if duration > 0:
-            empty = np.zeros(1)
-            self.segments.append(Segment(t, s, 1, np.array([0.0]), empty, empty, np.zeros(0, np.int8),
-                                         duration, cycle))
+            self.segments.append(Segment(t, s, 1, (), 0.0, duration, cycle))
         return t + duration
 
     def _run(self, t: float, s: float, d: int, legs: list[Leg], accel: float, cycle: int) -> tuple[float, float]:
-        tg, xg, vg, ph = run_profile(legs, accel)
-        self.segments.append(Segment(t, s, d, tg, xg, vg, ph, tg[-1], cycle))
+        tg, xg, _, _ = run_profile(legs, accel)
+        self.segments.append(Segment(t, s, d, tuple(legs), accel, tg[-1], cycle))
         return t + tg[-1], s + d * xg[-1]
 
     def sample(self, times: np.ndarray) -> dict[str, np.ndarray]:
@@ -141,18 +143,19 @@ class Timeline:
             seg = self.segments[k]
             sel = which == k
             cycle[sel] = seg.cycle
-            if seg.x.size < 2:
+            if not seg.legs:
                 out["s"][sel] = seg.s0
                 continue
+            t_g, x_g, v_g, phase_g = seg.grid()
             tau = np.clip(times[sel] - seg.t0, 0.0, seg.duration)
-            i = np.clip(np.searchsorted(seg.t, tau, side="right") - 1, 0, seg.t.size - 2)
-            dt_cell = seg.t[i + 1] - seg.t[i]
-            acc = (seg.v[i + 1] - seg.v[i]) / np.maximum(dt_cell, 1e-12)
-            r = tau - seg.t[i]
-            out["s"][sel] = seg.s0 + seg.direction * (seg.x[i] + seg.v[i] * r + 0.5 * acc * r * r)
-            out["ds"][sel] = seg.direction * (seg.v[i] + acc * r)
+            i = np.clip(np.searchsorted(t_g, tau, side="right") - 1, 0, t_g.size - 2)
+            dt_cell = t_g[i + 1] - t_g[i]
+            acc = (v_g[i + 1] - v_g[i]) / np.maximum(dt_cell, 1e-12)
+            r = tau - t_g[i]
+            out["s"][sel] = seg.s0 + seg.direction * (x_g[i] + v_g[i] * r + 0.5 * acc * r * r)
+            out["ds"][sel] = seg.direction * (v_g[i] + acc * r)
             out["dds"][sel] = seg.direction * acc
-            phase[sel] = seg.phase[i]
+            phase[sel] = phase_g[i]
         out["phase"] = phase
         out["cycle"] = cycle
         return out
@@ -165,16 +168,17 @@ class Timeline:
         plan = self.cycles[cycle]
         times, points = [], []
         for seg in self.segments:
-            if seg.cycle != cycle or seg.x.size < 2 or not (plan.t_start <= seg.t0 < plan.t_cut_end):
+            if seg.cycle != cycle or not seg.legs or not (plan.t_start <= seg.t0 < plan.t_cut_end):
                 continue
-            pos = seg.s0 + seg.direction * seg.x + offset
+            t_g, x_g, _, _ = seg.grid()
+            pos = seg.s0 + seg.direction * x_g + offset
             lo, hi = sorted((pos[0], pos[-1]))
             marks = np.arange(np.ceil(lo / step), np.floor(hi / step) + 1) * step
             if seg.direction < 0:
                 marks = marks[::-1]
             # pos is monotone along the grid: interpolate the time of each mark.
             order = slice(None) if seg.direction > 0 else slice(None, None, -1)
-            times.append(seg.t0 + np.interp(marks, pos[order], seg.t[order]))
+            times.append(seg.t0 + np.interp(marks, pos[order], t_g[order]))
             points.append(marks)
         if not times:
             return np.zeros(0), np.zeros(0)

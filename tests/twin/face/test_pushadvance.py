@@ -91,3 +91,22 @@ def test_timeline_samples_are_continuous_and_reach_both_ends():
     assert np.abs(np.diff(out["s"])).max() <= 0.05 * max(scn.haulage.return_speed_m_min, 1) / 60 + 1e-9
     assert np.isclose(out["s"].min(), tl.s_min) and np.isclose(out["s"].max(), tl.s_max, atol=1e-6)
     np.testing.assert_allclose(np.gradient(out["s"], t)[1:-1], out["ds"][1:-1], atol=3e-3)
+
+
+def test_timeline_holds_legs_not_grids_and_samples_as_the_grid_does():
+    """A panel_100 timeline (100 cycles of a 360 m face) holds each segment's legs, not its 2 mm speed grid (5 MB a
+    cut): pickled it stays small whatever the number of cycles. Sampling makes the grid again where it is read, so s
+    and its phase at a time equal run_profile's grid interpolated there."""
+    import pickle
+
+    from tests.conftest import SCENARIO_DIR
+    from twin.config.scenario import load_scenario
+
+    scn = load_scenario(SCENARIO_DIR / "panel_100.toml")
+    tl = Timeline(scn)
+    assert len(tl.cycles) == 100 and len(pickle.dumps(tl.segments)) < 1_000_000
+    seg = next(s for s in tl.segments if s.legs and s.cycle == 7)
+    t_g, x_g, _, phase_g = run_profile(list(seg.legs), seg.accel)
+    out = tl.sample(seg.t0 + t_g[1:-1:997])
+    np.testing.assert_allclose(out["s"], seg.s0 + seg.direction * x_g[1:-1:997], rtol=0, atol=1e-9)
+    assert np.array_equal(out["phase"], phase_g[1:-1:997]) and set(out["cycle"]) == {7}
