@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from estimators.arrays import put
 from estimators.nav import earth
 from estimators.nav.earth import gravity_nb, nav_rates, radii_nb
 from estimators.nav.rotations import cross3, qexp, qmul, qrot
@@ -114,9 +115,11 @@ def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height, u
             v_m = vel[u - 1] + 0.5 * (vel[u - 1] - vel[u - 2])
         else:
             lat_m, h_m, v_m = lat[0], hgt[0], vel[0].copy()
-        lat[u], lon[u], hgt[u], vel[u], quat[u], _dv_n, _v_bar = strapdown_step(
+        lat[u], lon[u], hgt[u], v_n, q_nb, _dv_n, _v_bar = strapdown_step(
             lat[u - 1], lon[u - 1], hgt[u - 1], vel[u - 1], quat[u - 1], phi[u - 1], dv_b[u - 1],
             t_upd[u] - t_upd[u - 1], lat_m, h_m, v_m, hold_height)
+        put(vel[u], v_n)
+        put(quat[u], q_nb)
 
 
 def compensated_increments(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, n_samples: int,
