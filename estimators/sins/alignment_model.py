@@ -49,6 +49,10 @@ in phi (a heading correction turns the tilt axes). Without it the tilt covarianc
 the body-fixed accelerometer bias is mapped through the corrected nominal, and the filter takes that bias for
 partly observable: measured, a level sigma of 0.66 accel bias / g on nav-004, and on the MTi-G-700, whose
 heading sigma is tens of degrees without the zero-rate update, a level 0.8 deg off with a sigma of 0.05 deg.
+
+The kernels the EKF loop calls are inlined into it (numba inline="always"; the UKF calls them from Python): numba
+compiles a called kernel on its own and then optimizes its code again in every caller, and the loop compiled 15 %
+faster as one function, bit for bit the same.
 """
 
 from __future__ import annotations
@@ -85,7 +89,7 @@ _PE, _PN, _PU = PHI.start, PHI.start + 1, PHI.start + 2
 _AX, _AY = ACCEL_BIAS.start, ACCEL_BIAS.start + 1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def propagate(x, c1, r_ie, w_u, gamma, T):
     """The nonlinear error model over one block (module docstring) for one state x."""
     e0 = euler_mat(x[_PE], x[_PN], x[_PU])
@@ -110,7 +114,7 @@ def propagate_rows(xs, c1, r_ie, w_u, gamma, T):
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def transition(c1, w, gamma, T, q_psd):
     """A (000 eqs. 20-22) at phi = 0, then Phi (eq. 26) and Q_d = Gamma Q_k Gamma^T (eqs. 27, 29), third order."""
     a = np.zeros((N_STATES, N_STATES))
@@ -129,7 +133,7 @@ def transition(c1, w, gamma, T, q_psd):
     return phi, 0.5 * (qd + qd.T)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def mechanize_nominal(c, v, dth, dvb, r_ie, g_n, w_u, T):
     """Nominal C_b^n' and (v_E, v_N) over one block (stationary: no transport rate; coning negligible).
 
@@ -143,7 +147,7 @@ def mechanize_nominal(c, v, dth, dvb, r_ie, g_n, w_u, T):
     return c1, v1
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def measurement(c0, c1, v, dth, w, T, r_vel, r_rate, zero_rate):
     """(z, H, R) of the standing IMU: zero velocity, and with zero_rate the vertical rate (module docstring)."""
     m = 3 if zero_rate else 2
@@ -162,7 +166,7 @@ def measurement(c0, c1, v, dth, w, T, r_vel, r_rate, zero_rate):
     return z, hm, r
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def reset(c, v, x, p):
     """Feed phi and dv into the nominal and zero them (the biases stay in the state); P <- G P G^T with G the
     Jacobian (central differences) of the remaining error E(phi) E(phi_hat)^T in phi at phi_hat (module

@@ -178,7 +178,7 @@ def alignment_floors(c_nb, accel_bias_b, gyro_bias_b, lat: float, accel_sigma: f
 # The loops: the EKF as one numba kernel; the UKF steps the same kernels around the unscented transform.
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _correct(k, c0, c, v, x, p, dth, w, T, r_vel, r_rate, zero_rate, c_out, s_out, b_out, nis_out):
     """Measurement update, reset and outputs of block k (shared by both loops); returns the nominal (c, v)."""
     z, hm, r = measurement(c0, c, v, dth, w, T, r_vel, r_rate, zero_rate)
