@@ -2,25 +2,45 @@
 calls, for estimators.precompile: a first run compiles them in the background while the twin runs.
 
 Each with the methods that call it (None: every method, through estimators.shearer.prepare), the longest to compile
-first. The kernels they call are compiled with them. A change of a listed call's argument types must be made here
-too, or the call compiles again (tests/estimators/shearer/test_precompiled.py fails).
+first. The kernels they call are compiled with them, but for run_filter's longest (FILTER_CALLS), which are listed
+on their own so that two processes share its compile. A change of a listed call's argument types must be made
+here too, or the call compiles again (tests/estimators/shearer/test_precompiled.py fails).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterable
 
+from estimators.kalman.error_state import N_STATES
 from estimators.precompile import Kernel
 
 _FILTER = ("kf", "kf_rts", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "dr_compensated")
 """The methods that run 001's filter (odometer_filter.run_filter)."""
 _SMOOTHED = ("kf_rts", "kf_cpoem_rts", "rts_offline", "dr_compensated")
 
+_C1, _C2 = "f8[::1]", "f8[:, ::1]"
+FILTER_CALLS = (
+    Kernel("estimators.kalman.update", "gated_update", f"{_C1}, {_C2}, {_C1}, {_C2}, {_C2}, f8"),
+    Kernel("estimators.kalman.measurements", "odometer_velocity",
+           f"{_C1}, {_C1}, {_C1}, {_C1}, {_C1}, f8, f8, {_C1}, {_C2}, f8, i8"),
+    Kernel("estimators.kalman.measurements", "zero_rate", f"{_C1}, {_C1}, f8, f8, i8"),
+    Kernel("estimators.kalman.measurements", "position_fix", f"{_C1}, {_C1}, {_C1}, {_C2}, IntegerLiteral({N_STATES})"),
+    Kernel("estimators.sins.error_model", "feed_back_navigation", f"{_C1}, {_C1}"),
+    Kernel("estimators.kalman.measurements", "zero_velocity", f"{_C1}, f8, {_C1}, f8, i8"),
+    Kernel("estimators.sins.error_model", "bias_blocks", f"{_C2}, {_C2}"),
+    Kernel("estimators.sins.error_model", "navigation_block", f"{_C2}, {_C1}, {_C1}"),
+)
+"""The kernels run_filter calls (but the small ones it reaches first) with the argument types of its calls, the
+longest first. Listed after run_filter, another process compiles them while run_filter's types its first steps,
+and run_filter loads them from the cache: run_filter is the longest compile of a first run, and this takes about
+a quarter off it. IntegerLiteral: N_STATES, a global constant, which numba types as a literal."""
+
 KERNELS: tuple[tuple[Kernel, tuple[str, ...] | None], ...] = (
     (Kernel("estimators.shearer.odometer_filter", "run_filter",
             "i8, i8, i8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], i1[::1], i8[::1], f8[:, ::1], f8[:, :, ::1], "
             "f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
             "f8[:, :, ::1], f8[:, :, ::1], f8[:, :, ::1], i4[::1], f8[::1], f8[:, ::1]"), _FILTER),
+    *((kernel, _FILTER) for kernel in FILTER_CALLS),
     (Kernel("estimators.sins.fine_alignment", "_ekf_kernel",
             "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8, f8[::1], f8[:, ::1], f8[::1], f8, f8[::1], "
             "f8[:, ::1], f8, f8, b1, f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[::1]"), None),

@@ -6,9 +6,12 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
+from numba.core.compiler import run_frontend
+from numba.core.registry import cpu_target
+from numba.core.typed_passes import type_inference_stage
 
 from estimators.shearer.methods import METHODS, estimate
-from estimators.shearer.precompiled import KERNELS, method_kernels
+from estimators.shearer.precompiled import FILTER_CALLS, KERNELS, method_kernels
 from tests.estimators.shearer.test_independent_trajectories import NOISY, trajectory
 
 pytestmark = pytest.mark.slow  # runs every method (over 3 s with the kernels in the cache)
@@ -20,6 +23,17 @@ def test_each_listed_kernel_is_called_with_the_listed_argument_types():
     listed = tuple(m for m in METHODS if any(users and m in users for _, users in KERNELS))
     estimate(traj.log(errors), traj.config(errors), listed, workers=1)
     for kernel, _ in KERNELS:
+        if kernel not in FILTER_CALLS:  # called by run_filter, which the methods may load from the cache
+            assert kernel.signature() in kernel.dispatcher().signatures, kernel
+
+
+def test_run_filter_calls_the_listed_kernels_with_the_listed_argument_types():
+    run_filter = KERNELS[0][0]
+    # Typed afresh (as its first compile does, not loaded from the cache), run_filter compiles or loads the
+    # kernels it calls for the argument types of its calls.
+    typing, target = cpu_target.typing_context, cpu_target.target_context
+    type_inference_stage(typing, target, run_frontend(run_filter.dispatcher().py_func), run_filter.signature(), None)
+    for kernel in FILTER_CALLS:
         assert kernel.signature() in kernel.dispatcher().signatures, kernel
 
 
