@@ -20,20 +20,22 @@ _SMOOTHED = ("kf_rts", "kf_cpoem_rts", "rts_offline", "dr_compensated")
 
 _C1, _C2 = "f8[::1]", "f8[:, ::1]"
 FILTER_CALLS = (
+    Kernel("estimators.sins.error_model", "feed_back_navigation", f"{_C1}, {_C1}"),
     Kernel("estimators.kalman.update", "gated_update", f"{_C1}, {_C2}, {_C1}, {_C2}, {_C2}, f8"),
+    Kernel("estimators.kalman.measurements", "position_fix", f"{_C1}, {_C1}, {_C1}, {_C2}, IntegerLiteral({N_STATES})"),
+    Kernel("estimators.kalman.measurements", "zero_rate", f"{_C1}, {_C1}, f8, f8, i8"),
+    Kernel("estimators.kalman.measurements", "zero_velocity", f"{_C1}, f8, {_C1}, f8, i8"),
+    Kernel("estimators.kalman.update", "joseph_update", f"{_C1}, {_C2}, {_C1}, {_C2}, {_C2}"),
     Kernel("estimators.kalman.measurements", "odometer_velocity",
            f"{_C1}, {_C1}, {_C1}, {_C1}, {_C1}, f8, f8, {_C1}, {_C2}, f8, i8"),
-    Kernel("estimators.kalman.measurements", "zero_rate", f"{_C1}, {_C1}, f8, f8, i8"),
-    Kernel("estimators.kalman.measurements", "position_fix", f"{_C1}, {_C1}, {_C1}, {_C2}, IntegerLiteral({N_STATES})"),
-    Kernel("estimators.sins.error_model", "feed_back_navigation", f"{_C1}, {_C1}"),
-    Kernel("estimators.kalman.measurements", "zero_velocity", f"{_C1}, f8, {_C1}, f8, i8"),
     Kernel("estimators.sins.error_model", "bias_blocks", f"{_C2}, {_C2}"),
     Kernel("estimators.sins.error_model", "navigation_block", f"{_C2}, {_C1}, {_C1}"),
 )
-"""The kernels run_filter calls (but the small ones it reaches first) with the argument types of its calls, the
-longest first. Listed after run_filter, another process compiles them while run_filter's types its first steps,
-and run_filter loads them from the cache: run_filter is the longest compile of a first run, and this takes about
-a quarter off it. IntegerLiteral: N_STATES, a global constant, which numba types as a literal."""
+"""The kernels run_filter calls with the argument types of its calls, the last it reaches first. Listed after
+run_filter, another process compiles them from the end of run_filter while run_filter's process types it from the
+start: they meet in the middle (in the call order they would go in step, each compiling every kernel), and
+run_filter loads the ones it reaches later from the cache. run_filter is the longest compile of a first run; this
+takes about a quarter off it. IntegerLiteral: N_STATES, a global constant, which numba types as a literal."""
 
 KERNELS: tuple[tuple[Kernel, tuple[str, ...] | None], ...] = (
     (Kernel("estimators.shearer.odometer_filter", "run_filter",
