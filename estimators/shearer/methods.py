@@ -20,7 +20,8 @@ from estimators.shearer.adaptive_federated_mag import run_mag
 from estimators.shearer.config import STREAMED, Config, PositioningError
 from estimators.shearer.health import Assessment, assess
 from estimators.shearer.online import OnlinePositioning
-from estimators.shearer.positioning import PassStore, dead_reckoning, rts_offline, run_kf
+from estimators.shearer.dead_reckoning import dead_reckoning
+from estimators.shearer.positioning import PassStore, rts_offline, run_kf
 from estimators.shearer.prepare import Prepared, prepare
 from estimators.shearer.rail_kinematics import run_rail
 from estimators.shearer.solution import Solution, join_rows

@@ -27,7 +27,8 @@ from estimators.io.log import ImuBuffer, log_from_columns
 from estimators.io.logformat import FLAG_SMOOTHED, IMU, ODOMETER, SURVEY
 from estimators.shearer.config import Config, PositioningError
 from estimators.shearer.health import filter_lost, track_lost
-from estimators.shearer.positioning import DeadReckoningPasses, KfPass, KfPasses, PassStore
+from estimators.shearer.dead_reckoning import DeadReckoningPasses
+from estimators.shearer.positioning import KfPass, KfPasses, PassStore
 from estimators.shearer.prepare import Preparer
 from estimators.shearer.rail_kinematics import RailPasses
 from estimators.shearer.solution import Solution, make_solution, rows_of

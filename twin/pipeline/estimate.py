@@ -33,6 +33,7 @@ from estimators.io.logformat import (
     make_table,
     read_stream,
 )
+from estimators.io.self_assessment import SelfAssessment
 from estimators.kalman.error_state import CAL_MOUNT, CAL_SCALE
 from estimators.shearer.config import STREAMED, Config, ImuNoise, MagSettings
 from estimators.shearer.methods import estimate
@@ -186,7 +187,7 @@ class EstimateWriter:
         for appender in appenders.values():
             appender.close()
         last = self.last.pop(name)
-        own = metrics.SelfAssessment(self.survey)
+        own = SelfAssessment(self.survey)
         score = None if self.truth is None else metrics.CycleScore(NO_CYCLES if self.cycles is None else self.cycles)
         for block in StreamBlocks(*estimate_file(self.run_dir, name), metrics.SCORED_ESTIMATE):
             own.push(block)
@@ -219,7 +220,7 @@ def run_estimators(run_dir: Path, scn: Scenario, recording: bool = True, workers
     supports' parallel kernels start their threads.
 
     Each method's entry holds "truth" (whether truth_shearer was there to score against), its notes, what it says
-    of itself (estimators.io.metrics.self_assessment, under "self") and, for the filters, the final odometer
+    of itself (estimators.io.self_assessment, under "self") and, for the filters, the final odometer
     calibration; with truth_shearer also the errors ("cycles": estimators.io.metrics.cycle_metrics) and the true
     calibration. Partial truth: without truth_cycles the errors are scored over the whole run only (the "all" row);
     truth_cycles without truth_shearer scores nothing. The truth never reaches an estimator."""

@@ -324,9 +324,8 @@ def simulate_stream(scn: Scenario, shearer_sink: ShearerSink, progress: Progress
     handed = [0]
 
     def hand_over(keep: int) -> None:
-        """Hand the finished chunks, oldest first, to the sink until at most `keep` are pending. The sink takes them
-        on a thread of its own while the face simulates on (taken() waits for it); live taps see each chunk after
-        its readings, as the sink's."""
+        """Hand the finished chunks, oldest first, to the sink (on a thread of its own while the face simulates on;
+        taken() waits for it) until at most `keep` are pending; live taps see each chunk after its readings."""
         while len(pending) > keep:
             chunk = pending.pop(0).result()
             if loop is not None:

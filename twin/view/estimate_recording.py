@@ -5,7 +5,7 @@ none, e.g. an imported log; written reproducibly by twin.view.rrd_stream), so `l
 the run's layout with a second "Estimates" tab of plots (twin.view.layout). A run without truth (truth_shearer None, e.g.
 a real face's log) gets everything but the errors: paths, sigmas, flags, sensor states, fusion, detectors.
 Everything is logged column-wise with `send_columns` on the `sim_time` timeline, cut to what a person can see at the
-record rate (twin.view.row_cuts.visible_rows: at most the rate, without the samples a plotted line passes within
+record rate (twin.view.visible_cut.visible_rows: at most the rate, without the samples a plotted line passes within
 a pixel of; flags and alarms OR-ed over each interval so a brief one stays; every sample at FULL rate).
 
 Entities, per estimator METHOD (errors as estimators.io.metrics defines them: estimate - truth in East/North/Up at
@@ -74,11 +74,11 @@ from estimators.shearer.federated_filter import MAG_DISTURBED, MAG_GATED, MAG_US
 from estimators.shearer.methods import METHODS
 from twin.config.imu_grades import DEG, DEG_PER_H, MG
 from twin.config.scenario import Scenario
-from twin.pipeline.support_estimate import ANGLES, FLAG_NAMES, SupportAttitude
+from twin.pipeline.support_estimate import SupportAttitude
 from twin.view import plan
 from twin.view.recording import run_recording_id
 from twin.view.record_rate import FULL, RECORD_RATE_HZ, check_record_rate
-from twin.view.rerun_columns import PlottedSeries, RowBatches, SeriesBlock, series, time_column
+from twin.view.rerun_columns import PlottedSeries, RowBatches, SeriesBlock, time_column
 from twin.view.row_cuts import (
     Blocks,
     IntervalReduce,
@@ -91,6 +91,7 @@ from twin.view.row_cuts import (
     decimated_blocks,
 )
 from twin.view.rrd_stream import recording_id, recording_stream
+from twin.view.support_attitude_recording import SUPPORT_PLOT_RATE_HZ, log_support_attitude
 
 POSITION_AXES = ("east", "north", "up")
 ATTITUDE_AXES = ("e", "n", "u")
@@ -334,47 +335,6 @@ def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, detector
             static=True)
 
 
-# The supports' canopy attitude (issue 8).
-SUPPORT_PLOT_RATE_HZ = 2.0
-"""Largest rate of the supports' plots: a canopy moves over seconds (an advance, the shearer's pass), and a face has
-many units."""
-
-
-def _log_support_attitude(rec: rr.RecordingStream, supports: SupportAttitude, rate_hz: float | None) -> None:
-    """Each support's angles (with the truth) and errors per method, ours' flags (OR-ed over each plot
-    interval) with the shearer's field, the GD objective; decimated to rate_hz, sent column-wise."""
-    root = "plots/support_attitude"
-    for name, t in supports.t.items():
-        keep = decimate(t, rate_hz)
-        est = np.degrees(supports.euler[name][:, keep])
-        truth = np.degrees(supports.truth_euler[name][:, keep]) if supports.truth_euler else None
-        for i, j in enumerate(supports.supports):
-            for a, angle in enumerate(ANGLES):
-                series(rec, f"{root}/angles/{angle}/{j}/{name}", t[keep], est[i, :, a:a + 1],
-                       [f"support {j} {name} [deg]"], rate_hz=rate_hz)
-                if truth is not None:
-                    series(rec, f"{root}/errors/{angle}/{j}/{name}", t[keep],
-                           ((est[i, :, a] - truth[i, :, a] + 180.0) % 360.0 - 180.0)[:, None],
-                           [f"support {j} {name} [deg]"], rate_hz=rate_hz)
-                    if name == "ours":
-                        series(rec, f"{root}/angles/{angle}/{j}/truth", t[keep], truth[i, :, a:a + 1],
-                               [f"support {j} truth [deg]"], rate_hz=rate_hz)
-    t = supports.t["ours"]
-    keep = decimate(t, rate_hz)
-    for i, j in enumerate(supports.supports):
-        flags = np.bitwise_or.reduceat(supports.flags[i].astype(np.int64), keep)
-        values = [(flags & bit) != 0 for _, bit in FLAG_NAMES]
-        labels = [f"support {j} ours {label}" for label, _ in FLAG_NAMES]
-        if supports.near is not None:
-            values.append(np.maximum.reduceat(supports.near[i], keep))
-            labels.append(f"support {j} shearer's field / peak")
-        series(rec, f"{root}/magnetometer/{j}", t[keep], np.column_stack(values).astype(float), labels,
-               rate_hz=rate_hz, band=False)
-    if supports.objective:
-        rec.log(f"{root}/gd_objective", rr.BarChart(np.degrees(supports.objective)), static=True)
-
-
-
 def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates: Mapping[str, Blocks],
                              states: Mapping[str, Blocks], states_truth: dict[str, float] | None = None,
                              rate_hz: float | None = RECORD_RATE_HZ, fusion: Mapping[str, Blocks] | None = None,
@@ -413,4 +373,4 @@ def write_estimate_recording(path: Path, scn: Scenario, truth_shearer, estimates
         for method, (table, thresholds) in detectors.items():
             _log_detectors(rec, scn, method, table, thresholds, rate_hz)
         if supports is not None:
-            _log_support_attitude(rec, supports, FULL if rate_hz is FULL else min(rate_hz, SUPPORT_PLOT_RATE_HZ))
+            log_support_attitude(rec, supports, FULL if rate_hz is FULL else min(rate_hz, SUPPORT_PLOT_RATE_HZ))

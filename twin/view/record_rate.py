@@ -3,7 +3,7 @@
 metrics.json under "recordings" (file name: Hz, or "full").
 
 A rate is a finite number of Hz > 0, or FULL (None): every sample, neither decimated nor thinned
-(twin.view.row_cuts.visible_rows). Kept apart from the writers so the command line reads it without importing
+(twin.view.visible_cut.visible_rows). Kept apart from the writers so the command line reads it without importing
 Rerun.
 """
 

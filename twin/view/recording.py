@@ -29,7 +29,7 @@ Entities (fixed names, checked by tests):
                             path (twin.view.plan)
 * `sensors/...`, `alignment/...`, `faults/...`   the sensor streams (twin.view.sensor_recording)
 
-Time series are cut to what a person can see at the record rate (twin.view.row_cuts.visible_rows; every sample
+Time series are cut to what a person can see at the record rate (twin.view.visible_cut.visible_rows; every sample
 at FULL rate).
 """
 

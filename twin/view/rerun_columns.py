@@ -1,7 +1,7 @@
 """Batched Rerun logging: whole histories sent column-wise with `send_columns` on the `sim_time` timeline.
 
 An entity's history (time columns, scalar series, bar-chart tensors) goes out in one call, or in calls of SEND_ROWS
-rows for a long series given in blocks, cut to what a person can see (twin.view.row_cuts.visible_rows: at most the record rate, and without the samples the drawn line passes
+rows for a long series given in blocks, cut to what a person can see (twin.view.visible_cut.visible_rows: at most the record rate, and without the samples the drawn line passes
 within a pixel of); shared by the run's and the estimators' recordings. A long stream comes in blocks
 (twin.view.row_cuts.Blocks); `latest_frames` cuts a history of many instances (every pan or support at every frame)
 into chunks sent one call each, `mean_rates` carries its state across blocks, and `PlottedSeries` cuts and sends
@@ -19,7 +19,8 @@ import pyarrow as pa
 import rerun as rr
 
 from twin.view.record_rate import FULL
-from twin.view.row_cuts import Blocks, SeriesRange, VisibleCut, blocks_of, col
+from twin.view.row_cuts import Blocks, blocks_of, col
+from twin.view.visible_cut import SeriesRange, VisibleCut
 
 TIMELINE = "sim_time"
 APPLICATION_ID = "longwall-twin"

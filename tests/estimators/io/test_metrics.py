@@ -17,13 +17,12 @@ from estimators.io.metrics import (
     nees_band,
     position_errors,
     CycleScore,
-    SelfAssessment,
     TruthTrack,
     column,
-    self_assessment,
     slerp,
     truth_at,
 )
+from estimators.io.self_assessment import SelfAssessment, self_assessment
 from estimators.nav import earth
 from estimators.nav.rotations import euler_to_quat, quat_mul, rotvec_to_quat
 

@@ -1,4 +1,4 @@
-"""estimators.io.metrics.self_assessment: what an estimate says of itself without truth, on closed-form paths."""
+"""estimators.io.self_assessment: what an estimate says of itself without truth, on closed-form paths."""
 
 from __future__ import annotations
 
@@ -13,11 +13,8 @@ from estimators.io.logformat import (
     FLAG_UNHEALTHY,
     FLAG_ZUPT,
 )
-from estimators.io.metrics import (
-    enu_offset_to_geodetic,
-    self_assessment,
-    survey_residuals,
-)
+from estimators.io.metrics import enu_offset_to_geodetic
+from estimators.io.self_assessment import self_assessment, survey_residuals
 from tests.estimators.io.test_metrics import (
     estimate_table,
     offset_estimate,

@@ -9,13 +9,15 @@ import pytest
 
 from twin.view.record_rate import FULL, parse_record_rate, rate_label
 from twin.view.row_cuts import (
-    BAND_ROWS,
-    LINE_TOLERANCE,
     MARKER_STEP_M,
     PATH_TOLERANCE_M,
     line_rows,
     marker_rows,
     path_strips,
+)
+from twin.view.visible_cut import (
+    BAND_ROWS,
+    LINE_TOLERANCE,
     visible_rows,
 )
 

@@ -11,23 +11,25 @@ from twin.view.line_kernel import line_kernel
 from twin.view.record_rate import FULL
 from twin.view.rerun_columns import latest_frames, latest_rows, mean_rates, median_interval
 from twin.view.row_cuts import (
-    BAND_ROWS,
-    BAND_TURNS,
-    LINE_TOLERANCE,
     PATH_TOLERANCE_M,
     IntervalReduce,
     LineCut,
     MarkerCut,
     PathStrips,
-    SeriesRange,
-    VisibleCut,
-    _intervals,
-    band_rows,
     decimate,
     decimated_blocks,
     line_rows,
     marker_rows,
     path_strips,
+)
+from twin.view.visible_cut import (
+    BAND_ROWS,
+    BAND_TURNS,
+    LINE_TOLERANCE,
+    SeriesRange,
+    VisibleCut,
+    _intervals,
+    band_rows,
     visible_rows,
 )
 from twin.view.sensor_recording import bar_frames, pressure_extremes, sample_times
