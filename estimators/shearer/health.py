@@ -35,7 +35,7 @@ from estimators.kalman import error_state as es
 from estimators.nav import earth
 from estimators.shearer.config import Config
 from estimators.shearer.position_fixes import Fixes
-from estimators.shearer.solution import SD_POS, Solution
+from estimators.shearer.solution import SD_POS, Solution, rows_of
 
 
 class Track(NamedTuple):
@@ -133,7 +133,7 @@ class Assessment:
                 self.count[kind] += int(mask.sum())
                 if value is not None:
                     self.peak[kind] = max(self.peak[kind], float(value[mask].max()))
-        self.last = Solution(*(getattr(sol, k)[-1:] for k in ("t", "llh", "v_n", "q_nb", "sd", "flags")))
+        self.last = rows_of(sol, slice(-1, None))
 
     def notes(self) -> list[str]:
         """A note per kind of lost track: when, how often, how far."""
