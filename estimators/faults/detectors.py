@@ -26,9 +26,9 @@ with the H0 mean 0.74 m for larger ones.
 
 The numba kernels (`chi2_residual`, `chi2_dual_state`, `fsprt_state`, `fsprt_update`, `hysteresis`) are for the
 sequential filter kernels, one call per measurement epoch. Quadratic forms go through the Cholesky factor of the
-correlation matrix D^-1/2 S D^-1/2 (D = diag S), so states of very different scales (metres and rad/s) keep their
-precision; a covariance that is not finite, or not symmetric positive definite to PD_RTOL, gives NaN (and leaves an
-FSPRT state untouched). `chi2_threshold`, `DetectorConfig` and `run_detectors` are the validating Python API.
+correlation matrix D^-1/2 S D^-1/2 (D = diag S; estimators.kalman.cholesky), so states of very different scales
+(metres and rad/s) keep their precision; a covariance that is not finite, or not positive definite to that module's
+PD_RTOL, gives NaN (and leaves an FSPRT state untouched). `chi2_threshold`, `DetectorConfig` and `run_detectors` are the validating Python API.
 """
 
 from __future__ import annotations
@@ -41,12 +41,13 @@ import numba as nb
 import numpy as np
 from scipy.stats import chi2 as _chi2
 
+from estimators.kalman.cholesky import correlation_cholesky, whiten
+
 __all__ = [
     "FSPRT_COUNT",
     "FSPRT_LAMBDA",
     "FSPRT_MEAN",
     "FSPRT_N_SCALARS",
-    "PD_RTOL",
     "DetectorConfig",
     "DetectorRun",
     "chi2_dual_state",
@@ -67,54 +68,8 @@ FSPRT_MEAN = 2
 FSPRT_N_SCALARS = 2
 """Scalars before the fading mean: an FSPRT state for innovations of size m has FSPRT_N_SCALARS + m elements."""
 
-PD_RTOL = 1e-12
-"""Smallest squared Cholesky pivot of the correlation matrix D^-1/2 S D^-1/2 for S to count as positive definite."""
-
 
 # ------------------------------------------------------------------------------------------ numba kernels
-
-
-@nb.njit(cache=True)
-def _factor(s):
-    """(L, d, ok): s ~ D^1/2 L L^T D^1/2 with d = diag(D)^-1/2 and L the lower Cholesky factor of the correlation
-    matrix of the symmetrised s; ok False when s is not finite or not positive definite to PD_RTOL."""
-    m = s.shape[0]
-    chol = np.zeros((m, m))
-    d = np.zeros(m)
-    for i in range(m):
-        for j in range(m):
-            if not np.isfinite(s[i, j]):
-                return chol, d, False
-    for i in range(m):
-        if not s[i, i] > 0.0:
-            return chol, d, False
-        d[i] = 1.0 / math.sqrt(s[i, i])
-    for j in range(m):
-        acc = 1.0
-        for p in range(j):
-            acc -= chol[j, p] * chol[j, p]
-        if not acc > PD_RTOL:
-            return chol, d, False
-        chol[j, j] = math.sqrt(acc)
-        for i in range(j + 1, m):
-            acc = 0.5 * (s[i, j] + s[j, i]) * d[i] * d[j]
-            for p in range(j):
-                acc -= chol[i, p] * chol[j, p]
-            chol[i, j] = acc / chol[j, j]
-    return chol, d, True
-
-
-@nb.njit(cache=True)
-def _whiten(chol, d, v):
-    """y with y^T y = v^T S^-1 v: y = L^-1 D^-1/2 v (forward substitution)."""
-    m = v.shape[0]
-    y = np.empty(m)
-    for i in range(m):
-        acc = v[i] * d[i]
-        for p in range(i):
-            acc -= chol[i, p] * y[p]
-        y[i] = acc / chol[i, i]
-    return y
 
 
 @nb.njit(cache=True)
@@ -123,10 +78,10 @@ def _quadratic_form(v, s):
     for i in range(v.shape[0]):
         if not np.isfinite(v[i]):
             return np.nan
-    chol, d, ok = _factor(s)
+    chol, d, ok = correlation_cholesky(s)
     if not ok:
         return np.nan
-    y = _whiten(chol, d, v)
+    y = whiten(chol, d, v)
     return float(np.dot(y, y))
 
 
@@ -183,7 +138,7 @@ def fsprt_update(state, v, s, fading):
     for i in range(m):
         if not np.isfinite(v[i]):
             return state[FSPRT_LAMBDA]
-    chol, d, ok = _factor(s)
+    chol, d, ok = correlation_cholesky(s)
     if not ok:
         return state[FSPRT_LAMBDA]
     k = state[FSPRT_COUNT] + 1.0
@@ -193,8 +148,8 @@ def fsprt_update(state, v, s, fading):
     # mean is what makes vbar_k the normalised exponentially weighted mean (weights summing to 1).
     for i in range(m):
         mean[i] = (1.0 - d_k) * mean[i] + d_k * v[i]
-    y = _whiten(chol, d, v)
-    y_mean = _whiten(chol, d, mean)
+    y = whiten(chol, d, v)
+    y_mean = whiten(chol, d, mean)
     increment = 0.0  # 004 eq. 20: [v' S^-1 v - (v - vbar)' S^-1 (v - vbar)] / 2, without the cancellation
     for i in range(m):
         increment += y_mean[i] * (y[i] - 0.5 * y_mean[i])

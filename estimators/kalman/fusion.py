@@ -20,10 +20,10 @@ definite, gets weight 0 in the fusion and beta_i = 0, is flagged, and is reset t
 the global solution and rejoins once its covariance is sound again. With no usable sub-filter at all there is
 no estimate and `fuse` raises.
 
-Inverses go through the eigen-decomposition of the correlation matrix D^-1/2 P D^-1/2 (D = diag P), so error
-states of very different scales (metres and 1e-5 rad/s) keep their precision. The numba kernels
-(`fuse_kernel`, `spd_inverse`) can be called from a filter kernel; `fuse`, `sharing_coefficients` and
-`reset_subfilters` are the validating Python API.
+Inverses go through the Cholesky factor of the correlation matrix D^-1/2 P D^-1/2 (D = diag P;
+estimators.kalman.cholesky.spd_inverse), so error states of very different scales (metres and 1e-5 rad/s) keep
+their precision. The numba kernels (`fuse_kernel`, `sharing_kernel`) can be called from a filter kernel; `fuse`,
+`sharing_coefficients` and `reset_subfilters` are the validating Python API.
 """
 
 from __future__ import annotations
@@ -33,6 +33,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from estimators.kalman.cholesky import spd_inverse
+
 __all__ = [
     "FusionResult",
     "fuse",
@@ -40,39 +42,7 @@ __all__ = [
     "reset_subfilters",
     "sharing_coefficients",
     "sharing_kernel",
-    "spd_inverse",
 ]
-
-PD_RTOL = 1e-12
-"""Smallest eigenvalue of the correlation matrix, relative to its largest, for a covariance to count as positive
-definite (a correlation of 1 - 1e-12 between two states is as good as singular)."""
-SYMMETRY_RTOL = 1e-8
-"""Largest |P - P^T| relative to the diagonal scale for a covariance to count as symmetric."""
-
-
-@nb.njit(cache=True)
-def spd_inverse(p):
-    """(P^-1, ok): the inverse of a symmetric positive definite P; ok False (and P^-1 zero) when it is not."""
-    n = p.shape[0]
-    inv = np.zeros((n, n))
-    for i in range(n):
-        for j in range(n):
-            if not np.isfinite(p[i, j]):
-                return inv, False
-    d = np.empty(n)
-    for i in range(n):
-        if p[i, i] <= 0.0:
-            return inv, False
-        d[i] = 1.0 / np.sqrt(p[i, i])
-    corr = p * np.outer(d, d)
-    if np.abs(corr - corr.T).max() > SYMMETRY_RTOL:
-        return inv, False
-    w, v = np.linalg.eigh(0.5 * (corr + corr.T))
-    if w[0] <= PD_RTOL * w[-1]:
-        return inv, False
-    inv = (v / w) @ v.T
-    return inv * np.outer(d, d), True
-
 
 @nb.njit(cache=True)
 def fuse_kernel(xs, ps):
