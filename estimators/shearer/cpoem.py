@@ -172,7 +172,9 @@ class RamLog:
     @classmethod
     def from_rows(cls, t, support, ext, valid, support_u, noise_sd: float) -> RamLog:
         s = np.asarray(support)
-        groups = [np.flatnonzero(s == k) for k in range(len(support_u))]
+        order = np.argsort(s, kind="stable")  # each support's rows in time order
+        bounds = np.searchsorted(s[order], np.arange(len(support_u) + 1))
+        groups = [order[lo:hi] for lo, hi in zip(bounds[:-1], bounds[1:])]
         return cls([t[g] for g in groups], [ext[g] for g in groups], [valid[g] for g in groups],
                    np.asarray(support_u, float), noise_sd)
 

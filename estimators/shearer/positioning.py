@@ -294,16 +294,23 @@ class PassStore:
                       "flags": np.zeros(1, np.int32)}
 
     def keep(self, a: int, seg: _Segment) -> None:
-        np.savez(self._path(a), x_post=seg.x_post, p_post=seg.p_post, p_pred=seg.p_pred, phi=seg.phi,
-                 nav=seg.nav[1:], cal=seg.cal[1:], sd=_sd(seg.p_post[1:]), flags=seg.flags[1:])
+        self._save(a, "forward", {"x_post": seg.x_post, "p_post": seg.p_post, "p_pred": seg.p_pred, "phi": seg.phi,
+                                  "nav": seg.nav[1:], "cal": seg.cal[1:], "sd": _sd(seg.p_post[1:]),
+                                  "flags": seg.flags[1:]})
         self.saved.append((a, a + seg.x_post.shape[0] - 1))
 
-    def _path(self, a: int, kind: str = "forward") -> Path:
-        return self.folder / f"{kind}_{a}.npz"
+    def _save(self, a: int, kind: str, arrays: dict[str, np.ndarray]) -> None:
+        """A pass's arrays, a .npy file each (no archive to checksum: these are gigabytes on a long run)."""
+        folder = self.folder / f"{kind}_{a}"
+        folder.mkdir()
+        for key, value in arrays.items():
+            np.save(folder / f"{key}.npy", value)
+
+    def _load(self, a: int, keys: tuple[str, ...], kind: str = "forward") -> dict[str, np.ndarray]:
+        return {key: np.load(self.folder / f"{kind}_{a}" / f"{key}.npy") for key in keys}
 
     def _rows(self, a: int, kind: str = "forward") -> dict[str, np.ndarray]:
-        with np.load(self._path(a, kind)) as data:
-            return {k: data[k] for k in ROW_KEYS}
+        return self._load(a, ROW_KEYS, kind)
 
     def smoothed(self, t_kf: np.ndarray, cfg: Config) -> Iterator[Solution]:
         """rts_offline's rows (001 eqs. 29-31: one backward pass over the whole forward run, pass by pass from the
@@ -318,17 +325,16 @@ class PassStore:
             return
         last_update = {}
         for a, b in self.saved:
-            with np.load(self._path(a)) as data:
-                last_update[b] = data["x_post"][-1]
+            last_update[b] = np.load(self.folder / f"forward_{a}" / "x_post.npy", mmap_mode="r")[-1].copy()
         known = None
         for i in range(len(self.saved) - 1, -1, -1):
             a, b = self.saved[i]
             own = self._rows(a)
             start = self.first if i == 0 else {k: v[-1:] for k, v in self._rows(self.saved[i - 1][0]).items()}
             rows = {k: np.concatenate([start[k], own[k][:-1]]) for k in ROW_KEYS}  # epochs a..b-1
-            with np.load(self._path(a)) as data:  # each array read fresh from the file: changed in place
-                known = _smooth_stored(data, last_update.get(a, np.zeros(es.N_STATES)), known, rows)
-            np.savez(self._path(a, "smoothed"), **rows)
+            data = self._load(a, ("x_post", "p_post", "p_pred", "phi"))  # read fresh from the files: changed in place
+            known = _smooth_stored(data, last_update.get(a, np.zeros(es.N_STATES)), known, rows)
+            self._save(a, "smoothed", rows)
         for i, (a, b) in enumerate(self.saved):
             rows = self._rows(a, "smoothed")
             end = self._rows(self.saved[i + 1][0], "smoothed") if i + 1 < len(self.saved) else self._rows(a)
