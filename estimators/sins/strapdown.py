@@ -24,10 +24,9 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from estimators.arrays import put
 from estimators.nav import earth
-from estimators.nav.earth import gravity_nb, nav_rates, radii_nb
-from estimators.nav.rotations import cross3, qexp, qmul, qrot
+from estimators.nav.earth import OMEGA_IE, gravity_nb, radii_nb
+from estimators.nav.rotations import qexp, qmul
 from estimators.sins.coning import coefficients
 
 
@@ -50,15 +49,45 @@ def compensate(dtheta: np.ndarray, dv: np.ndarray, n_samples: int) -> tuple[np.n
     phi = sum theta_i + c x theta_N,  dv_b = sum v_i + 1/2 (sum theta_i) x (sum v_i) + c x v_N + d x theta_N,
     with c = sum_{i<N} k_i theta_i and d = sum_{i<N} k_i v_i (estimators.sins.coning)."""
     u = (dtheta.shape[0] - 1) // n_samples
-    th = dtheta[1:1 + u * n_samples].reshape(u, n_samples, 3)
-    v = dv[1:1 + u * n_samples].reshape(u, n_samples, 3)
-    k = coefficients(n_samples)
-    sum_th, sum_v = th.sum(axis=1), v.sum(axis=1)
-    c = np.einsum("i,uij->uj", k, th[:, :-1])
-    d = np.einsum("i,uij->uj", k, v[:, :-1])
-    phi = sum_th + np.cross(c, th[:, -1])
-    dv_b = sum_v + 0.5 * np.cross(sum_th, sum_v) + np.cross(c, v[:, -1]) + np.cross(d, th[:, -1])
+    phi, dv_b = np.empty((u, 3)), np.empty((u, 3))
+    _compensate_kernel(np.ascontiguousarray(dtheta, float), np.ascontiguousarray(dv, float), coefficients(n_samples),
+                       phi, dv_b)
     return phi, dv_b
+
+
+@nb.njit(cache=True, inline="always")
+def _cross(a, b):
+    """a x b of two 3-tuples, as numpy.cross computes it."""
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+@nb.njit(cache=True)
+def _compensate_kernel(dtheta, dv, k, phi, dv_b):
+    """`compensate` into phi, dv_b (U, 3) in one pass over the increments, each sum and product in the order of
+    NumPy's vector form (the same numbers bit for bit: tests/estimators/sins/test_strapdown.py)."""
+    n = k.size + 1
+    for u in range(phi.shape[0]):
+        r = 1 + u * n
+        last = r + n - 1
+        s_th = (dtheta[r, 0], dtheta[r, 1], dtheta[r, 2])
+        s_v = (dv[r, 0], dv[r, 1], dv[r, 2])
+        for i in range(1, n):
+            s_th = (s_th[0] + dtheta[r + i, 0], s_th[1] + dtheta[r + i, 1], s_th[2] + dtheta[r + i, 2])
+            s_v = (s_v[0] + dv[r + i, 0], s_v[1] + dv[r + i, 1], s_v[2] + dv[r + i, 2])
+        c = (0.0, 0.0, 0.0)
+        d = (0.0, 0.0, 0.0)
+        for i in range(n - 1):
+            c = (c[0] + k[i] * dtheta[r + i, 0], c[1] + k[i] * dtheta[r + i, 1], c[2] + k[i] * dtheta[r + i, 2])
+            d = (d[0] + k[i] * dv[r + i, 0], d[1] + k[i] * dv[r + i, 1], d[2] + k[i] * dv[r + i, 2])
+        th_n = (dtheta[last, 0], dtheta[last, 1], dtheta[last, 2])
+        v_n = (dv[last, 0], dv[last, 1], dv[last, 2])
+        coning = _cross(c, th_n)
+        rotation = _cross(s_th, s_v)
+        sculling_c = _cross(c, v_n)
+        sculling_d = _cross(d, th_n)
+        for j in range(3):
+            phi[u, j] = s_th[j] + coning[j]
+            dv_b[u, j] = s_v[j] + 0.5 * rotation[j] + sculling_c[j] + sculling_d[j]
 
 
 @nb.njit(cache=True)
@@ -72,6 +101,32 @@ def body_attitude(q0: np.ndarray, phi: np.ndarray) -> np.ndarray:
     return out
 
 
+@nb.njit(cache=True, inline="always")
+def _rates(lat, h, v0, v1):
+    """w_ie^n + w_en^n (ENU; estimators.nav.earth.nav_rates) at (lat, h) with velocity (v0, v1, .), as scalars: the
+    Earth rate's north and up components and the transport rate's east, north and up."""
+    r_m, r_n = radii_nb(lat)
+    return OMEGA_IE * np.cos(lat), OMEGA_IE * np.sin(lat), -v1 / (r_m + h), v0 / (r_n + h), v0 * np.tan(lat) / (r_n + h)
+
+
+@nb.njit(cache=True, inline="always")
+def _qexp(a0, a1, a2):
+    """estimators.nav.rotation_kernels.qexp of the rotation vector a, as four scalars."""
+    theta = np.sqrt(a0 ** 2 + a1 ** 2 + a2 ** 2)
+    if theta < 1e-8:
+        c, s = 1.0 - theta * theta / 8, 0.5 - theta * theta / 48
+    else:
+        c, s = np.cos(0.5 * theta), np.sin(0.5 * theta) / theta
+    return c, s * a0, s * a1, s * a2
+
+
+@nb.njit(cache=True, inline="always")
+def _qmul(p0, p1, p2, p3, q0, q1, q2, q3):
+    """The Hamilton product p (x) q (estimators.nav.rotation_kernels.qmul_into), as four scalars."""
+    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1, p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
+
+
 @nb.njit(cache=True)
 def strapdown_step(lat, lon, h, v, q, phi, dv_b, dt, lat_e, h_e, v_e, hold_height):
     """One update over dt (000 eqs. 3-5) of the state (lat, lon, h, v_n, q_nb) with the compensated increments phi,
@@ -80,16 +135,41 @@ def strapdown_step(lat, lon, h, v, q, phi, dv_b, dt, lat_e, h_e, v_e, hold_heigh
     epochs: the interval's start). hold_height zeroes the new vertical velocity.
 
     Returns (lat, lon, h, v_n, q_nb) after the update, the specific-force increment in n (dv_n) and the mean
-    velocity over the interval."""
-    w_ie, w_en = nav_rates(lat_e, h_e, v_e)
-    zeta = (w_ie + w_en) * dt
-    dv_n = qrot(q, dv_b)
-    dv_n = dv_n - 0.5 * cross3(zeta, dv_n)
-    g_n = np.array([0.0, 0.0, -gravity_nb(lat_e, h_e)])
-    v_new = v + dv_n + (g_n - cross3(2.0 * w_ie + w_en, v_e)) * dt
+    velocity over the interval (`step_into` with new arrays)."""
+    v_new, q_new, dv_n, v_bar = np.empty(3), np.empty(4), np.empty(3), np.empty(3)
+    lat_new, lon_new, h_new = step_into(lat, lon, h, v, q, phi, dv_b, dt, lat_e, h_e, v_e, hold_height, v_new, q_new,
+                                        dv_n, v_bar)
+    return lat_new, lon_new, h_new, v_new, q_new, dv_n, v_bar
+
+
+@nb.njit(cache=True, inline="always")
+def step_into(lat, lon, h, v, q, phi, dv_b, dt, lat_e, h_e, v_e, hold_height, v_new, q_new, dv_n, v_bar):
+    """`strapdown_step` into the caller's arrays v_new, q_new, dv_n, v_bar (none of them an input); returns
+    (lat, lon, h). Written in scalars (no array for a term), each the operations of the vector form in its order, so
+    the numbers are the vector form's bit for bit (tests/estimators/sins/test_strapdown.py)."""
+    # dv_n = C_b^n dv_b (rotation_kernels.qrot), less half the n-frame rotation zeta = (w_ie + w_en) dt across it.
+    ie1, ie2, en0, en1, en2 = _rates(lat_e, h_e, v_e[0], v_e[1])
+    z0, z1, z2 = (0.0 + en0) * dt, (ie1 + en1) * dt, (ie2 + en2) * dt
+    w, x, y, zq = q[0], q[1], q[2], q[3]
+    tx = 2.0 * (y * dv_b[2] - zq * dv_b[1])
+    ty = 2.0 * (zq * dv_b[0] - x * dv_b[2])
+    tz = 2.0 * (x * dv_b[1] - y * dv_b[0])
+    r0 = dv_b[0] + w * tx + (y * tz - zq * ty)
+    r1 = dv_b[1] + w * ty + (zq * tx - x * tz)
+    r2 = dv_b[2] + w * tz + (x * ty - y * tx)
+    dv_n[0] = r0 - 0.5 * (z1 * r2 - z2 * r1)
+    dv_n[1] = r1 - 0.5 * (z2 * r0 - z0 * r2)
+    dv_n[2] = r2 - 0.5 * (z0 * r1 - z1 * r0)
+    # v_new = v + dv_n + (g_n - (2 w_ie + w_en) x v_e) dt
+    c0, c1, c2 = 2.0 * 0.0 + en0, 2.0 * ie1 + en1, 2.0 * ie2 + en2
+    g = -gravity_nb(lat_e, h_e)
+    v_new[0] = v[0] + dv_n[0] + (0.0 - (c1 * v_e[2] - c2 * v_e[1])) * dt
+    v_new[1] = v[1] + dv_n[1] + (0.0 - (c2 * v_e[0] - c0 * v_e[2])) * dt
+    v_new[2] = v[2] + dv_n[2] + (g - (c0 * v_e[1] - c1 * v_e[0])) * dt
     if hold_height:  # the vertical channel held (an altitude aid or a known floor): no vertical motion
         v_new[2] = 0.0
-    v_bar = 0.5 * (v + v_new)
+    for i in range(3):
+        v_bar[i] = 0.5 * (v[i] + v_new[i])
     h_new = h + v_bar[2] * dt
     h_bar = 0.5 * (h + h_new)
     r_m, r_n = radii_nb(lat)
@@ -97,29 +177,37 @@ def strapdown_step(lat, lon, h, v, q, phi, dv_b, dt, lat_e, h_e, v_e, hold_heigh
     lat_bar = 0.5 * (lat + lat_new)
     r_m, r_n = radii_nb(lat_bar)
     lon_new = lon + v_bar[0] * dt / ((r_n + h_bar) * np.cos(lat_bar))
-    # Attitude with the n-frame rotation re-evaluated at the new mid-interval state.
-    w_ie, w_en = nav_rates(lat_bar, h_bar, v_bar)
-    q_new = qmul(qmul(qexp(-(w_ie + w_en) * dt), q), qexp(phi))
-    return lat_new, lon_new, h_new, v_new, q_new / np.sqrt(np.sum(q_new * q_new)), dv_n, v_bar
+    # Attitude with the n-frame rotation re-evaluated at the new mid-interval state:
+    # q_new = Exp(-(w_ie + w_en) dt) (x) q (x) Exp(phi), normalised.
+    ie1, ie2, en0, en1, en2 = _rates(lat_bar, h_bar, v_bar[0], v_bar[1])
+    e0, e1, e2, e3 = _qexp(-(0.0 + en0) * dt, -(ie1 + en1) * dt, -(ie2 + en2) * dt)
+    p0, p1, p2, p3 = _qmul(e0, e1, e2, e3, w, x, y, zq)
+    f0, f1, f2, f3 = _qexp(phi[0], phi[1], phi[2])
+    p0, p1, p2, p3 = _qmul(p0, p1, p2, p3, f0, f1, f2, f3)
+    norm = np.sqrt(0.0 + p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
+    q_new[0], q_new[1], q_new[2], q_new[3] = p0 / norm, p1 / norm, p2 / norm, p3 / norm
+    return lat_new, lon_new, h_new
 
 
 @nb.njit(cache=True)
 def _mechanize_kernel(t_upd, phi, dv_b, lat, lon, hgt, vel, quat, hold_height, u_first):
     """Update u (over (t_upd[u-1], t_upd[u]]) with the compensated phi[u-1], dv_b[u-1]; outputs at index u, from
     u_first (1; 2 where rows 0 and 1 are the last two updates of an earlier block)."""
+    v_m, dv_n, v_bar = np.empty(3), np.empty(3), np.empty(3)
     for u in range(u_first, lat.size):
         # Mid-interval position and velocity, extrapolated from the last two epochs.
         if u >= 2:
             lat_m = lat[u - 1] + 0.5 * (lat[u - 1] - lat[u - 2])
             h_m = hgt[u - 1] + 0.5 * (hgt[u - 1] - hgt[u - 2])
-            v_m = vel[u - 1] + 0.5 * (vel[u - 1] - vel[u - 2])
+            for i in range(3):
+                v_m[i] = vel[u - 1, i] + 0.5 * (vel[u - 1, i] - vel[u - 2, i])
         else:
-            lat_m, h_m, v_m = lat[0], hgt[0], vel[0].copy()
-        lat[u], lon[u], hgt[u], v_n, q_nb, _dv_n, _v_bar = strapdown_step(
-            lat[u - 1], lon[u - 1], hgt[u - 1], vel[u - 1], quat[u - 1], phi[u - 1], dv_b[u - 1],
-            t_upd[u] - t_upd[u - 1], lat_m, h_m, v_m, hold_height)
-        put(vel[u], v_n)
-        put(quat[u], q_nb)
+            lat_m, h_m = lat[0], hgt[0]
+            for i in range(3):
+                v_m[i] = vel[0, i]
+        lat[u], lon[u], hgt[u] = step_into(lat[u - 1], lon[u - 1], hgt[u - 1], vel[u - 1], quat[u - 1], phi[u - 1],
+                                           dv_b[u - 1], t_upd[u] - t_upd[u - 1], lat_m, h_m, v_m, hold_height,
+                                           vel[u], quat[u], dv_n, v_bar)
 
 
 def compensated_increments(t: np.ndarray, dtheta: np.ndarray, dv: np.ndarray, n_samples: int,

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from fractions import Fraction
 
+import numba as nb
 import numpy as np
 import pytest
 
@@ -14,8 +15,17 @@ from estimators.nav.rotations import (
     quat_to_rotvec,
     rotvec_to_quat,
 )
-from estimators.sins.coning import coefficients_exact, coning_drift
-from estimators.sins.strapdown import Mechanization, NavState, body_attitude, compensate, mechanize
+from estimators.nav.earth import gravity_nb, nav_rates, radii_nb
+from estimators.nav.rotation_kernels import cross3, qexp, qmul, qrot
+from estimators.sins.coning import coefficients, coefficients_exact, coning_drift
+from estimators.sins.strapdown import (
+    Mechanization,
+    NavState,
+    body_attitude,
+    compensate,
+    mechanize,
+    strapdown_step,
+)
 from twin.papers.motions import coning, sculling
 
 
@@ -118,3 +128,49 @@ def test_mechanization_in_blocks_gives_the_rows_of_one_call_bit_for_bit():
     bad[1500, 2] = np.nan
     with pytest.raises(ValueError, match="dtheta row 1500 is not finite"):
         Mechanization(*args).run(t[1200:2001], bad[1200:2001], dv[1200:2001], first_row=1200)
+
+
+@nb.njit
+def _vector_step(lat, lon, h, v, q, phi, dv_b, dt, lat_e, h_e, v_e, hold_height):
+    """The strapdown step in its vector form (000 eqs. 3-5), as written before the scalar kernel: the reference."""
+    w_ie, w_en = nav_rates(lat_e, h_e, v_e)
+    zeta = (w_ie + w_en) * dt
+    dv_n = qrot(q, dv_b)
+    dv_n = dv_n - 0.5 * cross3(zeta, dv_n)
+    g_n = np.array([0.0, 0.0, -gravity_nb(lat_e, h_e)])
+    v_new = v + dv_n + (g_n - cross3(2.0 * w_ie + w_en, v_e)) * dt
+    if hold_height:
+        v_new[2] = 0.0
+    v_bar = 0.5 * (v + v_new)
+    h_new = h + v_bar[2] * dt
+    h_bar = 0.5 * (h + h_new)
+    lat_new = lat + v_bar[1] * dt / (radii_nb(lat)[0] + h_bar)
+    lat_bar = 0.5 * (lat + lat_new)
+    lon_new = lon + v_bar[0] * dt / ((radii_nb(lat_bar)[1] + h_bar) * np.cos(lat_bar))
+    w_ie, w_en = nav_rates(lat_bar, h_bar, v_bar)
+    q_new = qmul(qmul(qexp(-(w_ie + w_en) * dt), q), qexp(phi))
+    return lat_new, lon_new, h_new, v_new, q_new / np.sqrt(np.sum(q_new * q_new)), dv_n, v_bar
+
+
+def test_scalar_step_and_compensation_equal_their_vector_forms_bit_for_bit():
+    """strapdown_step and compensate are written in scalars for speed; every number equals the vector form's."""
+    rng = np.random.default_rng(8)
+    for hold in (False, True):
+        for _ in range(200):
+            q = rng.normal(size=4)
+            args = (rng.uniform(-1.4, 1.4), rng.uniform(-3, 3), rng.normal(0, 500), rng.normal(0, 3, 3),
+                    q / np.linalg.norm(q), rng.normal(0, 1e-2, 3), rng.normal(0, 0.1, 3), rng.uniform(1e-3, 0.1),
+                    rng.uniform(-1.4, 1.4), rng.normal(0, 500), rng.normal(0, 3, 3), hold)
+            for ours, ref in zip(strapdown_step(*args), _vector_step(*args)):
+                assert np.array_equal(ours, ref)
+    for n in range(1, 6):
+        dtheta, dv = rng.normal(0, 1e-3, (1 + 50 * n + 2, 3)), rng.normal(0, 1e-2, (1 + 50 * n + 2, 3))
+        u = (dtheta.shape[0] - 1) // n  # the 2 rows over a whole update left out for n > 2
+        th, v = dtheta[1:1 + u * n].reshape(u, n, 3), dv[1:1 + u * n].reshape(u, n, 3)
+        k = coefficients(n)
+        c, d = np.einsum("i,uij->uj", k, th[:, :-1]), np.einsum("i,uij->uj", k, v[:, :-1])
+        phi_ref = th.sum(axis=1) + np.cross(c, th[:, -1])
+        dv_ref = (v.sum(axis=1) + 0.5 * np.cross(th.sum(axis=1), v.sum(axis=1)) + np.cross(c, v[:, -1])
+                  + np.cross(d, th[:, -1]))
+        phi, dv_b = compensate(dtheta, dv, n)
+        assert np.array_equal(phi, phi_ref) and np.array_equal(dv_b, dv_ref)
