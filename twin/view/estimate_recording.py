@@ -188,8 +188,8 @@ def _estimate_series(method: str, truth: TruthTrack | None, estimate: Blocks, ra
 
 def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth: TruthTrack | None, method: str, estimate: Blocks,
                   rate_hz: float | None, color: np.ndarray) -> None:
-    """An estimate's path and point (3-D and plan) and its plots, from its file read twice a block at a time: first
-    the path, the points and the plots' ranges, then the plots cut and sent."""
+    """An estimate's path and point (3-D and plan) and its plots, from its file read once a block at a time: the
+    path, the points and the plots' ranges, then the plots cut and sent from their spool (PlottedSeries)."""
     if not _has_rows(estimate):
         return
     site = scn.site
@@ -230,7 +230,7 @@ def _log_estimate(rec: rr.RecordingStream, scn: Scenario, truth: TruthTrack | No
     plan_points.flush()
     # +- one-sigma series are left out when there is no sigma at all (NaN throughout).
     plots.drop(*(e for e in plots.names if e.startswith(f"plots/sigma/{method}/") and not plots.finite(e)))
-    plots.send(rec, _estimate_series(method, truth, estimate, rate_hz))
+    plots.send(rec)
 
 
 def _log_fusion(rec: rr.RecordingStream, truth: TruthTrack | None, method: str, estimate: Blocks, fusion: Blocks,
@@ -261,7 +261,7 @@ def _log_fusion(rec: rr.RecordingStream, truth: TruthTrack | None, method: str, 
     plots.measure(blocks())
     if not plots.finite(f"{root}/beta"):  # a centralized filter: no sub-filters
         plots.drop(f"{root}/beta", *(f"{root}/subfilter_errors/{axis}" for axis in POSITION_AXES[:2]))
-    plots.send(rec, blocks())
+    plots.send(rec)
 
 
 def _log_states(rec: rr.RecordingStream, method: str, states: Blocks, truth: dict[str, float] | None,
@@ -290,7 +290,7 @@ def _log_states(rec: rr.RecordingStream, method: str, states: Blocks, truth: dic
                 block[f"plots/sigma/{method}/{group}"] = (t, np.column_stack([sd, -sd]))
             yield block
 
-    PlottedSeries(names, rate_hz).log(rec, blocks)
+    PlottedSeries(names, rate_hz).log(rec, blocks())
 
 
 DETECTOR_PEAKS = ("residual", "dual_state", "fsprt", "isolated")
@@ -309,7 +309,7 @@ def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, detector
     names[f"{root}/isolated"] = [f"{method} isolated"]
     site, rail = scn.site, []
 
-    def blocks(points: bool = False) -> Iterator[SeriesBlock]:
+    def blocks() -> Iterator[SeriesBlock]:
         peaks = IntervalReduce(rate_hz, np.fmax)
         for block in chain(bounded(detectors), [None]):
             if block is None:
@@ -317,7 +317,7 @@ def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, detector
             else:
                 t, peak = peaks.push(column(block, "t"),
                                      np.column_stack([column(block, name) for name in DETECTOR_PEAKS]))
-            if points and block is not None:
+            if block is not None:
                 rail.append(earth.lla_to_enu(column(block, "lat"), column(block, "lon"), column(block, "h"),
                                              np.radians(site.lat_deg), np.radians(site.lon_deg),
                                              site.height_m).astype(np.float32))
@@ -329,8 +329,7 @@ def _log_detectors(rec: rr.RecordingStream, scn: Scenario, method: str, detector
                    f"{root}/isolated": (t, peak[:, 3:])}
 
     plots = PlottedSeries(names, rate_hz, [f"{root}/isolated"])
-    plots.measure(blocks(points=True))
-    plots.send(rec, blocks())
+    plots.log(rec, blocks())
     rec.log(f"world/estimates/{method}/rail", rr.Points3D(np.concatenate(rail), radii=0.08, colors=[240, 120, 40]),
             static=True)
 

@@ -227,9 +227,9 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_h
         pushed[0] += t.size
         last[:] = [t[-1:], p[-1:], q_tb[-1:], cycle[-1:]]
 
-    def blocks(draw: bool = False) -> Iterator[SeriesBlock]:
-        for sub in decimated_blocks(bounded(shearer), rate_hz, draw_path if draw else None):
-            if draw and sub.num_rows:
+    def blocks() -> Iterator[SeriesBlock]:
+        for sub in decimated_blocks(bounded(shearer), rate_hz, draw_path):
+            if sub.num_rows:
                 draw_poses(sub)
             t = col(sub, "t")
             yield {"plots/shearer_speed": (t, np.hypot(col(sub, "v_n_e"), col(sub, "v_n_n"))[:, None]),
@@ -237,7 +237,7 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_h
 
     plots = PlottedSeries({"plots/shearer_speed": ["horizontal speed [m/s]"], "plots/cycle": ["cycle"]}, rate_hz,
                           ["plots/cycle"])
-    plots.measure(blocks(draw=True))
+    plots.measure(blocks())
     if markers.finish().size:  # the last row, unless kept
         poses.add(*last[:3])
         plan_points.add(last[0], last[1], last[3])
@@ -245,7 +245,7 @@ def _log_shearer(rec: rr.RecordingStream, scn: Scenario, shearer: Blocks, rate_h
     rec.log("world/shearer_path", rr.LineStrips3D(path.strips(), radii=0.03, colors=TRUTH_RGB), static=True)
     plan.log_path(rec, f"{plan.PLAN_ROOT}/truth", plan_path, TRUTH_RGB)
     plan_points.flush()
-    plots.send(rec, blocks())
+    plots.send(rec)
 
 
 def _log_face_line(rec: rr.RecordingStream, scn: Scenario, pans: pa.Table, cycles: pa.Table) -> None:

@@ -12,7 +12,10 @@ The record rate (twin.view.record_rate) is a rate in Hz, or FULL (None): every s
 
 from __future__ import annotations
 
+import pickle
+import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from typing import BinaryIO
 
 import numpy as np
 import pyarrow as pa
@@ -235,24 +238,32 @@ block)."""
 
 
 class PlottedSeries:
-    """Time series given in blocks (the same entities in each; a function that reads them anew for each pass), each
-    cut to `visible_rows` at `rate_hz` (twin.view.row_cuts: the same rows as a whole series') and sent
-    SEND_ROWS rows at a time: `measure` reads them once for each series' range (SeriesRange), `send` again to cut
-    and send them, each entity's look logged before its first rows. `names`: entity -> its series' names; `steps`:
-    the entities of flags and steps (band False: every edge kept)."""
+    """Time series given in blocks (the same entities in each), each cut to `visible_rows` at `rate_hz`
+    (twin.view.row_cuts: the same rows as a whole series') and sent SEND_ROWS rows at a time. `measure` reads the
+    blocks once, for each series' range (SeriesRange), and spools them to a scratch file; `send` reads them back from
+    it to cut and send them, each entity's look logged before its first rows. So the blocks are made once (an
+    estimate's errors interpolate the truth) and held a block at a time. `names`: entity -> its series' names;
+    `steps`: the entities of flags and steps (band False: every edge kept)."""
 
     def __init__(self, names: Mapping[str, list[str]], rate_hz: float | None, steps: Iterable[str] = ()):
         self.names, self.rate_hz, self.steps = dict(names), rate_hz, set(steps)
         self.ranges: dict[str, SeriesRange] = {}
+        self._spool: BinaryIO | None = None
 
     def measure(self, blocks: Iterable[SeriesBlock]) -> None:
         ranges = {entity: SeriesRange(self.rate_hz) for entity in self.names}
-        for block in blocks:
-            for entity, rows in block.items():
-                ranges[entity].push(*rows)
+        spool = tempfile.TemporaryFile(prefix="longwall-series-")  # deleted when closed
+        try:
+            for block in blocks:
+                for entity, rows in block.items():
+                    ranges[entity].push(*rows)
+                pickle.dump(dict(block), spool, protocol=pickle.HIGHEST_PROTOCOL)
+        except BaseException:
+            spool.close()
+            raise
         for measured in ranges.values():
             measured.finish()
-        self.ranges = ranges
+        self.ranges, self._spool = ranges, spool
 
     def finite(self, entity: str) -> bool:
         """Whether the entity's record-rate rows hold a finite value (measured)."""
@@ -262,11 +273,24 @@ class PlottedSeries:
         for entity in entities:
             self.names.pop(entity)
 
-    def send(self, rec: rr.RecordingStream, blocks: Iterable[SeriesBlock]) -> None:
+    def _spooled(self) -> Iterator[SeriesBlock]:
+        if self._spool is None:
+            raise RuntimeError("PlottedSeries.send before measure")
+        spool, self._spool = self._spool, None
+        with spool:
+            spool.seek(0)
+            while True:
+                try:
+                    yield pickle.load(spool)
+                except EOFError:
+                    return
+
+    def send(self, rec: rr.RecordingStream) -> None:
+        """The measured blocks cut and sent (once: the spool is closed after)."""
         cuts = {entity: VisibleCut(self.rate_hz, self.ranges[entity], entity not in self.steps)
                 for entity in self.names}
         batches = {entity: series_batches(rec, entity, names) for entity, names in self.names.items()}
-        for block in blocks:
+        for block in self._spooled():
             for entity, rows in block.items():
                 if entity in cuts:
                     batches[entity].add(*cuts[entity].push(*rows)[1:])
@@ -274,10 +298,10 @@ class PlottedSeries:
             batches[entity].add(*cut.finish()[1:])
             batches[entity].flush()
 
-    def log(self, rec: rr.RecordingStream, blocks: Callable[[], Iterable[SeriesBlock]]) -> None:
+    def log(self, rec: rr.RecordingStream, blocks: Iterable[SeriesBlock]) -> None:
         """`measure` then `send`, every entity."""
-        self.measure(blocks())
-        self.send(rec, blocks())
+        self.measure(blocks)
+        self.send(rec)
 
 
 def series_batches(rec: rr.RecordingStream, entity: str, names: list[str]) -> RowBatches:
@@ -291,4 +315,4 @@ def series(rec: rr.RecordingStream, entity: str, t: np.ndarray, values: np.ndarr
            rate_hz: float | None = FULL, band: bool = True) -> None:
     """A time series of (K, n) values given whole, its rows cut to `visible_rows` at `rate_hz` (every row by default);
     `band` False for flags and steps, whose every edge is kept (PlottedSeries for one in blocks)."""
-    PlottedSeries({entity: names}, rate_hz, () if band else (entity,)).log(rec, lambda: [{entity: (t, values)}])
+    PlottedSeries({entity: names}, rate_hz, () if band else (entity,)).log(rec, [{entity: (t, values)}])

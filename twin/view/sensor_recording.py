@@ -25,21 +25,21 @@ def log_sensors(rec: rr.RecordingStream, sensors: dict[str, Blocks], rate_hz: fl
     """Every sensor channel as time series (fast streams averaged to about rate_hz), fault windows as
     0/1 steps, the ram readings as a bar chart per support. The imu, pushram and pressure streams may come in blocks
     (twin.view.row_cuts.Blocks), the others as tables."""
-    # The long streams are read a block at a time, twice (PlottedSeries: their ranges, then their cut).
+    # The long streams are read a block at a time (PlottedSeries: their ranges, then their cut from its spool).
     if "imu" in sensors:
         imu, interval = sensors["imu"], median_interval(sensors["imu"])
         increments = [f"{p}_{a}" for p in ("dtheta", "dv") for a in "xyz"]
         PlottedSeries({f"sensors/imu/{name}": [f"{a} [{label}]" for a in "xyz"]
-                       for name, label in (("gyro", "rad/s"), ("accel", "m/s^2"))}, rate_hz).log(rec, lambda: (
+                       for name, label in (("gyro", "rad/s"), ("accel", "m/s^2"))}, rate_hz).log(rec, (
             {"sensors/imu/gyro": (t, rates[:, :3]), "sensors/imu/accel": (t, rates[:, 3:])}
             for t, rates in mean_rates(bounded(imu), increments, rate_hz, interval)))
     # Of the other long streams the rows at the record rate (series decimates them the same again).
     if "odometer" in sensors:
-        PlottedSeries({"sensors/odometer/distance": ["distance [m]"]}, rate_hz).log(rec, lambda: (
+        PlottedSeries({"sensors/odometer/distance": ["distance [m]"]}, rate_hz).log(rec, (
             {"sensors/odometer/distance": (col(odo, "t"), col(odo, "distance")[:, None])}
             for odo in decimated_blocks(bounded(sensors["odometer"]), rate_hz)))
     if "mag" in sensors:
-        PlottedSeries({"sensors/mag": [f"{a} [uT]" for a in "xyz"]}, rate_hz).log(rec, lambda: (
+        PlottedSeries({"sensors/mag": [f"{a} [uT]" for a in "xyz"]}, rate_hz).log(rec, (
             {"sensors/mag": (col(mag, "t"), vec(mag, "b", "xyz") * 1e6)}
             for mag in decimated_blocks(bounded(sensors["mag"]), rate_hz)))
     if "support_imu" in sensors:
@@ -93,7 +93,7 @@ def _log_pressures(rec: rr.RecordingStream, pressure: Blocks, rate_hz: float | N
         for column, grid in zip(("leg", "ram"), grids):
             send_bar_chart(rec, f"sensors/pressure/{column}_bars", frames, grid)
     PlottedSeries({"sensors/pressure/extremes": ["lowest leg [MPa]", "highest ram [MPa]"]}, rate_hz).log(
-        rec, lambda: ({"sensors/pressure/extremes": rows} for rows in pressure_extremes(pressure)))
+        rec, ({"sensors/pressure/extremes": rows} for rows in pressure_extremes(pressure)))
 
 
 def pressure_extremes(pressure: Blocks) -> Iterator[tuple[np.ndarray, np.ndarray]]:

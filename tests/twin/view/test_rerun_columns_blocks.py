@@ -9,7 +9,15 @@ import pytest
 
 from twin.view.line_kernel import line_kernel
 from twin.view.record_rate import FULL
-from twin.view.rerun_columns import latest_frames, latest_rows, mean_rates, median_interval
+from twin.view import rerun_columns
+from twin.view.rerun_columns import (
+    PlottedSeries,
+    RowBatches,
+    latest_frames,
+    latest_rows,
+    mean_rates,
+    median_interval,
+)
 from twin.view.row_cuts import (
     PATH_TOLERANCE_M,
     IntervalReduce,
@@ -326,3 +334,32 @@ def test_pressure_extremes_of_blocks_are_the_whole_streams():
     np.fmax.at(whole[:, 1], np.searchsorted(times, t), table.column("ram").to_numpy())
     got_t, got = (np.concatenate(x) for x in zip(*pressure_extremes(_blocks(rng, table))))
     assert np.array_equal(got_t, times) and np.array_equal(got.view(np.int64), whole.view(np.int64))  # bit for bit
+
+
+@pytest.mark.parametrize("seed", [5, 6])
+def test_plotted_series_from_a_one_shot_generator_sends_the_whole_series_rows(seed, monkeypatch):
+    """PlottedSeries reads its blocks once (measure spools them; send reads the spool): a generator cut anywhere
+    sends, per entity, the rows the whole series in one block sends; a second send has nothing to read."""
+    rng = np.random.default_rng(seed)
+    t, y = _series(rng, 3000, 3)
+    flags = (rng.random((t.size, 1)) < 0.01).astype(float)
+    sent: dict[str, list] = {}
+
+    def capture(rec, entity, names):
+        return RowBatches(lambda tt, values: sent.setdefault(entity, []).append((tt, values)))
+
+    monkeypatch.setattr(rerun_columns, "series_batches", capture)
+    names = {"plots/y": ["a", "b", "c"], "plots/flag": ["flag"]}
+    whole = PlottedSeries(names, 2.0, ["plots/flag"])
+    whole.log(None, [{"plots/y": (t, y), "plots/flag": (t, flags)}])
+    expected, sent = sent, {}
+    cut = PlottedSeries(names, 2.0, ["plots/flag"])
+    cut.log(None, ({"plots/y": (t[i], y[i]), "plots/flag": (t[i], flags[i])} for i in _cuts(rng, t.size)))
+    assert sent.keys() == expected.keys()
+    for entity in expected:
+        got = [np.concatenate(c) for c in zip(*sent[entity])]
+        want = [np.concatenate(c) for c in zip(*expected[entity])]
+        assert all(np.array_equal(g, w, equal_nan=True) for g, w in zip(got, want))
+    assert sum(len(tt) for tt, _ in expected["plots/y"]) < t.size  # the cut left rows out
+    with pytest.raises(RuntimeError, match="before measure"):
+        cut.send(None)
