@@ -94,14 +94,21 @@ def state_envelope(state: np.ndarray, rate_hz: float, n_states: int = 3) -> np.n
     sample, smoothed by a boxcar of ENVELOPE_S twice (a triangle reaching width - 1 samples to each side, so the
     envelope's slope is continuous and its curvature bounded).
 
-    The convolution is done in integers and divided once at the end, so a sample's weight does not depend on how
-    far the array extends beyond the triangle's reach (a chunk of the run gives the whole run's values)."""
+    The convolution is done in integers (two running sums of the boxcar) and divided once at the end, so a sample's
+    weight does not depend on how far the array extends beyond the triangle's reach (a chunk of the run gives the
+    whole run's values)."""
     width = max(1, int(ENVELOPE_S * rate_hz))  # 100 samples at 200 Hz
-    box = np.ones(width, dtype=np.int64)
-    kernel = np.convolve(box, box)  # 1, 2, .., width, .., 2, 1
     onehot = (np.asarray(state)[:, None] == np.arange(n_states)).astype(np.int64)
-    centred = slice(width - 1, width - 1 + onehot.shape[0])  # np.convolve's mode="same", for any array length
-    return np.column_stack([np.convolve(onehot[:, j], kernel)[centred] for j in range(n_states)]) / width ** 2
+    triangle = _boxcar_full(_boxcar_full(onehot, width), width)  # the full convolution with 1, 2, .., width, .., 2, 1
+    return triangle[width - 1:width - 1 + onehot.shape[0]] / width ** 2  # np.convolve's mode="same", any length
+
+
+def _boxcar_full(x: np.ndarray, width: int) -> np.ndarray:
+    """The full convolution of integer columns x (K, n) with a boxcar of `width` ones, (K + width - 1, n), exact:
+    running sums of x padded with width - 1 zeros."""
+    sums = np.cumsum(np.concatenate([x, np.zeros((width - 1, x.shape[1]), x.dtype)]), axis=0)
+    sums[width:] -= sums[:-width].copy()
+    return sums
 
 
 def time_derivative(y: np.ndarray, t: np.ndarray, edge_order: int = 1) -> np.ndarray:

@@ -252,3 +252,17 @@ def test_partition_needs_the_halo():
     for halo, same in ((width + 1, True), (width, False), (1, False)):
         parts = _stream(scn, truth, starts, halo)
         assert all(np.array_equal(a, b) for a, b in zip(parts, whole)) == same, halo
+
+
+def test_state_envelope_is_the_integer_triangle_convolution_bit_for_bit():
+    """The running sums give np.convolve's integer triangle (1, 2, .., width, .., 2, 1) in mode "same", exactly, for
+    arrays shorter and longer than the triangle."""
+    rng = np.random.default_rng(21)
+    for n, rate_hz in ((1, 200.0), (7, 200.0), (150, 200.0), (999, 1.0), (5000, 200.0)):
+        state = np.repeat(rng.integers(0, 3, n // 40 + 1), 40)[:n]
+        width = max(1, int(ENVELOPE_S * rate_hz))
+        triangle = np.convolve(np.ones(width, np.int64), np.ones(width, np.int64))
+        onehot = (state[:, None] == np.arange(3)).astype(np.int64)
+        expected = np.column_stack([np.convolve(onehot[:, j], triangle)[width - 1:width - 1 + n]
+                                    for j in range(3)]) / width ** 2
+        assert np.array_equal(state_envelope(state, rate_hz), expected)
