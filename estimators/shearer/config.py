@@ -16,6 +16,10 @@ filters and dead reckoning and 004's federated rail-model filter a pass at a tim
 passes kept on disk; the batch method's rows bit for bit). 003's magnetometer filters (ckf_mag, afkf) run on the
 whole log."""
 
+DEAD_RECKONING = ("dr", "dr_compensated")
+"""001's dead reckoning methods (estimators.shearer.dead_reckoning): no filter, so no covariance (their one-sigmas
+are NaN, and the health monitor gives them only the checks that need none)."""
+
 DEG = np.pi / 180
 
 

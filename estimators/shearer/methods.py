@@ -17,7 +17,7 @@ from typing import Any, Protocol
 
 from estimators.io.log import Log
 from estimators.shearer.adaptive_federated_mag import run_mag
-from estimators.shearer.config import STREAMED, Config, PositioningError
+from estimators.shearer.config import DEAD_RECKONING, STREAMED, Config, PositioningError
 from estimators.shearer.health import Assessment, assess
 from estimators.shearer.online import OnlinePositioning
 from estimators.shearer.dead_reckoning import dead_reckoning
@@ -92,7 +92,7 @@ def _online(cfg: Config, pieces: Pieces, sink: Sink | None, name: str, **kwargs
     row) through the health monitor to `sink` as it ends (None: not written), a pass held at a time: the run, its
     health monitor and its last pass."""
     online = OnlinePositioning(cfg, name, **kwargs)
-    health = Assessment(cfg, name, covariance=not name.startswith("dr"))
+    health = Assessment(cfg, name, covariance=name not in DEAD_RECKONING)
     last = None
     for piece, final in pieces():
         for one in online.feed(piece, final):

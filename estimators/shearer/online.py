@@ -25,7 +25,7 @@ import numpy as np
 
 from estimators.io.log import ImuBuffer, log_from_columns
 from estimators.io.logformat import FLAG_SMOOTHED, IMU, ODOMETER, SURVEY
-from estimators.shearer.config import Config, PositioningError
+from estimators.shearer.config import DEAD_RECKONING, Config, PositioningError
 from estimators.shearer.health import filter_lost, track_lost
 from estimators.shearer.dead_reckoning import DeadReckoningPasses
 from estimators.shearer.positioning import KfPass, KfPasses, PassStore
@@ -86,7 +86,7 @@ class OnlinePositioning:
             if self.method == "fkf_rail":
                 self.passes = RailPasses(log, self.cfg, prep, self.cfg.isolate_by, whole=False)
                 self.initial = self.passes.first_row(prep)
-            elif self.method.startswith("dr"):
+            elif self.method in DEAD_RECKONING:
                 self.passes = DeadReckoningPasses(self.cfg, prep, log.survey_llh[0], self.cal)
             else:
                 self.passes = KfPasses(log, self.cfg, prep, cpoem=self.method.startswith("kf_cpoem"),
