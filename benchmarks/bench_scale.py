@@ -21,6 +21,7 @@ is printed beside it.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import subprocess
@@ -46,13 +47,14 @@ TARGET_100_CYCLES_S = 20 * 60.0
 @dataclass(frozen=True)
 class Timed:
     """One command: exit code, wall time [s], peak PSS of its process tree and largest single RSS [bytes], stderr's
-    last line."""
+    last line, and the run's own wall time by stage (its timing.json, when it wrote one)."""
 
     rc: int
     wall_s: float
     peak_pss: float
     max_rss: float
     last_err: str
+    stages_s: dict[str, float]
 
 
 def _tree_pss(proc: psutil.Process) -> float:
@@ -65,8 +67,8 @@ def _tree_pss(proc: psutil.Process) -> float:
     return total
 
 
-def timed(args: list[str], env: dict[str, str] | None = None) -> Timed:
-    """Run a command to its end, sampling its process tree's memory."""
+def timed(args: list[str], env: dict[str, str] | None = None, out: Path | None = None) -> Timed:
+    """Run a command to its end, sampling its process tree's memory; `out`: the run directory it writes."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     start = time.perf_counter()
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
@@ -89,11 +91,13 @@ def timed(args: list[str], env: dict[str, str] | None = None) -> Timed:
     sampler.join()
     max_rss = max(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, before) * 1024.0
     lines = [line for line in err.splitlines() if line.strip()]
-    return Timed(proc.returncode, wall, peak[0], max_rss, lines[-1] if lines else "")
+    timing = out / "timing.json" if out is not None else None
+    stages = json.loads(timing.read_text()).get("stages_s", {}) if timing is not None and timing.is_file() else {}
+    return Timed(proc.returncode, wall, peak[0], max_rss, lines[-1] if lines else "", stages)
 
 
-def longwall(*args: str) -> list[str]:
-    return [sys.executable, "-m", "twin.cli", "run", *args, "--force", "--quiet"]
+def longwall(*args: str, out: Path) -> list[str]:
+    return [sys.executable, "-m", "twin.cli", "run", *args, "--out", str(out), "--force", "--quiet"]
 
 
 def verdict(ok: bool) -> str:
@@ -107,7 +111,9 @@ def gb(x: float) -> str:
 def describe(label: str, r: Timed) -> str:
     if r.rc != 0:
         return f"{label:42s} failed (rc {r.rc}): {r.last_err}"
-    return f"{label:42s} {r.wall_s:7.1f} s   peak {gb(r.peak_pss)} (largest process {gb(r.max_rss)})"
+    stages = ", ".join(f"{k} {v:.1f}" for k, v in r.stages_s.items())
+    return (f"{label:42s} {r.wall_s:7.1f} s   peak {gb(r.peak_pss)} (largest process {gb(r.max_rss)})"
+            + (f"\n{'':44s}stages [s]: {stages}" if stages else ""))
 
 
 def main() -> None:
@@ -121,9 +127,10 @@ def main() -> None:
         tmp = Path(tmp)
         if not opts.skip_first_run:
             print("first run of a fresh install (empty numba cache) against a warm run: longwall run (default.toml)")
-            cold = timed(longwall("--out", str(tmp / "cold")), env={"NUMBA_CACHE_DIR": str(tmp / "numba-cache")})
-            timed(longwall("--out", str(tmp / "warm")))  # fills numba's own cache if a kernel changed since
-            warm = timed(longwall("--out", str(tmp / "warm")))
+            cold = timed(longwall(out=tmp / "cold"), env={"NUMBA_CACHE_DIR": str(tmp / "numba-cache")},
+                         out=tmp / "cold")
+            timed(longwall(out=tmp / "warm"))  # fills numba's own cache if a kernel changed since
+            warm = timed(longwall(out=tmp / "warm"), out=tmp / "warm")
             print(describe("  first run", cold))
             print(describe("  warm run", warm))
             if cold.rc == 0 and warm.rc == 0:
@@ -132,7 +139,7 @@ def main() -> None:
                       f"{verdict(ratio <= TARGET_FIRST_RUN_RATIO)})")
         if not opts.skip_seed004:
             print("\nseed004 end to end: longwall run scenarios/seed004.toml (6.4 h simulated, 5 cycles)")
-            r = timed(longwall(str(SEED004), "--out", str(tmp / "seed004")))
+            r = timed(longwall(str(SEED004), out=tmp / "seed004"), out=tmp / "seed004")
             print(describe("  seed004", r))
             if r.rc == 0:
                 print(f"  wall {r.wall_s:.1f} s (target <= {TARGET_SEED004_S:.0f} s: "
@@ -142,7 +149,7 @@ def main() -> None:
         if opts.cycles:
             print("\npeak memory over cycles of seed004's face: longwall run scenarios/panel_100.toml --cycles N")
         for n in opts.cycles:
-            runs[n] = timed(longwall(str(PANEL), "--cycles", str(n), "--out", str(tmp / f"cycles{n}")))
+            runs[n] = timed(longwall(str(PANEL), "--cycles", str(n), out=tmp / f"cycles{n}"), out=tmp / f"cycles{n}")
             print(describe(f"  {n} cycles", runs[n]))
         ok = {n: r for n, r in runs.items() if r.rc == 0}
         if ok:
