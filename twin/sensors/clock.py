@@ -6,10 +6,22 @@ import numpy as np
 
 
 def sample_times(t0: float, t1: float, rate_hz: float) -> np.ndarray:
-    """The clock k / rate_hz for every integer k with t0 <= k / rate_hz <= t1 (no accumulated rounding)."""
-    k0 = int(np.ceil(t0 * rate_hz - 1e-9))
-    k1 = int(np.floor(t1 * rate_hz + 1e-9))
+    """The clock k / rate_hz for every integer k with t0 <= k / rate_hz <= t1 (no accumulated rounding).
+
+    A bound that is itself a sample of the clock (k / rate_hz, or a time of another clock that falls on it) is
+    inside, whatever the rounding of t * rate_hz: the tolerance is a few of its rounding steps, which grow with the
+    time (7.5e-9 of a sample at 200 Hz beyond 2^18 s = 72.8 h, where a fixed 1e-9 dropped a sample at chunk
+    boundaries)."""
+    x0, x1 = t0 * rate_hz, t1 * rate_hz
+    k0 = int(np.ceil(x0 - _tolerance(x0)))
+    k1 = int(np.floor(x1 + _tolerance(x1)))
     return np.arange(k0, k1 + 1) / rate_hz
+
+
+def _tolerance(x: float) -> float:
+    """How far t * rate_hz may lie from the integer it stands for: the rounding of t (half a step) and of the
+    product (half a step), with margin."""
+    return 1e-9 + 4.0 * float(np.spacing(abs(x)))
 
 
 def true_at(supports: dict[str, np.ndarray], column: str, t_grid: np.ndarray, n_supports: int) -> np.ndarray:
