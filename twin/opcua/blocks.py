@@ -11,6 +11,7 @@ the stream is published: every row before that time is in a block (rows of one t
 
 from __future__ import annotations
 
+import threading
 from collections import deque
 from dataclasses import dataclass
 
@@ -44,7 +45,8 @@ class Block:
 
 class BlockStream:
     """One sensor stream's rows waiting for their publication (`add`), its blocks (`publish`) and the last `history`
-    of them (`read`)."""
+    of them (`read`). `read` may be called from another thread (asyncua answers method calls in a thread pool) while
+    the publisher appends: the ring is read and appended under a lock."""
 
     def __init__(self, stream: Stream, history: int):
         if history < 1:
@@ -55,6 +57,7 @@ class BlockStream:
         self.sequence = 0  # the last block's
         self.rows = 0  # rows published
         self.ring: deque[Block] = deque(maxlen=history)
+        self._ring_lock = threading.Lock()
 
     def add(self, columns: dict[str, np.ndarray], made_until: float) -> None:
         """The stream's next rows (in time order), and the time before which it has no more to come."""
@@ -86,14 +89,17 @@ class BlockStream:
         self.sequence += 1
         block = Block(self.sequence, self.rows, columns, self.complete_until)
         self.rows += block.rows
-        self.ring.append(block)
+        with self._ring_lock:
+            self.ring.append(block)
         return block
 
     def read(self, from_sequence: int, max_rows: int = MAX_READ_ROWS) -> list[Block]:
         """The blocks held from `from_sequence` on (those before the oldest held are gone: the answer starts later),
         at most `max_rows` rows but at least one block when there is one."""
+        with self._ring_lock:
+            held = list(self.ring)
         out, rows = [], 0
-        for block in self.ring:
+        for block in held:
             if block.sequence < from_sequence:
                 continue
             if out and rows + block.rows > max_rows:

@@ -7,8 +7,9 @@ per-cycle offset input, twin.face.drift.OffsetSource).
 
 The sensor streams (sensor trial 0, the rows its run directory's Parquet files get) are published in blocks, one
 per stream per publication with rows (twin.opcua.blocks), the last `history_s` of simulated time of them held for
-ReadBlocks. When the run ends, State says Finished and the server stays up while clients are connected (at least
-MIN_LINGER_S, at most LINGER_S), so that a recorder fetches the last blocks.
+ReadBlocks. When the run ends, State says Finished and the server stays up while clients are connected or one has
+left within REJOIN_S (at least MIN_LINGER_S, at most LINGER_S), so that a recorder fetches the last blocks, also one
+whose connection dropped and is coming back.
 
 The estimator (`estimator`, default kf_cpoem_rts): the same sensor rows, as they reach the publisher, go to the
 method run online in a worker thread (twin.opcua.estimator); each pass is published under Longwall/Estimator once
@@ -65,6 +66,9 @@ LINGER_S = 30.0
 """After the run, the server stays up at most this long [s of wall time] while clients are connected."""
 MIN_LINGER_S = 5.0
 """... and at least this long, for a recorder reconnecting just then."""
+REJOIN_S = 10.0
+"""... and this long after a client left, for a recorder whose connection dropped to connect again (it retries every
+half second once its old connection is given up, within 2 s: twin.opcua.recorder)."""
 
 
 class _PasswordUsers(UserManager):
@@ -241,11 +245,17 @@ class Publisher:
 
 
 async def _linger(server: Server) -> None:
-    """Stay up while clients are connected (a recorder fetching the last blocks), at least MIN_LINGER_S and at most
-    LINGER_S."""
-    start = time.perf_counter()
-    while time.perf_counter() - start < LINGER_S and (
-            time.perf_counter() - start < MIN_LINGER_S or server.bserver is not None and server.bserver.clients):
+    """Stay up while clients are connected (a recorder fetching the last blocks) or one left within REJOIN_S, at
+    least MIN_LINGER_S and at most LINGER_S."""
+    start = left = time.perf_counter()
+    held = 0
+    while (now := time.perf_counter()) - start < LINGER_S:
+        clients = len(server.bserver.clients) if server.bserver is not None else 0
+        if clients < held:
+            left = now
+        held = clients
+        if now - start >= MIN_LINGER_S and not clients and now - left >= REJOIN_S:
+            return
         await asyncio.sleep(0.1)
 
 
