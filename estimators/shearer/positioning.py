@@ -332,8 +332,9 @@ class PassStore:
             own = self._rows(a)
             start = self.first if i == 0 else {k: v[-1:] for k, v in self._rows(self.saved[i - 1][0]).items()}
             rows = {k: np.concatenate([start[k], own[k][:-1]]) for k in ROW_KEYS}  # epochs a..b-1
-            data = self._load(a, ("x_post", "p_post", "p_pred", "phi"))  # read fresh from the files: changed in place
-            known = _smooth_stored(data, last_update.get(a, np.zeros(es.N_STATES)), known, rows)
+            # The pass's matrices, read fresh from the files (changed in place), are let go when the pass is done.
+            known = _smooth_stored(self._load(a, ("x_post", "p_post", "p_pred", "phi")),
+                                   last_update.get(a, np.zeros(es.N_STATES)), known, rows)
             self._save(a, "smoothed", rows)
         for i, (a, b) in enumerate(self.saved):
             rows = self._rows(a, "smoothed")
