@@ -276,7 +276,14 @@ gravity_nb = nb.njit(cache=True)(normal_gravity_kernel)
 @nb.njit(cache=True)
 def nav_rates(lat, h, v):
     """w_ie^n and w_en^n (ENU) at (lat, h) with velocity v."""
+    ie_n, ie_u, en_e, en_n, en_u = nav_rate_parts(lat, h, v[0], v[1])
+    return np.array([0.0, ie_n, ie_u]), np.array([en_e, en_n, en_u])
+
+
+@nb.njit(cache=True, inline="always")
+def nav_rate_parts(lat, h, v_e, v_n):
+    """`nav_rates` as scalars (w_ie^n's north and up, w_en^n's east, north and up; w_ie^n's east is 0) for the
+    velocity's east and north v_e, v_n."""
     r_m, r_n = radii_nb(lat)
-    w_ie = np.array([0.0, OMEGA_IE * np.cos(lat), OMEGA_IE * np.sin(lat)])
-    w_en = np.array([-v[1] / (r_m + h), v[0] / (r_n + h), v[0] * np.tan(lat) / (r_n + h)])
-    return w_ie, w_en
+    return (OMEGA_IE * np.cos(lat), OMEGA_IE * np.sin(lat), -v_n / (r_m + h), v_e / (r_n + h),
+            v_e * np.tan(lat) / (r_n + h))

@@ -21,9 +21,16 @@ from numba.extending import register_jitable
 SMALL_ANGLE = 1e-3
 
 
+@nb.njit(cache=True, inline="always")
+def cross_parts(a, b):
+    """a x b of two 3-vectors (arrays or tuples) as three scalars."""
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
 @nb.njit(cache=True)
 def cross3(a, b):
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
+    x, y, z = cross_parts(a, b)
+    return np.array([x, y, z])
 
 
 @nb.njit(cache=True)
@@ -35,11 +42,14 @@ def skew3(v):
 @nb.njit(cache=True, inline="always")
 def qmul_into(p, q, out):
     """out = p (x) q, the Hamilton product (q_ac = q_ab (x) q_bc); out may be p or q."""
-    w = p[0] * q[0] - p[1] * q[1] - p[2] * q[2] - p[3] * q[3]
-    x = p[0] * q[1] + p[1] * q[0] + p[2] * q[3] - p[3] * q[2]
-    y = p[0] * q[2] - p[1] * q[3] + p[2] * q[0] + p[3] * q[1]
-    z = p[0] * q[3] + p[1] * q[2] - p[2] * q[1] + p[3] * q[0]
-    out[0], out[1], out[2], out[3] = w, x, y, z
+    out[0], out[1], out[2], out[3] = qmul_parts(p[0], p[1], p[2], p[3], q[0], q[1], q[2], q[3])
+
+
+@nb.njit(cache=True, inline="always")
+def qmul_parts(p0, p1, p2, p3, q0, q1, q2, q3):
+    """The Hamilton product p (x) q of quaternions given as scalars, as four scalars."""
+    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
+            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1, p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
 
 
 @nb.njit(cache=True)
@@ -61,12 +71,18 @@ def qnormalize_into(q, out):
 def qexp_into(phi, out):
     """out = exp(phi / 2) = [cos(|phi|/2), sin(|phi|/2) phi / |phi|], the unit quaternion of the rotation vector
     phi (axis * angle); series below 1e-8 rad."""
-    theta = np.sqrt(phi[0] ** 2 + phi[1] ** 2 + phi[2] ** 2)
+    out[0], out[1], out[2], out[3] = qexp_parts(phi[0], phi[1], phi[2])
+
+
+@nb.njit(cache=True, inline="always")
+def qexp_parts(a0, a1, a2):
+    """`qexp_into` of the rotation vector (a0, a1, a2), as four scalars."""
+    theta = np.sqrt(a0 ** 2 + a1 ** 2 + a2 ** 2)
     if theta < 1e-8:
         c, s = 1.0 - theta * theta / 8, 0.5 - theta * theta / 48
     else:
         c, s = np.cos(0.5 * theta), np.sin(0.5 * theta) / theta
-    out[0], out[1], out[2], out[3] = c, s * phi[0], s * phi[1], s * phi[2]
+    return c, s * a0, s * a1, s * a2
 
 
 @nb.njit(cache=True)

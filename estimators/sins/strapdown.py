@@ -25,7 +25,8 @@ import numba as nb
 import numpy as np
 
 from estimators.nav import earth
-from estimators.nav.earth import OMEGA_IE, gravity_nb, radii_nb
+from estimators.nav.earth import gravity_nb, nav_rate_parts, radii_nb
+from estimators.nav.rotation_kernels import cross_parts, qexp_parts, qmul_parts, qrot_into
 from estimators.nav.rotations import qexp, qmul
 from estimators.sins.coning import coefficients
 
@@ -55,12 +56,6 @@ def compensate(dtheta: np.ndarray, dv: np.ndarray, n_samples: int) -> tuple[np.n
     return phi, dv_b
 
 
-@nb.njit(cache=True, inline="always")
-def _cross(a, b):
-    """a x b of two 3-tuples, as numpy.cross computes it."""
-    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
-
-
 @nb.njit(cache=True)
 def _compensate_kernel(dtheta, dv, k, phi, dv_b):
     """`compensate` into phi, dv_b (U, 3) in one pass over the increments, each sum and product in the order of
@@ -81,10 +76,10 @@ def _compensate_kernel(dtheta, dv, k, phi, dv_b):
             d = (d[0] + k[i] * dv[r + i, 0], d[1] + k[i] * dv[r + i, 1], d[2] + k[i] * dv[r + i, 2])
         th_n = (dtheta[last, 0], dtheta[last, 1], dtheta[last, 2])
         v_n = (dv[last, 0], dv[last, 1], dv[last, 2])
-        coning = _cross(c, th_n)
-        rotation = _cross(s_th, s_v)
-        sculling_c = _cross(c, v_n)
-        sculling_d = _cross(d, th_n)
+        coning = cross_parts(c, th_n)
+        rotation = cross_parts(s_th, s_v)
+        sculling_c = cross_parts(c, v_n)
+        sculling_d = cross_parts(d, th_n)
         for j in range(3):
             phi[u, j] = s_th[j] + coning[j]
             dv_b[u, j] = s_v[j] + 0.5 * rotation[j] + sculling_c[j] + sculling_d[j]
@@ -99,32 +94,6 @@ def body_attitude(q0: np.ndarray, phi: np.ndarray) -> np.ndarray:
         q = qmul(out[u], qexp(phi[u]))
         out[u + 1] = q / np.sqrt(np.sum(q * q))
     return out
-
-
-@nb.njit(cache=True, inline="always")
-def _rates(lat, h, v0, v1):
-    """w_ie^n + w_en^n (ENU; estimators.nav.earth.nav_rates) at (lat, h) with velocity (v0, v1, .), as scalars: the
-    Earth rate's north and up components and the transport rate's east, north and up."""
-    r_m, r_n = radii_nb(lat)
-    return OMEGA_IE * np.cos(lat), OMEGA_IE * np.sin(lat), -v1 / (r_m + h), v0 / (r_n + h), v0 * np.tan(lat) / (r_n + h)
-
-
-@nb.njit(cache=True, inline="always")
-def _qexp(a0, a1, a2):
-    """estimators.nav.rotation_kernels.qexp of the rotation vector a, as four scalars."""
-    theta = np.sqrt(a0 ** 2 + a1 ** 2 + a2 ** 2)
-    if theta < 1e-8:
-        c, s = 1.0 - theta * theta / 8, 0.5 - theta * theta / 48
-    else:
-        c, s = np.cos(0.5 * theta), np.sin(0.5 * theta) / theta
-    return c, s * a0, s * a1, s * a2
-
-
-@nb.njit(cache=True, inline="always")
-def _qmul(p0, p1, p2, p3, q0, q1, q2, q3):
-    """The Hamilton product p (x) q (estimators.nav.rotation_kernels.qmul_into), as four scalars."""
-    return (p0 * q0 - p1 * q1 - p2 * q2 - p3 * q3, p0 * q1 + p1 * q0 + p2 * q3 - p3 * q2,
-            p0 * q2 - p1 * q3 + p2 * q0 + p3 * q1, p0 * q3 + p1 * q2 - p2 * q1 + p3 * q0)
 
 
 @nb.njit(cache=True)
@@ -148,15 +117,10 @@ def step_into(lat, lon, h, v, q, phi, dv_b, dt, lat_e, h_e, v_e, hold_height, v_
     (lat, lon, h). Written in scalars (no array for a term), each the operations of the vector form in its order, so
     the numbers are the vector form's bit for bit (tests/estimators/sins/test_strapdown.py)."""
     # dv_n = C_b^n dv_b (rotation_kernels.qrot), less half the n-frame rotation zeta = (w_ie + w_en) dt across it.
-    ie1, ie2, en0, en1, en2 = _rates(lat_e, h_e, v_e[0], v_e[1])
+    ie1, ie2, en0, en1, en2 = nav_rate_parts(lat_e, h_e, v_e[0], v_e[1])
     z0, z1, z2 = (0.0 + en0) * dt, (ie1 + en1) * dt, (ie2 + en2) * dt
-    w, x, y, zq = q[0], q[1], q[2], q[3]
-    tx = 2.0 * (y * dv_b[2] - zq * dv_b[1])
-    ty = 2.0 * (zq * dv_b[0] - x * dv_b[2])
-    tz = 2.0 * (x * dv_b[1] - y * dv_b[0])
-    r0 = dv_b[0] + w * tx + (y * tz - zq * ty)
-    r1 = dv_b[1] + w * ty + (zq * tx - x * tz)
-    r2 = dv_b[2] + w * tz + (x * ty - y * tx)
+    qrot_into(q, dv_b, dv_n)
+    r0, r1, r2 = dv_n[0], dv_n[1], dv_n[2]
     dv_n[0] = r0 - 0.5 * (z1 * r2 - z2 * r1)
     dv_n[1] = r1 - 0.5 * (z2 * r0 - z0 * r2)
     dv_n[2] = r2 - 0.5 * (z0 * r1 - z1 * r0)
@@ -179,11 +143,11 @@ def step_into(lat, lon, h, v, q, phi, dv_b, dt, lat_e, h_e, v_e, hold_height, v_
     lon_new = lon + v_bar[0] * dt / ((r_n + h_bar) * np.cos(lat_bar))
     # Attitude with the n-frame rotation re-evaluated at the new mid-interval state:
     # q_new = Exp(-(w_ie + w_en) dt) (x) q (x) Exp(phi), normalised.
-    ie1, ie2, en0, en1, en2 = _rates(lat_bar, h_bar, v_bar[0], v_bar[1])
-    e0, e1, e2, e3 = _qexp(-(0.0 + en0) * dt, -(ie1 + en1) * dt, -(ie2 + en2) * dt)
-    p0, p1, p2, p3 = _qmul(e0, e1, e2, e3, w, x, y, zq)
-    f0, f1, f2, f3 = _qexp(phi[0], phi[1], phi[2])
-    p0, p1, p2, p3 = _qmul(p0, p1, p2, p3, f0, f1, f2, f3)
+    ie1, ie2, en0, en1, en2 = nav_rate_parts(lat_bar, h_bar, v_bar[0], v_bar[1])
+    e0, e1, e2, e3 = qexp_parts(-(0.0 + en0) * dt, -(ie1 + en1) * dt, -(ie2 + en2) * dt)
+    p0, p1, p2, p3 = qmul_parts(e0, e1, e2, e3, q[0], q[1], q[2], q[3])
+    f0, f1, f2, f3 = qexp_parts(phi[0], phi[1], phi[2])
+    p0, p1, p2, p3 = qmul_parts(p0, p1, p2, p3, f0, f1, f2, f3)
     norm = np.sqrt(0.0 + p0 * p0 + p1 * p1 + p2 * p2 + p3 * p3)
     q_new[0], q_new[1], q_new[2], q_new[3] = p0 / norm, p1 / norm, p2 / norm, p3 / norm
     return lat_new, lon_new, h_new
