@@ -301,13 +301,15 @@ class PassStore:
 
     def _save(self, a: int, kind: str, arrays: dict[str, np.ndarray]) -> None:
         """A pass's arrays, a .npy file each (no archive to checksum: these are gigabytes on a long run)."""
-        folder = self.folder / f"{kind}_{a}"
-        folder.mkdir()
+        (self.folder / f"{kind}_{a}").mkdir()
         for key, value in arrays.items():
-            np.save(folder / f"{key}.npy", value)
+            np.save(self._file(a, key, kind), value)
+
+    def _file(self, a: int, key: str, kind: str = "forward") -> Path:
+        return self.folder / f"{kind}_{a}" / f"{key}.npy"
 
     def _load(self, a: int, keys: tuple[str, ...], kind: str = "forward") -> dict[str, np.ndarray]:
-        return {key: np.load(self.folder / f"{kind}_{a}" / f"{key}.npy") for key in keys}
+        return {key: np.load(self._file(a, key, kind)) for key in keys}
 
     def _rows(self, a: int, kind: str = "forward") -> dict[str, np.ndarray]:
         return self._load(a, ROW_KEYS, kind)
@@ -325,7 +327,7 @@ class PassStore:
             return
         last_update = {}
         for a, b in self.saved:
-            last_update[b] = np.load(self.folder / f"forward_{a}" / "x_post.npy", mmap_mode="r")[-1].copy()
+            last_update[b] = np.load(self._file(a, "x_post"), mmap_mode="r")[-1].copy()
         known = None
         for i in range(len(self.saved) - 1, -1, -1):
             a, b = self.saved[i]
