@@ -15,7 +15,7 @@ Figures:
 
 Peak memory is the largest sum over the process tree of each process's proportional set size (PSS: pages shared
 copy-on-write with the forked workers counted once), sampled every 0.2 s; ru_maxrss of the largest single process
-is printed beside it.
+is printed beside it, and the peak in each stage of the run (the stages' ends on the clock from its timing.json).
 """
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import psutil
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -47,7 +48,7 @@ TARGET_100_CYCLES_S = 20 * 60.0
 @dataclass(frozen=True)
 class Timed:
     """One command: exit code, wall time [s], peak PSS of its process tree and largest single RSS [bytes], stderr's
-    last line, and the run's own wall time by stage (its timing.json, when it wrote one)."""
+    last line, and from the run's timing.json (when it wrote one) its wall time and peak PSS by stage."""
 
     rc: int
     wall_s: float
@@ -55,6 +56,20 @@ class Timed:
     max_rss: float
     last_err: str
     stages_s: dict[str, float]
+    stage_peaks: dict[str, float]
+
+
+def stage_peaks(samples: list[tuple[float, float]], ends: list[list]) -> dict[str, float]:
+    """The largest of `samples` ((Unix s, bytes)) in each stage of `ends` ([end in Unix s, stage], in time order, the
+    time up to each end going to its stage): the run's start to its first stage, the time after the last end (the
+    run's closing) to "closing"."""
+    times = np.array([end for end, _ in ends])
+    peaks: dict[str, float] = {}
+    for t, value in samples:
+        i = int(np.searchsorted(times, t))
+        name = ends[i][1] if i < len(ends) else "closing"
+        peaks[name] = max(peaks.get(name, 0.0), value)
+    return peaks
 
 
 def _tree_pss(proc: psutil.Process) -> float:
@@ -73,13 +88,13 @@ def timed(args: list[str], env: dict[str, str] | None = None, out: Path | None =
     start = time.perf_counter()
     proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
                             env={**os.environ, **(env or {})})
-    peak = [0.0]
+    samples: list[tuple[float, float]] = []  # (Unix s, PSS of the tree)
 
     def sample() -> None:
         ps = psutil.Process(proc.pid)
         while proc.poll() is None:
             try:
-                peak[0] = max(peak[0], _tree_pss(ps))
+                samples.append((time.time(), _tree_pss(ps)))
             except psutil.NoSuchProcess:
                 break
             time.sleep(0.2)
@@ -92,8 +107,10 @@ def timed(args: list[str], env: dict[str, str] | None = None, out: Path | None =
     max_rss = max(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss, before) * 1024.0
     lines = [line for line in err.splitlines() if line.strip()]
     timing = out / "timing.json" if out is not None else None
-    stages = json.loads(timing.read_text()).get("stages_s", {}) if timing is not None and timing.is_file() else {}
-    return Timed(proc.returncode, wall, peak[0], max_rss, lines[-1] if lines else "", stages)
+    figures = json.loads(timing.read_text()) if timing is not None and timing.is_file() else {}
+    peaks = stage_peaks(samples, figures["stage_ends_unix_s"]) if figures.get("stage_ends_unix_s") else {}
+    return Timed(proc.returncode, wall, max((m for _, m in samples), default=0.0), max_rss,
+                 lines[-1] if lines else "", figures.get("stages_s", {}), peaks)
 
 
 def longwall(*args: str, out: Path) -> list[str]:
@@ -112,8 +129,10 @@ def describe(label: str, r: Timed) -> str:
     if r.rc != 0:
         return f"{label:42s} failed (rc {r.rc}): {r.last_err}"
     stages = ", ".join(f"{k} {v:.1f}" for k, v in r.stages_s.items())
+    peaks = ", ".join(f"{k} {v / 1e9:.2f}" for k, v in r.stage_peaks.items())
     return (f"{label:42s} {r.wall_s:7.1f} s   peak {gb(r.peak_pss)} (largest process {gb(r.max_rss)})"
-            + (f"\n{'':44s}stages [s]: {stages}" if stages else ""))
+            + (f"\n{'':44s}stages [s]: {stages}" if stages else "")
+            + (f"\n{'':44s}peak by stage [GB]: {peaks}" if peaks else ""))
 
 
 def main() -> None:

@@ -153,6 +153,12 @@ def test_run_writes_estimates_and_estimate_reruns_them(default_run, capsys):
     timing = json.loads((default_run / "timing.json").read_text())
     assert {"face", "shearer", "sensors", "recording", "estimators"} <= set(timing["stages_s"])
     assert 0 < sum(timing["stages_s"].values()) <= timing["total_s"] and timing["wall_s"] < timing["total_s"]
+    # ... and on the clock: each stage's runs of reports in time order, ending within the run.
+    ends = timing["stage_ends_unix_s"]
+    assert {stage for _, stage in ends} == set(timing["stages_s"])
+    assert [stage for _, stage in ends][-1] == "estimators" and all(a != b for (_, a), (_, b) in zip(ends, ends[1:]))
+    times = [t for t, _ in ends]
+    assert times == sorted(times) and times[-1] - times[0] <= timing["total_s"]
     before = read_estimate(default_run, "kf_cpoem_rts").column("lat").to_numpy()
     assert main(["estimate", str(default_run)]) == 0
     assert "SEP per cutting cycle" in capsys.readouterr().out

@@ -245,6 +245,10 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     done = {k: 0.0 for k in stages}
     stage_s = {k: 0.0 for k in stages}  # wall time of each stage: the time up to each report goes to its stage
     last = [start]
+    # The same on the clock (Unix seconds): [end, stage] of each run of reports of one stage, the time up to each
+    # end going to its stage; timing.json's "stage_ends_unix_s", by which a memory sampler beside the run
+    # (benchmarks/bench_scale.py) tells the stages apart. The face and shearer stages alternate chunk by chunk.
+    stage_ends: list[list] = []
 
     running = ["face"]  # the stage under way, which the bar names
     compiling = [False]  # numba compiled a kernel in this stage: a first run after installing
@@ -265,6 +269,10 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
         now = time.perf_counter()
         stage_s[stage] += now - last[0]
         last[0] = now
+        if stage_ends and stage_ends[-1][1] == stage:
+            stage_ends[-1][0] = round(time.time(), 3)
+        else:
+            stage_ends.append([round(time.time(), 3), stage])
         done[stage] = frac
         bar.n = round(100 * sum(stages[k] * v for k, v in done.items()) / total)
         after = [k for k in list(stages)[list(stages).index(stage) + 1:] if stages[k] and done[k] < 1.0]
@@ -323,7 +331,8 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
             monte_carlo = write_monte_carlo(staging, results, list(scn.estimators.shearer.methods),
                                             runner.description)
         bar.close()
-        write_timing(staging, total_s=time.perf_counter() - start, stages_s={k: v for k, v in stage_s.items() if v})
+        write_timing(staging, total_s=time.perf_counter() - start, stages_s={k: v for k, v in stage_s.items() if v},
+                     stage_ends_unix_s=stage_ends)
     if not quiet:
         print(format_summary(summary, wall_s))
         print(format_estimators(estimated, scn.name))
