@@ -111,15 +111,18 @@ def quat_rotvec_into(q, out):
 
 
 @nb.njit(cache=True, inline="always")
+def qrot_parts(w, x, y, z, v0, v1, v2):
+    """q v q* = C_b^n(q) v for a unit q = (w, x, y, z), in scalars: v + w t + u x t with t = 2 u x v, u = (x, y, z)."""
+    tx = 2.0 * (y * v2 - z * v1)
+    ty = 2.0 * (z * v0 - x * v2)
+    tz = 2.0 * (x * v1 - y * v0)
+    return v0 + w * tx + (y * tz - z * ty), v1 + w * ty + (z * tx - x * tz), v2 + w * tz + (x * ty - y * tx)
+
+
+@nb.njit(cache=True, inline="always")
 def qrot_into(q, v, out):
-    """out = q v q* = C_b^n(q) v for a unit q: v + w t + u x t with t = 2 u x v, u = q[1:]."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    tx = 2.0 * (y * v[2] - z * v[1])
-    ty = 2.0 * (z * v[0] - x * v[2])
-    tz = 2.0 * (x * v[1] - y * v[0])
-    out[0] = v[0] + w * tx + (y * tz - z * ty)
-    out[1] = v[1] + w * ty + (z * tx - x * tz)
-    out[2] = v[2] + w * tz + (x * ty - y * tx)
+    """out = q v q* (qrot_parts)."""
+    out[0], out[1], out[2] = qrot_parts(q[0], q[1], q[2], q[3], v[0], v[1], v[2])
 
 
 @nb.njit(cache=True)

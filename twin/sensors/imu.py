@@ -32,7 +32,8 @@ import numba as nb
 import numpy as np
 
 from estimators.nav import earth
-from estimators.nav.rotations import euler_to_mat, quat_conj, quat_rotate
+from estimators.nav.rotation_kernels import qrot_parts
+from estimators.nav.rotations import euler_to_mat
 from twin.config.scenario import Scenario
 from twin.config.sensors import VibrationState
 from twin.face.haulage import STOPPED
@@ -98,41 +99,78 @@ def state_envelope(state: np.ndarray, rate_hz: float, n_states: int = 3) -> np.n
     weight does not depend on how far the array extends beyond the triangle's reach (a chunk of the run gives the
     whole run's values)."""
     width = max(1, int(ENVELOPE_S * rate_hz))  # 100 samples at 200 Hz
-    onehot = (np.asarray(state)[:, None] == np.arange(n_states)).astype(np.int64)
-    triangle = _boxcar_full(_boxcar_full(onehot, width), width)  # the full convolution with 1, 2, .., width, .., 2, 1
-    return triangle[width - 1:width - 1 + onehot.shape[0]] / width ** 2  # np.convolve's mode="same", any length
+    out = np.empty((len(state), n_states))
+    _envelope_kernel(np.ascontiguousarray(state, np.int64), width, out)
+    return out
 
 
-def _boxcar_full(x: np.ndarray, width: int) -> np.ndarray:
-    """The full convolution of integer columns x (K, n) with a boxcar of `width` ones, (K + width - 1, n), exact:
-    running sums of x padded with width - 1 zeros."""
-    sums = np.cumsum(np.concatenate([x, np.zeros((width - 1, x.shape[1]), x.dtype)]), axis=0)
-    sums[width:] -= sums[:-width].copy()
-    return sums
+@nb.njit(cache=True)
+def _envelope_kernel(state, width, out):
+    """state_envelope into out (K, n_states): the full convolution of the one-hot columns with two boxcars of
+    `width` ones (running sums in integers, exact), rows width - 1 .. width + K - 2 (np.convolve's mode="same"),
+    over width^2."""
+    n_rows, n_states = out.shape
+    if n_rows == 0:
+        return
+    n_box = n_rows + width - 1  # the first convolution's length
+    box = np.zeros((n_box, n_states), np.int64)
+    for j in range(n_box):
+        if j > 0:
+            box[j] = box[j - 1]
+        if j < n_rows and 0 <= state[j] < n_states:
+            box[j, state[j]] += 1
+        if 0 <= j - width < n_rows and 0 <= state[j - width] < n_states:
+            box[j, state[j - width]] -= 1
+    tri = np.zeros(n_states, np.int64)  # the second convolution at j, from the running sum of box
+    for j in range(n_rows + 2 * width - 2):
+        for i in range(n_states):
+            if j < n_box:
+                tri[i] += box[j, i]
+            if 0 <= j - width < n_box:
+                tri[i] -= box[j - width, i]
+        if j >= width - 1:
+            for i in range(n_states):
+                out[j - width + 1, i] = tri[i] / (width * width)
+        if j - width + 2 >= n_rows:
+            break
 
 
 def time_derivative(y: np.ndarray, t: np.ndarray, edge_order: int = 1) -> np.ndarray:
     """dy/dt (K, ...) of samples y (K, ...) at times t (K,) [s]: np.gradient's second-order formulas for uneven
-    steps in the interior and of order edge_order (1 or 2) at the ends, used whatever the steps. (np.gradient
-    switches to its even-step formula when every step of the array is equal, so its values would depend, in the
-    last bit, on how far the array extends.)"""
+    steps in the interior and of order edge_order (1 or 2) at the ends, used whatever the steps, bit for bit
+    np.gradient's values where its steps are uneven. (np.gradient switches to its even-step formula when every step
+    of the array is equal, so its values would depend, in the last bit, on how far the array extends.)"""
     if y.shape[0] < edge_order + 1:
         raise ValueError(f"a derivative of order-{edge_order} edges needs {edge_order + 1} samples, got {y.shape[0]}")
-    dx = np.diff(t).reshape((-1,) + (1,) * (y.ndim - 1))
-    d1, d2 = dx[:-1], dx[1:]
-    out = np.empty_like(y, dtype=float)
-    out[1:-1] = -d2 / (d1 * (d1 + d2)) * y[:-2] + (d2 - d1) / (d1 * d2) * y[1:-1] + d1 / (d2 * (d1 + d2)) * y[2:]
+    rows = np.ascontiguousarray(y, dtype=float).reshape(y.shape[0], -1)
+    out = np.empty_like(rows)
+    _derivative_kernel(rows, np.ascontiguousarray(t, dtype=float), edge_order, out)
+    return out.reshape(y.shape)
+
+
+@nb.njit(cache=True, parallel=True)
+def _derivative_kernel(y, t, edge_order, out):
+    """time_derivative of the columns of y (K, n) into out, in np.gradient's order of operations."""
+    last = y.shape[0] - 1
+    for k in nb.prange(1, last):
+        d1, d2 = t[k] - t[k - 1], t[k + 1] - t[k]
+        a, b, c = -d2 / (d1 * (d1 + d2)), (d2 - d1) / (d1 * d2), d1 / (d2 * (d1 + d2))
+        for i in range(y.shape[1]):
+            out[k, i] = a * y[k - 1, i] + b * y[k, i] + c * y[k + 1, i]
     if edge_order == 1:
-        out[0] = (y[1] - y[0]) / dx[0]
-        out[-1] = (y[-1] - y[-2]) / dx[-1]
-    else:
-        d1, d2 = dx[0], dx[1]
-        out[0] = (-(2. * d1 + d2) / (d1 * (d1 + d2)) * y[0] + (d1 + d2) / (d1 * d2) * y[1]
-                  - d1 / (d2 * (d1 + d2)) * y[2])
-        d1, d2 = dx[-2], dx[-1]
-        out[-1] = (d2 / (d1 * (d1 + d2)) * y[-3] - (d2 + d1) / (d1 * d2) * y[-2]
-                   + (2. * d2 + d1) / (d2 * (d1 + d2)) * y[-1])
-    return out
+        d_first, d_last = t[1] - t[0], t[last] - t[last - 1]
+        for i in range(y.shape[1]):
+            out[0, i] = (y[1, i] - y[0, i]) / d_first
+            out[last, i] = (y[last, i] - y[last - 1, i]) / d_last
+        return
+    d1, d2 = t[1] - t[0], t[2] - t[1]
+    a, b, c = -(2. * d1 + d2) / (d1 * (d1 + d2)), (d1 + d2) / (d1 * d2), d1 / (d2 * (d1 + d2))
+    for i in range(y.shape[1]):
+        out[0, i] = a * y[0, i] + b * y[1, i] - c * y[2, i]
+    d1, d2 = t[last - 1] - t[last - 2], t[last] - t[last - 1]
+    a, b, c = d2 / (d1 * (d1 + d2)), (d2 + d1) / (d1 * d2), (2. * d2 + d1) / (d2 * (d1 + d2))
+    for i in range(y.shape[1]):
+        out[last, i] = a * y[last - 2, i] - b * y[last - 1, i] + c * y[last, i]
 
 
 @nb.njit(cache=True, inline="always")
@@ -292,15 +330,25 @@ def sensor_increments(t: np.ndarray, w_ib_b: np.ndarray, f_b: np.ndarray, amp_st
 def gravity_at_lever_arm_b(shearer: dict[str, np.ndarray], lever_arm_b: np.ndarray) -> np.ndarray:
     """g at the sensor minus g at the body reference point, in b (K, 3): the gravity gradient over the lever
     arm d_n = C_nb r. Across, the vertical turns by d/R (g_E = -gamma d_E / (R_N + h), g_N = -gamma d_N /
-    (R_M + h)); up, gamma falls by about 3.1e-6 s^-2 per metre. Second-order terms are (r / R)^2 ~ 1e-14."""
+    (R_M + h)); up, gamma falls by about 3.1e-6 s^-2 per metre. Left out: gamma's change with latitude over d_N
+    (at most 8.2e-9 s^-2 per metre north: 2 ng at 2.5 m) and the second-order terms, (r / R)^2 ~ 1e-14."""
     q_nb = np.column_stack([shearer[f"q_nb_{a}"] for a in "wxyz"])
-    lat, h = shearer["lat"], shearer["h"]
-    d_n = quat_rotate(q_nb, np.broadcast_to(lever_arm_b, (lat.size, 3)))
-    r_m, r_n = earth.radii(lat)
-    gamma = earth.normal_gravity(lat, h)
-    dg_n = np.column_stack([-gamma * d_n[:, 0] / (r_n + h), -gamma * d_n[:, 1] / (r_m + h),
-                            gamma - earth.normal_gravity(lat, h + d_n[:, 2])])
-    return quat_rotate(quat_conj(q_nb), dg_n)
+    lat, h = (np.ascontiguousarray(shearer[name], dtype=float) for name in ("lat", "h"))
+    out = np.empty((lat.size, 3))
+    _gravity_kernel(q_nb, lat, h, np.asarray(lever_arm_b, dtype=float), out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _gravity_kernel(q_nb, lat, h, lever, out):
+    """gravity_at_lever_arm_b per sample: d_n = C_b^n r, dg_n, and C_n^b dg_n (earth.radii and normal gravity)."""
+    for k in nb.prange(lat.size):
+        w, x, y, z = q_nb[k, 0], q_nb[k, 1], q_nb[k, 2], q_nb[k, 3]
+        d0, d1, d2 = qrot_parts(w, x, y, z, lever[0], lever[1], lever[2])
+        r_m, r_n = earth.radii_nb(lat[k])
+        gamma = earth.gravity_nb(lat[k], h[k])
+        dg0, dg1, dg2 = -gamma * d0 / (r_n + h[k]), -gamma * d1 / (r_m + h[k]), gamma - earth.gravity_nb(lat[k], h[k] + d2)
+        out[k, 0], out[k, 1], out[k, 2] = qrot_parts(w, -x, -y, -z, dg0, dg1, dg2)
 
 
 def mounting_matrix(misalignment_deg) -> np.ndarray:

@@ -52,6 +52,7 @@ speed along the odometer axis is below STANDSTILL_M_S.
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from estimators.nav.rotations import euler_to_mat
@@ -71,18 +72,26 @@ def odometer_axis_b(mounting_deg) -> np.ndarray:
 
 
 def speed_along_axis(shearer: dict[str, np.ndarray], axis_b: np.ndarray) -> np.ndarray:
-    """v_y^m = axis_b . (C_n^b v_n) = (C_b^n axis_b) . v_n at every truth sample (no (N, 3, 3) temporaries)."""
-    w, x, y, z = (np.asarray(shearer[f"q_nb_{c}"], dtype=float) for c in "wxyz")
-    v = [np.asarray(shearer[f"v_n_{c}"], dtype=float) for c in "enu"]
-    ax, ay, az = (float(c) for c in axis_b)
-    # Rows of C_b^n (unit quaternion) applied to the fixed axis, each dotted with the matching v_n component.
-    xx, yy, zz = x * x, y * y, z * z
-    xy, xz, yz = x * y, x * z, y * z
-    wx, wy, wz = w * x, w * y, w * z
-    row_e = (1 - 2 * (yy + zz)) * ax + 2 * (xy - wz) * ay + 2 * (xz + wy) * az
-    row_n = 2 * (xy + wz) * ax + (1 - 2 * (xx + zz)) * ay + 2 * (yz - wx) * az
-    row_u = 2 * (xz - wy) * ax + 2 * (yz + wx) * ay + (1 - 2 * (xx + yy)) * az
-    return row_e * v[0] + row_n * v[1] + row_u * v[2]
+    """v_y^m = axis_b . (C_n^b v_n) = (C_b^n axis_b) . v_n at every truth sample."""
+    cols = [np.ascontiguousarray(shearer[name], dtype=float) for name in
+            ("q_nb_w", "q_nb_x", "q_nb_y", "q_nb_z", "v_n_e", "v_n_n", "v_n_u")]
+    out = np.empty(cols[0].size)
+    _speed_kernel(*cols, *(float(c) for c in axis_b), out)
+    return out
+
+
+@nb.njit(cache=True, parallel=True)
+def _speed_kernel(w, x, y, z, v_e, v_n, v_u, ax, ay, az, out):
+    """speed_along_axis per sample: the rows of C_b^n (unit quaternion) applied to the fixed axis, each dotted with
+    the matching v_n component."""
+    for k in nb.prange(out.size):
+        xx, yy, zz = x[k] * x[k], y[k] * y[k], z[k] * z[k]
+        xy, xz, yz = x[k] * y[k], x[k] * z[k], y[k] * z[k]
+        wx, wy, wz = w[k] * x[k], w[k] * y[k], w[k] * z[k]
+        row_e = (1 - 2 * (yy + zz)) * ax + 2 * (xy - wz) * ay + 2 * (xz + wy) * az
+        row_n = 2 * (xy + wz) * ax + (1 - 2 * (xx + zz)) * ay + 2 * (yz - wx) * az
+        row_u = 2 * (xz - wy) * ax + 2 * (yz + wx) * ay + (1 - 2 * (xx + yy)) * az
+        out[k] = row_e * v_e[k] + row_n * v_n[k] + row_u * v_u[k]
 
 
 class Odometer:

@@ -304,3 +304,18 @@ def test_faults_table_and_run_check():
         check_faults_in_run(scn, 2000.0)
     assert np.array_equal(window_mask(np.array([9.9, 10.0, 19.99, 20.0]), scn.faults[0]),
                           [False, True, True, False])
+
+
+def test_speed_along_axis_is_the_axis_turned_into_n_dotted_with_the_velocity():
+    """The per-sample kernel against C_b^n (quat_to_mat) applied to the axis, for random attitudes, velocities and
+    a mounted (not body-y) axis."""
+    from estimators.nav.rotations import quat_to_mat
+    from twin.sensors.odometer import odometer_axis_b, speed_along_axis
+    rng = np.random.default_rng(5)
+    q = rng.normal(size=(1000, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    v_n = rng.normal(size=(1000, 3))
+    axis_b = odometer_axis_b([2.0, -1.0, 3.0])
+    cols = {**{f"q_nb_{c}": q[:, i] for i, c in enumerate("wxyz")}, **{f"v_n_{c}": v_n[:, i] for i, c in enumerate("enu")}}
+    expected = np.einsum("kij,j,ki->k", quat_to_mat(q), axis_b, v_n)
+    np.testing.assert_allclose(speed_along_axis(cols, axis_b), expected, rtol=0, atol=1e-14)
