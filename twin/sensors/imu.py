@@ -106,33 +106,19 @@ def state_envelope(state: np.ndarray, rate_hz: float, n_states: int = 3) -> np.n
 
 @nb.njit(cache=True)
 def _envelope_kernel(state, width, out):
-    """state_envelope into out (K, n_states): the full convolution of the one-hot columns with two boxcars of
-    `width` ones (running sums in integers, exact), rows width - 1 .. width + K - 2 (np.convolve's mode="same"),
-    over width^2."""
+    """state_envelope into out (K, n_states), per state in integers (exact): the one-hot column's boxcar b(j) (the
+    full convolution with `width` ones), the same lagging by width, and their difference's running sum, the second
+    boxcar; rows width - 1 .. width + K - 2 of the full convolution (np.convolve's mode="same"), over width^2."""
     n_rows, n_states = out.shape
-    if n_rows == 0:
-        return
-    n_box = n_rows + width - 1  # the first convolution's length
-    box = np.zeros((n_box, n_states), np.int64)
-    for j in range(n_box):
-        if j > 0:
-            box[j] = box[j - 1]
-        if j < n_rows and 0 <= state[j] < n_states:
-            box[j, state[j]] += 1
-        if 0 <= j - width < n_rows and 0 <= state[j - width] < n_states:
-            box[j, state[j - width]] -= 1
-    tri = np.zeros(n_states, np.int64)  # the second convolution at j, from the running sum of box
-    for j in range(n_rows + 2 * width - 2):
-        for i in range(n_states):
-            if j < n_box:
-                tri[i] += box[j, i]
-            if 0 <= j - width < n_box:
-                tri[i] -= box[j - width, i]
-        if j >= width - 1:
-            for i in range(n_states):
-                out[j - width + 1, i] = tri[i] / (width * width)
-        if j - width + 2 >= n_rows:
-            break
+    for i in range(n_states):
+        box = lag = tri = 0  # b(j), b(j - width), and the triangle at j
+        for j in range(n_rows + width - 1):
+            box += (j < n_rows and state[j] == i) - (0 <= j - width and state[j - width] == i)
+            lag += (0 <= j - width < n_rows and state[j - width] == i) - (0 <= j - 2 * width and
+                                                                          state[j - 2 * width] == i)
+            tri += box - lag
+            if j >= width - 1:
+                out[j - width + 1, i] = tri / (width * width)
 
 
 def time_derivative(y: np.ndarray, t: np.ndarray, edge_order: int = 1) -> np.ndarray:
