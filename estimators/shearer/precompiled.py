@@ -3,7 +3,7 @@ calls, for estimators.precompile: a first run compiles them in the background wh
 
 Each with the methods that call it (None: every method, through estimators.shearer.prepare), the longest to compile
 first. The kernels they call are compiled with them, but for run_filter's longest (FILTER_CALLS), which are listed
-on their own so that two processes share its compile. A change of a listed call's argument types must be made
+on their own, before it, so that two processes share its compile. A change of a listed call's argument types must be made
 here too, or the call compiles again (tests/estimators/shearer/test_precompiled.py fails).
 """
 
@@ -20,29 +20,34 @@ _SMOOTHED = ("kf_rts", "kf_cpoem_rts", "rts_offline", "dr_compensated")
 
 _C1, _C2 = "f8[::1]", "f8[:, ::1]"
 FILTER_CALLS = (
-    Kernel("estimators.sins.error_model", "feed_back_navigation", f"{_C1}, {_C1}"),
     Kernel("estimators.kalman.update", "gated_update", f"{_C1}, {_C2}, {_C1}, {_C2}, {_C2}, f8"),
-    Kernel("estimators.kalman.measurements", "position_fix", f"{_C1}, {_C1}, {_C1}, {_C2}, IntegerLiteral({N_STATES})"),
-    Kernel("estimators.kalman.measurements", "zero_rate", f"{_C1}, {_C1}, f8, f8, i8"),
-    Kernel("estimators.kalman.measurements", "zero_velocity", f"{_C1}, f8, {_C1}, f8, i8"),
-    Kernel("estimators.kalman.update", "joseph_update", f"{_C1}, {_C2}, {_C1}, {_C2}, {_C2}"),
     Kernel("estimators.kalman.measurements", "odometer_velocity",
            f"{_C1}, {_C1}, {_C1}, {_C1}, {_C1}, f8, f8, {_C1}, {_C2}, f8, i8"),
-    Kernel("estimators.sins.error_model", "bias_blocks", f"{_C2}, {_C2}"),
     Kernel("estimators.sins.error_model", "navigation_block", f"{_C2}, {_C1}, {_C1}"),
+    Kernel("estimators.sins.error_model", "feed_back_navigation", f"{_C1}, {_C1}"),
+    Kernel("estimators.kalman.measurements", "zero_rate", f"{_C1}, {_C1}, f8, f8, i8"),
+    Kernel("estimators.kalman.measurements", "position_fix", f"{_C1}, {_C1}, {_C1}, {_C2}, IntegerLiteral({N_STATES})"),
+    Kernel("estimators.sins.error_model", "bias_blocks", f"{_C2}, {_C2}"),
+    Kernel("estimators.kalman.measurements", "zero_velocity", f"{_C1}, f8, {_C1}, f8, i8"),
+    Kernel("estimators.kalman.update", "joseph_update", f"{_C1}, {_C2}, {_C1}, {_C2}, {_C2}"),
 )
-"""The kernels run_filter calls with the argument types of its calls, the last it reaches first. Listed after
-run_filter, another process compiles them from the end of run_filter while run_filter's process types it from the
-start: they meet in the middle (in the call order they would go in step, each compiling every kernel), and
-run_filter loads the ones it reaches later from the cache. run_filter is the longest compile of a first run; this
-takes about a quarter off it. IntegerLiteral: N_STATES, a global constant, which numba types as a literal."""
+"""The kernels run_filter calls with the argument types of its calls, the longest first (but joseph_update,
+which gated_update calls: the cache has it when it comes up). Listed before run_filter,
+the two processes of a first run compile them between them (about 7 s each), then run_filter on one (loading them
+from the cache) beside the fine alignment's EKF on the other, each about 13 s: each kernel is compiled about once.
+(With run_filter listed first, its process compiled most of them itself while the other compiled them too, and
+listed after the EKF, run_filter waited for the callees the EKF shares.)
+IntegerLiteral: N_STATES, a global constant, which numba types as a literal."""
+
+RUN_FILTER = Kernel("estimators.shearer.odometer_filter", "run_filter",
+                    "i8, i8, i8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], i1[::1], i8[::1], f8[:, ::1], f8[:, :, ::1], "
+                    "f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[:, ::1], f8[:, ::1], "
+                    "f8[:, ::1], f8[:, :, ::1], f8[:, :, ::1], f8[:, :, ::1], i4[::1], f8[::1], f8[:, ::1]")
+"""001's filter (estimators.shearer.odometer_filter), the longest compile of a first run."""
 
 KERNELS: tuple[tuple[Kernel, tuple[str, ...] | None], ...] = (
-    (Kernel("estimators.shearer.odometer_filter", "run_filter",
-            "i8, i8, i8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], i1[::1], i8[::1], f8[:, ::1], f8[:, :, ::1], "
-            "f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[:, ::1], f8[:, ::1], f8[:, ::1], "
-            "f8[:, :, ::1], f8[:, :, ::1], f8[:, :, ::1], i4[::1], f8[::1], f8[:, ::1]"), _FILTER),
     *((kernel, _FILTER) for kernel in FILTER_CALLS),
+    (RUN_FILTER, _FILTER),
     (Kernel("estimators.sins.fine_alignment", "_ekf_kernel",
             "f8[:, ::1], f8[:, ::1], f8[:, ::1], f8[::1], f8[::1], f8, f8[::1], f8[:, ::1], f8[::1], f8, f8[::1], "
             "f8[:, ::1], f8, f8, b1, f8[:, :, ::1], f8[:, ::1], f8[:, ::1], f8[::1]"), None),
@@ -52,6 +57,7 @@ KERNELS: tuple[tuple[Kernel, tuple[str, ...] | None], ...] = (
     (Kernel("estimators.kalman.rts", "rts_backward",
             "f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, :, ::1]"),
      _SMOOTHED),
+    (Kernel("estimators.sins.strapdown", "_compensate_kernel", f"{_C2}, {_C2}, {_C1}, {_C2}, {_C2}"), None),
     (Kernel("estimators.nav.rotation_kernels", "rotvec_mat", "f8[::1]"), None),
     (Kernel("estimators.nav.rotations", "_quat_to_mat_rows", "f8[:, ::1], f8[:, :, ::1]"), None),
     (Kernel("estimators.shearer.positioning", "_apply_rows", "f8[:, ::1], f8[:, ::1], f8[:, ::1]"), _SMOOTHED),
@@ -59,10 +65,11 @@ KERNELS: tuple[tuple[Kernel, tuple[str, ...] | None], ...] = (
                                                                      "dr_compensated")),
     (Kernel("estimators.shearer.odometer_filter", "nonorth_matrix", "f8[::1]"), _FILTER),
 )
+"""Each kernel with the methods that call it, in the order a pool of processes takes them up."""
 
 
 def method_kernels(methods: Iterable[str]) -> tuple[Kernel, ...]:
-    """The kernels `methods` call (none for no method), the longest to compile first."""
+    """The kernels `methods` call (none for no method), in KERNELS' order."""
     methods = set(methods)
     if not methods:
         return ()

@@ -11,7 +11,7 @@ from numba.core.registry import cpu_target
 from numba.core.typed_passes import type_inference_stage
 
 from estimators.shearer.methods import METHODS, estimate
-from estimators.shearer.precompiled import FILTER_CALLS, KERNELS, method_kernels
+from estimators.shearer.precompiled import FILTER_CALLS, KERNELS, RUN_FILTER, method_kernels
 from tests.estimators.shearer.test_independent_trajectories import NOISY, trajectory
 
 pytestmark = pytest.mark.slow  # runs every method (over 3 s with the kernels in the cache)
@@ -28,7 +28,7 @@ def test_each_listed_kernel_is_called_with_the_listed_argument_types():
 
 
 def test_run_filter_calls_the_listed_kernels_with_the_listed_argument_types():
-    run_filter = KERNELS[0][0]
+    run_filter = RUN_FILTER
     # Typed afresh (as its first compile does, not loaded from the cache), run_filter compiles or loads the
     # kernels it calls for the argument types of its calls.
     typing, target = cpu_target.typing_context, cpu_target.target_context
@@ -40,7 +40,9 @@ def test_run_filter_calls_the_listed_kernels_with_the_listed_argument_types():
 def test_the_methods_kernels():
     assert method_kernels(()) == ()
     dr = method_kernels(["dr"])
-    assert {k.name for k in dr} == {"_ekf_kernel", "_mechanize_kernel", "rotvec_mat", "_quat_to_mat_rows"}
+    assert {k.name for k in dr} == {"_ekf_kernel", "_mechanize_kernel", "_compensate_kernel", "rotvec_mat",
+                                    "_quat_to_mat_rows"}
     every = method_kernels(METHODS)
-    assert every[0].name == "run_filter"  # the longest to compile first
     assert len(every) == len(KERNELS)
+    # run_filter after the kernels it calls (each compiled once, then loaded by it from the cache).
+    assert every.index(RUN_FILTER) == len(FILTER_CALLS) and set(every[:len(FILTER_CALLS)]) == set(FILTER_CALLS)
