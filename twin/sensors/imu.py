@@ -51,6 +51,8 @@ VIBRATION_STREAM = 1000
 phases belong to the machine's motion, drawn once per run, not per Monte Carlo trial."""
 ENVELOPE_S = 0.5
 """Length [s] of each of the two boxcars that smooth the machine state into the vibration envelope."""
+TURN_SLOTS = 32
+"""How many truth steps h the increments kernel holds the node turns of (_node_turns), per chunk of intervals."""
 
 
 @dataclass(frozen=True)
@@ -181,9 +183,10 @@ def _cross3(a0, a1, a2, b0, b1, b2):
 
 @nb.njit(cache=True)
 def _interval(k, t, w, dw, f, df, amp_state, amp_rate, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs, nodes,
-              weights, dtheta, dv, sin0, cos0, vib):
+              weights, dtheta, dv, sin0, cos0, vib, turn):
     """Increments of interval k (scratch: sin0/cos0 (n_states, n_tones, 6) sines and cosines at t[k-1],
-    vib (5, 3) the vibration at a node)."""
+    vib (5, 3) the vibration at a node; turn (n_states, n_tones, n_nodes, 2): each tone's cosine and sine over the
+    node offsets x h of this interval's step h, _node_turns)."""
     n_states, n_tones = freq.shape
     h = t[k] - t[k - 1]
     for st in range(n_states):
@@ -218,7 +221,7 @@ def _interval(k, t, w, dw, f, df, amp_state, amp_rate, freq, ang_amp, lin_amp, p
             wgt_dd = _hermite2(e0, e1, r0_, r1_, h, x)
             for tone in range(n_tones):
                 om = 2 * np.pi * freq[st, tone]
-                cn, sn = np.cos(om * x * h), np.sin(om * x * h)
+                cn, sn = turn[st, tone, q, 0], turn[st, tone, q, 1]
                 for i in range(3):
                     aa, al = ang_amp[st, tone, i], lin_amp[st, tone, i]
                     s_a = sin0[st, tone, i] * cn + cos0[st, tone, i] * sn
@@ -282,18 +285,46 @@ def _increments_kernel(t, w, dw, f, df, amp_state, amp_rate, freq, ang_amp, lin_
     """Gauss-Legendre integration of the sensor's rate and specific force over each interval (t[k-1], t[k]].
 
     amp_state (K, n_states) weighs each machine state's tones at each sample and amp_rate is its time
-    derivative (a smooth envelope, cubic Hermite between samples). The sines at the nodes come from one sine and cosine per interval and tone, turned by
-    the node offsets (angle addition). Intervals are independent: they run in parallel, in chunks with
-    their own scratch arrays."""
+    derivative (a smooth envelope, cubic Hermite between samples). The sines at the nodes come from one sine and
+    cosine per interval and tone, turned by the node offsets (angle addition; the turns computed once per value
+    of the step, _node_turns). Intervals are independent: they run in parallel, in chunks with their own scratch
+    arrays."""
     n_chunks = 64
     size = (t.size - 1 + n_chunks - 1) // n_chunks
     for chunk in nb.prange(n_chunks):
         sin0 = np.zeros((freq.shape[0], freq.shape[1], 6))
         cos0 = np.zeros((freq.shape[0], freq.shape[1], 6))
         vib = np.zeros((5, 3))
+        steps = np.full(TURN_SLOTS, np.nan)  # the steps h whose node turns are held, slot by slot
+        turns = np.zeros((TURN_SLOTS, freq.shape[0], freq.shape[1], nodes.size, 2))
+        n_held = 0
         for k in range(1 + chunk * size, min(t.size, 1 + (chunk + 1) * size)):
+            h = t[k] - t[k - 1]
+            slot = -1
+            for m in range(min(n_held, TURN_SLOTS)):
+                if steps[m] == h:
+                    slot = m
+                    break
+            if slot < 0:
+                slot = n_held % TURN_SLOTS
+                n_held += 1
+                steps[slot] = h
+                _node_turns(freq, nodes, h, turns[slot])
             _interval(k, t, w, dw, f, df, amp_state, amp_rate, freq, ang_amp, lin_amp, ph_ang, ph_lin, lever, mat_bs,
-                      nodes, weights, dtheta, dv, sin0, cos0, vib)
+                      nodes, weights, dtheta, dv, sin0, cos0, vib, turns[slot])
+
+
+@nb.njit(cache=True)
+def _node_turns(freq, nodes, h, turn):
+    """Each tone's cosine and sine of om x h at the Gauss-Legendre node offsets x of a step h, into turn
+    (n_states, n_tones, n_nodes, 2). They depend on h alone: a run's truth steps take a few dozen values (the last
+    bits of t[k] - t[k-1]), so _increments_kernel computes them once per value it meets (TURN_SLOTS at a time)."""
+    for st in range(freq.shape[0]):
+        for tone in range(freq.shape[1]):
+            om = 2 * np.pi * freq[st, tone]
+            for q in range(nodes.size):
+                x = 0.5 * (nodes[q] + 1.0)
+                turn[st, tone, q, 0], turn[st, tone, q, 1] = np.cos(om * x * h), np.sin(om * x * h)
 
 
 def sensor_increments(t: np.ndarray, w_ib_b: np.ndarray, f_b: np.ndarray, amp_state: np.ndarray,
