@@ -11,8 +11,10 @@ position fix (001 eq. 6, with C of eq. 7 turning the ENU increment into latitude
 The fix carries no information along the face (ALONG_FACE_SD): the point's face coordinate is the odometer's
 count on the earlier pass, and the two passes' path lengths to the same place on the face part by the diagonal
 entry of every cut-out (a 0.8 m web over a 15 m snake adds 2.6 cm, with the sign of the direction of travel).
-The point is moved square to the face line (`advance_direction`), as the supports' rams push the pans, not along
-the shearer's body x, which the diagonal entry turns and the roll tilts.
+The point is moved square to the face line and along the floor (`advance_direction`), as the supports' rams push
+the pans: not along the shearer's body x, which the diagonal entry turns, but with eq. 6's rise of the floor in the
+advance direction (C_b^n's tilt across the face), which the pass's mean attitude gives; a horizontal advance held
+every fix at the last pass's height, and on a 1 deg floor the chain fell 14 mm behind the face every 0.8 m shear.
 
 The advance comes from the push-ram stroke sensors of the supports on either side of the point (interpolated
 along the face): between two passes each pan is pushed once, so the ram of a support shows one stroke of the
@@ -189,19 +191,38 @@ class RamLog:
 
 
 def advance_direction(points: Points) -> np.ndarray:
-    """The direction the pans were pushed (ENU, unit, horizontal): the supports' rams push square to the face line,
-    which is the least-squares line through the points' horizontal positions, towards the coal wall (the side of
-    the points' body x). Not the shearer's body x: in the diagonal entry of a cut-out it is turned by the snake
-    (0.1 rad for a 0.8 m web over 15 m), and tilted by its roll."""
+    """The direction the pans were pushed (ENU, unit): horizontally square to the face line, the least-squares line
+    through the points' horizontal positions, towards the coal wall (the side of the points' body x); vertically
+    along the floor, rising by the floor's slope s in that direction (the rams push the pans over the floor, and a
+    ram's stroke is its length along it: the point moves d cos(atan s) across and d sin(atan s) up).
+
+    Not the shearer's body x: in the diagonal entry of a cut-out it is turned by the snake (0.1 rad for a 0.8 m web
+    over 15 m), and its height then takes a share of the seam's dip along the face. The slope is the floor's, seen
+    by the machine sitting on the pans: each point's body z is the normal of the pans under it, and
+    s = -(z_e h_e + z_n h_n) / z_u along the horizontal direction h, which no yaw of the machine on the floor and
+    no tilt along the face changes; averaged over the pass, as the points' attitude errors and the floor's local
+    variations along the face average out. Nothing else in a log sees it as well: the push-ram strokes are lengths,
+    the surveyed face ends' heights (5 cm each) a slope only over tens of shears, and the passes' heights are what
+    the chained fixes make of this slope.
+
+    Error budget: an error delta of the pass's mean slope puts a point d delta off in height per shear, and the
+    chain of passes keeps it, N d delta after N shears. The tilt error across the face is the accelerometer's bias
+    across it over g, which the filter cannot part from the tilt (the machine never turns round): 30 ug
+    (nav-004) is 0.03 mm a 1 m shear; the MTi-G-700's 3 mg turn-on bias, 2.4 mm a 0.8 m shear, against the
+    14 mm a level direction put on a 1 deg floor (and on a level floor, where that was right, the error it adds).
+    A level face (every body z up) gives the horizontal direction exactly."""
     x_n = points.c_nb[:, :, 0].mean(axis=0)
     if points.u.size < 2:
-        side = np.array([x_n[0], x_n[1], 0.0])
-        return side / np.linalg.norm(side)
-    lat0, lon0, h0 = points.llh[0]
-    enu = earth.lla_to_enu(points.llh[:, 0], points.llh[:, 1], points.llh[:, 2], lat0, lon0, h0)[:, :2]
-    _, _, vt = np.linalg.svd(enu - enu.mean(axis=0), full_matrices=False)
-    normal = np.array([-vt[0, 1], vt[0, 0], 0.0])
-    return normal if normal @ x_n >= 0 else -normal
+        h = x_n[:2] / np.linalg.norm(x_n[:2])
+    else:
+        lat0, lon0, h0 = points.llh[0]
+        enu = earth.lla_to_enu(points.llh[:, 0], points.llh[:, 1], points.llh[:, 2], lat0, lon0, h0)[:, :2]
+        _, _, vt = np.linalg.svd(enu - enu.mean(axis=0), full_matrices=False)
+        h = np.array([-vt[0, 1], vt[0, 0]])
+        h = h if h @ x_n[:2] >= 0 else -h
+    z_n = points.c_nb[:, :, 2]
+    slope = float(np.mean(-(z_n[:, :2] @ h) / z_n[:, 2]))
+    return np.append(h, slope) / np.hypot(1.0, slope)
 
 
 def predict_fixes(points: Points, u: np.ndarray, t: np.ndarray, epochs: np.ndarray, marks: np.ndarray,
@@ -210,9 +231,10 @@ def predict_fixes(points: Points, u: np.ndarray, t: np.ndarray, epochs: np.ndarr
     """Fixes for the crossings (epochs, marks) of the current pass from the previous pass's points (001 eq. 6).
 
     The predicted point is moved along the face (body y at the point) by u[j] - u_i so that it refers to the
-    epoch where it is applied, and square to the face line by the pans' advance. R = point covariance + the change of
-    the path between the passes, in the body axes at the point: advance_sd and path_sd across the face (x),
-    ALONG_FACE_SD along it (y), path_sd vertically (z).
+    epoch where it is applied, and by the pans' advance along `advance_direction` (square to the face line, up the
+    floor's slope). R = point covariance + the change of the path between the passes, in the body axes at the point:
+    advance_sd and path_sd across the face (x, tilted as the floor), ALONG_FACE_SD along it (y), path_sd vertically
+    (z).
     Returns (epochs, llh (F, 3), R (F, 3, 3), skipped face coordinates, advance direction in n at each point
     (F, 3): the direction along which the ram stroke moved it, made square to the point's along-face axis so that a
     test of the innovation along it (rail_fix_update) sees none of the fix's along-face sigma)."""

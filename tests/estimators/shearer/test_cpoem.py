@@ -1,9 +1,12 @@
-"""CPOEM pieces: point crossings along the face and the pan advance from push-ram strokes."""
+"""CPOEM pieces: point crossings along the face, the pan advance from push-ram strokes, and the direction the
+advance moves a point (on a floor dipping in the advance direction)."""
 
 import numpy as np
 import pytest
 
-from estimators.shearer.cpoem import RamLog, crossings, ram_stroke
+from estimators.nav import earth
+from estimators.nav.rotations import quat_to_mat, rotvec_to_quat
+from estimators.shearer.cpoem import Points, RamLog, advance_direction, crossings, predict_fixes, ram_stroke
 
 
 def test_crossings_find_each_point_once_in_either_direction():
@@ -74,3 +77,79 @@ def test_stroke_of_a_noisy_sensor_over_a_snake_push_is_unbiased(steps, advance_a
     err = np.array([ram_stroke(t, clean + rng.normal(0.0, 0.02, t.size), np.ones(t.size), 0.0, 1200.0, 0.02)
                     for _ in range(300)]) - sum(steps)
     assert abs(err.mean()) < 0.0015 and np.sqrt(np.mean(err ** 2)) < 0.008, (err.mean(), err.std())
+
+
+ORIGIN = (np.radians(-27.5), np.radians(151.9), 400.0)
+AZIMUTH = np.radians(30.0)
+FACE = np.array([np.sin(AZIMUTH), np.cos(AZIMUTH)])  # horizontal, along the face (clockwise from north)
+COAL = np.array([FACE[1], -FACE[0]])  # horizontal, square to the face, towards the coal wall
+SEAM_DIP = np.radians(3.0)
+ROLL_SD = 1e-3
+"""One-sigma [rad] of a point's tilt across the face about the floor's (a MEMS filter's attitude noise)."""
+
+
+def _floor_points(dip: float, roll_sd: float, n: int = 60) -> tuple[Points, np.ndarray]:
+    """Points every metre along a face on the plane z = tan(dip) (p . COAL) + tan(SEAM_DIP) (p . FACE) (ENU about
+    ORIGIN), each with the machine's frame on the plane (y up the face, z the plane's normal) turned 0.1 rad on
+    the floor over the first 15 points (a cut-out's diagonal entry) and tilted across the face by N(0, roll_sd);
+    and the plane's unit normal."""
+    u = np.arange(n, dtype=float)
+    enu = np.column_stack([np.outer(u, FACE), np.tan(SEAM_DIP) * u])
+    normal = np.append(-np.tan(dip) * COAL - np.tan(SEAM_DIP) * FACE, 1.0)
+    normal /= np.linalg.norm(normal)
+    y = np.append(FACE, np.tan(SEAM_DIP))
+    y /= np.linalg.norm(y)
+    c_plane = np.column_stack([np.cross(y, normal), y, normal])
+    turn = np.column_stack([np.zeros(n), np.random.default_rng(5).normal(0.0, roll_sd, n), np.where(u < 15, 0.1, 0.0)])
+    c_nb = c_plane @ quat_to_mat(rotvec_to_quat(turn))
+    llh = np.column_stack(earth.enu_to_lla(enu, *ORIGIN))
+    return Points(u, np.zeros(n), llh, np.zeros((n, 3, 3)), c_nb), normal
+
+
+def _slope_tolerance(dip: float, n: int = 60) -> float:
+    """4 sigma of the pass's mean slope: a tilt eps across the face moves a point's slope by eps (1 + tan^2 dip)."""
+    return 4 * ROLL_SD * (1 + np.tan(dip) ** 2) / np.sqrt(n)
+
+
+@pytest.mark.parametrize("dip_deg", [-5.0, -1.0, 0.0, 0.5, 1.0, 5.0])
+def test_advance_direction_follows_the_floor_square_to_the_face(dip_deg):
+    """The advance direction rises by the floor's slope in the advance direction (from the points' attitude,
+    whatever the machine's turn on the floor and the seam's dip along the face), horizontally square to the face
+    line towards the coal: within 4 sigma of the points' tilt noise averaged over the pass."""
+    dip = np.radians(dip_deg)
+    points, _ = _floor_points(dip, ROLL_SD)
+    adv = advance_direction(points)
+    assert np.linalg.norm(adv) == pytest.approx(1.0, abs=1e-12)
+    across = np.hypot(adv[0], adv[1])
+    assert np.allclose(adv[:2] / across, COAL, atol=1e-9)
+    assert abs(adv[2] / across - np.tan(dip)) < _slope_tolerance(dip), (adv[2] / across, np.tan(dip))
+
+
+def test_a_level_face_is_advanced_horizontally():
+    """A face on a floor level across it (dipping along it, the machine turned on it) is advanced exactly
+    horizontally, square to the face line."""
+    points, _ = _floor_points(0.0, 0.0)
+    adv = advance_direction(points)
+    assert adv[2] == pytest.approx(0.0, abs=1e-12)
+    assert np.allclose(adv, np.append(COAL, 0.0), atol=1e-12)
+
+
+@pytest.mark.parametrize("dip_deg", [-1.0, 0.0, 1.0, 5.0])
+def test_predicted_fixes_follow_the_floor(dip_deg):
+    """Each point moved by a 0.8 m ram stroke lands on the floor's plane (a horizontal move left it d tan(dip) off:
+    14 mm at 1 deg): within d times the slope's tolerance, and 1 um for the linearised move in llh."""
+    dip, d = np.radians(dip_deg), 0.8
+    points, normal = _floor_points(dip, ROLL_SD)
+    t = np.arange(0.0, 300.0, 1.0)
+    supports = np.arange(-2.0, points.u[-1] + 3.0, 1.5)
+    ext = [_ram(t, [(50, d)], 0.0, np.random.default_rng(0))] * supports.size
+    rams = RamLog([t] * supports.size, ext, [np.ones(t.size)] * supports.size, supports, 1e-4)
+    epochs = np.arange(points.u.size)
+    j, llh, _, skipped, _ = predict_fixes(points, points.u, np.full(epochs.size, 299.0), epochs, points.u, rams,
+                                          0.05, 0.01)
+    assert j.size == points.u.size and skipped.size == 0
+    before = earth.lla_to_enu(*points.llh.T, *ORIGIN)
+    after = earth.lla_to_enu(*llh.T, *ORIGIN)
+    off_plane = (after - before) @ normal  # the plane passes through every point
+    assert np.all(np.abs(off_plane) < d * _slope_tolerance(dip) + 1e-6), np.abs(off_plane).max()
+    assert np.allclose(np.linalg.norm(after - before, axis=1), d, atol=1e-6)
