@@ -3,11 +3,12 @@
 the fault detectors of 004 section IV on the rail model's position fixes and its isolation while a fault holds.
 
 Rail kinematics model (004 section II, eqs. 5-8): the straight cut just finished, recorded every chute length
-along the face from the global estimate, moved towards the coal wall by the advance the push rams of the
-supports at each point measured since (estimators.shearer.cpoem), predicts where the shearer will run on the next
-cut; each point is a position fix (004 eq. 9) when the shearer crosses it again, with the chute geometry between
-supports (a rigid chute moves as the straight line between its neighbouring supports' strokes, eqs. 7-8). The
-first cut's points come from the face survey (estimators.shearer.position_fixes.face_survey_points).
+along the face from the global estimate, moved towards the coal wall and along the floor by the advance the push
+rams of the supports at each point measured since (estimators.shearer.cpoem.advance_direction), predicts where the
+shearer will run on the next cut; each point is a position fix (004 eq. 9) when the shearer crosses it again, with
+the chute geometry between supports (a rigid chute moves as the straight line between its neighbouring supports'
+strokes, eqs. 7-8). The first cut's points come from the face survey
+(estimators.shearer.position_fixes.face_survey_points).
 """
 
 from __future__ import annotations
