@@ -48,7 +48,7 @@ class Points:
     t: np.ndarray  # (P,) time the shearer crossed the point
     llh: np.ndarray  # (P, 3) body-point latitude, longitude, height
     cov: np.ndarray  # (P, 3, 3) ENU covariance of the point [m^2]
-    c_nb: np.ndarray  # (P, 3, 3) attitude C_b^n at the point (advance direction = body x)
+    c_nb: np.ndarray  # (P, 3, 3) attitude C_b^n at the point (body z: the normal of the floor under it)
 
     @classmethod
     def empty(cls) -> Points:
