@@ -220,6 +220,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     from twin.pipeline.montecarlo import TrialResult, trial_runner
     from twin.pipeline.montecarlo_table import format_monte_carlo, write_monte_carlo
     from twin.pipeline.twin_stream import stream_twin
+    from twin.sensors.precompiled import SENSOR_KERNELS
     from twin.sensors.faults import check_faults_in_run
     from twin.view.recording import BLOCK_STREAMS, ESTIMATES_RRD, RUN_RRD, STREAM_COLUMNS, write_recording
     from twin.view.summary import format_summary, twin_summary
@@ -292,8 +293,9 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
             pass
 
     monte_carlo = None
-    # A first run compiles the estimators' kernels on the other cores while the twin runs (estimators.precompile).
-    kernels = method_kernels(scn.estimators.shearer.methods) if sensors else ()
+    # A first run compiles the sensors' kernels and the estimators' on the other cores while the face is simulated
+    # (estimators.precompile).
+    kernels = (*SENSOR_KERNELS, *method_kernels(scn.estimators.shearer.methods)) if sensors else ()
     with (Precompiler(kernels, usable_cores()) as precompiler, atomic_run_dir(out, force) as staging,
           trial_runner(workers, ray_address) as runner, numba_event.install_listener("numba:compile", CompileNotice())):
         # The truth and trial 0's sensors go to the run directory as the twin makes them (twin.pipeline.twin_stream).
