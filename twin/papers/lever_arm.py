@@ -28,7 +28,8 @@ from twin.papers.sins_results import (
     reduction_pct,
     row,
 )
-from twin.sensors.imu import VibrationTones, sensor_increments
+from twin.sensors.imu import sensor_increments
+from twin.sensors.vibration import VibrationTones
 
 PAPER_LEVER_ARM = {  # maximum attitude errors [deg] (E, N, U) and reductions [%] per lever arm
     (1.0, 1.0, 1.0): {"table": 2, "uncompensated_deg": [0.45, 0.25, 0.35], "compensated_deg": [0.12, 0.10, 0.05],

@@ -18,7 +18,8 @@ import numpy as np
 
 from estimators.nav import earth
 from estimators.nav.rotations import euler_to_mat
-from twin.sensors.imu import VibrationTones, sensor_increments
+from twin.sensors.imu import sensor_increments
+from twin.sensors.vibration import VibrationTones
 
 G0 = 9.80665
 

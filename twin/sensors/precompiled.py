@@ -13,7 +13,7 @@ from estimators.precompile import Kernel
 
 _C1, _C2 = "f8[::1]", "f8[:, ::1]"
 SENSOR_KERNELS = (
-    Kernel("twin.sensors.imu", "_envelope_kernel", f"i8[::1], i8, {_C2}"),
+    Kernel("twin.sensors.vibration", "_envelope_kernel", f"i8[::1], i8, {_C2}"),
     Kernel("twin.sensors.imu", "_gravity_kernel", f"{_C2}, {_C1}, {_C1}, {_C1}, {_C2}"),
     Kernel("twin.sensors.imu", "_derivative_kernel", f"{_C2}, {_C1}, i8, {_C2}"),
     Kernel("twin.sensors.imu", "_increments_kernel",
@@ -21,4 +21,4 @@ SENSOR_KERNELS = (
            f"{_C1}, {_C2}, {_C1}, {_C1}, {_C2}, {_C2}"),
     Kernel("twin.sensors.odometer", "_speed_kernel", f"{_C1}, {_C1}, {_C1}, {_C1}, {_C1}, {_C1}, {_C1}, f8, f8, f8, {_C1}"),
 )
-"""The shearer's sensor kernels (twin.sensors.imu, odometer)."""
+"""The shearer's sensor kernels (twin.sensors.vibration, imu, odometer)."""

@@ -23,17 +23,19 @@ from twin.papers.motions import coning, coning_increments_closed_form, sculling
 from twin.sensors import imu
 from twin.sensors.chunks import halo_rows, split_truth
 from twin.sensors.imu import (
+    IdealImu,
+    ideal_increments,
+    mounting_matrix,
+    sensor_increments,
+    time_derivative,
+)
+from twin.sensors.vibration import (
     COAL,
     ENVELOPE_S,
     IDLE,
     VIBRATION_STREAM,
-    IdealImu,
-    ideal_increments,
     machine_state,
-    mounting_matrix,
-    sensor_increments,
     state_envelope,
-    time_derivative,
     vibration_tones,
 )
 
