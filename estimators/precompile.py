@@ -18,6 +18,10 @@ from dataclasses import dataclass
 from estimators.workers import leave_signals_to_parent
 
 
+F8_1D, F8_2D = "f8[::1]", "f8[:, ::1]"
+"""The argument types of a contiguous float64 vector and matrix in a Kernel's `args`."""
+
+
 @dataclass(frozen=True)
 class Kernel:
     """A numba dispatcher (module and attribute name) and the argument types of its call."""

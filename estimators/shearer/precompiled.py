@@ -3,8 +3,8 @@ calls, for estimators.precompile: a first run compiles them in the background wh
 
 Each with the methods that call it (None: every method, through estimators.shearer.prepare), the longest to compile
 first. The kernels they call are compiled with them, but for run_filter's longest (FILTER_CALLS), which are listed
-on their own, before it, so that two processes share its compile. A change of a listed call's argument types must be made
-here too, or the call compiles again (tests/estimators/shearer/test_precompiled.py fails).
+on their own, before it, so that two processes share its compile. A change of a listed call's argument types must
+be made here too, or the call compiles again (tests/estimators/shearer/test_precompiled.py fails).
 """
 
 from __future__ import annotations
@@ -12,24 +12,24 @@ from __future__ import annotations
 from collections.abc import Iterable
 
 from estimators.kalman.error_state import N_STATES
-from estimators.precompile import Kernel
+from estimators.precompile import F8_1D, F8_2D, Kernel
 
 _FILTER = ("kf", "kf_rts", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "dr_compensated")
 """The methods that run 001's filter (odometer_filter.run_filter)."""
 _SMOOTHED = ("kf_rts", "kf_cpoem_rts", "rts_offline", "dr_compensated")
 
-_C1, _C2 = "f8[::1]", "f8[:, ::1]"
 FILTER_CALLS = (
-    Kernel("estimators.kalman.update", "gated_update", f"{_C1}, {_C2}, {_C1}, {_C2}, {_C2}, f8"),
+    Kernel("estimators.kalman.update", "gated_update", f"{F8_1D}, {F8_2D}, {F8_1D}, {F8_2D}, {F8_2D}, f8"),
     Kernel("estimators.kalman.measurements", "odometer_velocity",
-           f"{_C1}, {_C1}, {_C1}, {_C1}, {_C1}, f8, f8, {_C1}, {_C2}, f8, i8"),
-    Kernel("estimators.sins.error_model", "navigation_block", f"{_C2}, {_C1}, {_C1}"),
-    Kernel("estimators.sins.error_model", "feed_back_navigation", f"{_C1}, {_C1}"),
-    Kernel("estimators.kalman.measurements", "zero_rate", f"{_C1}, {_C1}, f8, f8, i8"),
-    Kernel("estimators.kalman.measurements", "position_fix", f"{_C1}, {_C1}, {_C1}, {_C2}, IntegerLiteral({N_STATES})"),
-    Kernel("estimators.sins.error_model", "bias_blocks", f"{_C2}, {_C2}"),
-    Kernel("estimators.kalman.measurements", "zero_velocity", f"{_C1}, f8, {_C1}, f8, i8"),
-    Kernel("estimators.kalman.update", "joseph_update", f"{_C1}, {_C2}, {_C1}, {_C2}, {_C2}"),
+           f"{F8_1D}, {F8_1D}, {F8_1D}, {F8_1D}, {F8_1D}, f8, f8, {F8_1D}, {F8_2D}, f8, i8"),
+    Kernel("estimators.sins.error_model", "navigation_block", f"{F8_2D}, {F8_1D}, {F8_1D}"),
+    Kernel("estimators.sins.error_model", "feed_back_navigation", f"{F8_1D}, {F8_1D}"),
+    Kernel("estimators.kalman.measurements", "zero_rate", f"{F8_1D}, {F8_1D}, f8, f8, i8"),
+    Kernel("estimators.kalman.measurements", "position_fix",
+           f"{F8_1D}, {F8_1D}, {F8_1D}, {F8_2D}, IntegerLiteral({N_STATES})"),
+    Kernel("estimators.sins.error_model", "bias_blocks", f"{F8_2D}, {F8_2D}"),
+    Kernel("estimators.kalman.measurements", "zero_velocity", f"{F8_1D}, f8, {F8_1D}, f8, i8"),
+    Kernel("estimators.kalman.update", "joseph_update", f"{F8_1D}, {F8_2D}, {F8_1D}, {F8_2D}, {F8_2D}"),
 )
 """The kernels run_filter calls with the argument types of its calls, the longest first (but joseph_update,
 which gated_update calls: the cache has it when it comes up). Listed before run_filter,
@@ -40,9 +40,9 @@ listed after the EKF, run_filter waited for the callees the EKF shares.)
 IntegerLiteral: N_STATES, a global constant, which numba types as a literal."""
 
 RUN_FILTER = Kernel("estimators.shearer.odometer_filter", "run_filter",
-                    "i8, i8, i8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], i1[::1], i8[::1], f8[:, ::1], f8[:, :, ::1], "
-                    "f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[:, ::1], f8[:, ::1], "
-                    "f8[:, ::1], f8[:, :, ::1], f8[:, :, ::1], f8[:, :, ::1], i4[::1], f8[::1], f8[:, ::1]")
+                    "i8, i8, i8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], i1[::1], i8[::1], f8[:, ::1], "
+                    "f8[:, :, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[:, ::1], "
+                    "f8[:, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, :, ::1], f8[:, :, ::1], i4[::1], f8[::1], f8[:, ::1]")
 """001's filter (estimators.shearer.odometer_filter), the longest compile of a first run."""
 
 KERNELS: tuple[tuple[Kernel, tuple[str, ...] | None], ...] = (
@@ -57,7 +57,7 @@ KERNELS: tuple[tuple[Kernel, tuple[str, ...] | None], ...] = (
     (Kernel("estimators.kalman.rts", "rts_backward",
             "f8[:, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, :, ::1], f8[:, ::1], f8[:, :, ::1]"),
      _SMOOTHED),
-    (Kernel("estimators.sins.strapdown", "_compensate_kernel", f"{_C2}, {_C2}, {_C1}, {_C2}, {_C2}"), None),
+    (Kernel("estimators.sins.strapdown", "_compensate_kernel", f"{F8_2D}, {F8_2D}, {F8_1D}, {F8_2D}, {F8_2D}"), None),
     (Kernel("estimators.nav.rotation_kernels", "rotvec_mat", "f8[::1]"), None),
     (Kernel("estimators.nav.rotations", "_quat_to_mat_rows", "f8[:, ::1], f8[:, :, ::1]"), None),
     (Kernel("estimators.shearer.positioning", "_apply_rows", "f8[:, ::1], f8[:, ::1], f8[:, ::1]"), _SMOOTHED),

@@ -9,16 +9,16 @@ signature syntax has no name for the numpy Generator it takes.
 
 from __future__ import annotations
 
-from estimators.precompile import Kernel
+from estimators.precompile import F8_1D, F8_2D, Kernel
 
-_C1, _C2 = "f8[::1]", "f8[:, ::1]"
 SENSOR_KERNELS = (
-    Kernel("twin.sensors.vibration", "_envelope_kernel", f"i8[::1], i8, {_C2}"),
-    Kernel("twin.sensors.imu", "_gravity_kernel", f"{_C2}, {_C1}, {_C1}, {_C1}, {_C2}"),
-    Kernel("twin.sensors.imu", "_derivative_kernel", f"{_C2}, {_C1}, i8, {_C2}"),
+    Kernel("twin.sensors.vibration", "_envelope_kernel", f"i8[::1], i8, {F8_2D}"),
+    Kernel("twin.sensors.imu", "_gravity_kernel", f"{F8_2D}, {F8_1D}, {F8_1D}, {F8_1D}, {F8_2D}"),
+    Kernel("twin.sensors.imu", "_derivative_kernel", f"{F8_2D}, {F8_1D}, i8, {F8_2D}"),
     Kernel("twin.sensors.imu", "_increments_kernel",
-           f"{_C1}, {_C2}, {_C2}, {_C2}, {_C2}, {_C2}, {_C2}, {_C2}, f8[:, :, ::1], f8[:, :, ::1], {_C2}, {_C2}, "
-           f"{_C1}, {_C2}, {_C1}, {_C1}, {_C2}, {_C2}"),
-    Kernel("twin.sensors.odometer", "_speed_kernel", f"{_C1}, {_C1}, {_C1}, {_C1}, {_C1}, {_C1}, {_C1}, f8, f8, f8, {_C1}"),
+           f"{F8_1D}, {F8_2D}, {F8_2D}, {F8_2D}, {F8_2D}, {F8_2D}, {F8_2D}, {F8_2D}, f8[:, :, ::1], f8[:, :, ::1], "
+           f"{F8_2D}, {F8_2D}, {F8_1D}, {F8_2D}, {F8_1D}, {F8_1D}, {F8_2D}, {F8_2D}"),
+    Kernel("twin.sensors.odometer", "_speed_kernel",
+           f"{F8_1D}, {F8_1D}, {F8_1D}, {F8_1D}, {F8_1D}, {F8_1D}, {F8_1D}, f8, f8, f8, {F8_1D}"),
 )
 """The shearer's sensor kernels (twin.sensors.vibration, imu, odometer)."""
