@@ -19,7 +19,8 @@ from estimators.nav.rotations import (
 )
 from estimators.sins.strapdown import body_attitude, compensate
 from twin.config.experiments import ConingExperiment, ScullingExperiment
-from twin.papers.motions import G0, coning, sculling
+from twin.config.imu_grades import G0
+from twin.papers.motions import coning, sculling
 from twin.papers.sins_results import (
     DEG,
     ExperimentResult,

@@ -18,7 +18,8 @@ from estimators.sins.installation import compensate_lever_arm
 from estimators.sins.lever_arm_filter import AtRestSettings, align_at_rest
 from estimators.sins.strapdown import mechanize
 from twin.config.experiments import LeverArmExperiment
-from twin.papers.motions import G0, sway
+from twin.config.imu_grades import G0
+from twin.papers.motions import sway
 from twin.papers.sins_results import (
     DEG,
     ExperimentResult,

@@ -18,10 +18,9 @@ import numpy as np
 
 from estimators.nav import earth
 from estimators.nav.rotations import euler_to_mat
+from twin.config.imu_grades import G0
 from twin.sensors.imu import sensor_increments
 from twin.sensors.vibration import VibrationTones
-
-G0 = 9.80665
 
 
 def _at_rest(duration_s: float, dt: float, earth_rate: bool, gravity: bool, lat: float) -> tuple[np.ndarray, ...]:

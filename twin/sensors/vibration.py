@@ -13,12 +13,10 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
+from twin.config.imu_grades import G0
 from twin.config.scenario import Scenario
 from twin.config.sensors import VibrationState
 from twin.face.haulage import STOPPED
-
-G0 = 9.80665
-"""Standard gravity [m/s^2]: the tones' acceleration RMS is given in g."""
 
 # Machine states of the vibration model.
 IDLE, COAL, ROCK = range(3)
