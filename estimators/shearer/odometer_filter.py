@@ -217,7 +217,7 @@ def keep_covariance(x, p, p_fallback):
 
 
 @nb.njit(cache=True)
-def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch, fix_llh, fix_r, fix_gate, q_psd,
+def run_filter(j0, j1, row0, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch, fix_llh, fix_r, fix_gate, q_psd,
                params,
                nav, cal, p, nominal, out_nav, out_cal, x_post, p_post, p_pred, phi_store, flags, nis_out,
                vel_innov):
@@ -228,9 +228,11 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
     evaluated at, and the last odometer speed (carried across calls).
     Fixes (fix_epoch sorted, fix_llh (F, 3) lat/lon/h, fix_r (F, 3, 3) ENU covariance, fix_gate (F,) the largest
     normalized innovation squared accepted) apply at their epoch.
-    Stores per epoch: posterior navigation and calibration, covariance, the update x+ and Phi for the smoother,
-    the velocity innovation in m (NaN where none) and, per fix, its normalized innovation squared. p_pred and
-    phi_store of one row are scratch (a pass nothing smooths keeps neither: 2 x 441 floats an epoch).
+    Stores per epoch j: posterior navigation and calibration, the update x+, flags and the velocity innovation in m
+    (NaN where none) in row j; the covariances P_j, P_{j,j-1} and Phi_{j,j-1} for the smoother in row j - row0 of
+    p_post, p_pred and phi_store (a block of a pass: its caller keeps them on disk, estimators.kalman.rts); per fix,
+    its normalized innovation squared. p_pred and phi_store of one row are scratch (a pass nothing smooths keeps
+    neither: 2 x 441 floats an epoch).
     """
     lever = params[P_LEVER:P_LEVER + 3]
     r_vel = np.diag(np.array([params[P_R_LATERAL], params[P_R_ALONG], params[P_R_VERTICAL]]) ** 2)
@@ -241,7 +243,7 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
         t_span, f_sum, disp, w_sum = mechanize_epoch(nav, cal, t_mech, phi_b, dv_b, (j - 1) * steps, steps)
         phi, qd = transition(nav, nominal, f_sum, t_span, q_psd, params[P_TAU_FORCE])
         put(p, phi @ p @ phi.T + qd)
-        k = j if smoothed else 0
+        k = j - row0 if smoothed else 0
         put(phi_store[k], phi)
         put(p_pred[k], p)
         x[:] = 0.0
@@ -258,7 +260,7 @@ def run_filter(j0, j1, steps, t_mech, phi_b, dv_b, odo_dist, odo_mode, fix_epoch
             flag |= FLAG_COVARIANCE_REPAIRED
         apply_correction(nav, cal, x)
         put(x_post[j], x)
-        put(p_post[j], p)
+        put(p_post[j - row0], p)
         put(out_nav[j], nav)
         put(out_cal[j], cal)
         flags[j] = flag

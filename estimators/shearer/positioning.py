@@ -30,7 +30,8 @@ import numpy as np
 from estimators.io.log import Log
 from estimators.io.logformat import FLAG_SKIPPED, FLAG_SMOOTHED
 from estimators.kalman import error_state as es
-from estimators.kalman.rts import rts_backward
+from estimators.kalman import rts
+from estimators.kalman.rts import StoredInterval, one_sigma as _sd, rts_stored
 from estimators.nav import earth
 from estimators.nav.rotations import quat_to_mat
 from estimators.shearer import odometer_filter as kf
@@ -109,11 +110,6 @@ def _apply_rows(nav, cal, d):
         kf.apply_correction(nav[k], cal[k], d[k])
 
 
-def _sd(p: np.ndarray) -> np.ndarray:
-    """One-sigma of every state from covariances (..., n, n)."""
-    return np.sqrt(np.maximum(np.diagonal(p, axis1=-2, axis2=-1), 0.0))
-
-
 class _Forward:
     """Storage of one forward run: per-epoch navigation, calibration, state sigmas and flags."""
 
@@ -125,14 +121,14 @@ class _Forward:
 
 
 class _Segment(NamedTuple):
-    """One pass (epochs a..b, row 0 the previous pass's last) of the filter kernel: posterior error states and
-    covariances, predicted covariances and transitions (for the smoother; one row of scratch when the pass is not
-    smoothed), navigation and calibration rows, flags each fix's row in the pass, NIS gate and NIS."""
+    """One pass (epochs a..b, row 0 the previous pass's last) of the filter kernel: posterior error states, their
+    one-sigma and position covariances (3, 3), the smoother's matrices on disk (None when the pass is not smoothed),
+    navigation and calibration rows, flags, each fix's row in the pass, NIS gate and NIS."""
 
     x_post: np.ndarray
-    p_post: np.ndarray
-    p_pred: np.ndarray
-    phi: np.ndarray
+    sd: np.ndarray
+    p_dp: np.ndarray
+    stored: StoredInterval | None
     nav: np.ndarray
     cal: np.ndarray
     flags: np.ndarray
@@ -144,18 +140,29 @@ class _Segment(NamedTuple):
 def _run_segment(prep: Prepared, mech: Mech, a: int, b: int, fixes: Fixes, q_psd: np.ndarray, params: np.ndarray,
                  nav: np.ndarray, cal: np.ndarray, p: np.ndarray, nominal: np.ndarray, smoothed: bool) -> _Segment:
     """The filter kernel (odometer_filter.run_filter) over epochs (a, b] (their increments `mech`) with `fixes`,
-    from (nav, cal, p, nominal), which it leaves at epoch b; `smoothed`: the smoother's rows kept."""
-    m = b - a + 1
-    rows = m if smoothed else 1
-    seg = _Segment(np.zeros((m, es.N_STATES)), np.zeros((m, es.N_STATES, es.N_STATES)),
-                   np.zeros((rows, es.N_STATES, es.N_STATES)), np.zeros((rows, es.N_STATES, es.N_STATES)),
+    from (nav, cal, p, nominal), which it leaves at epoch b, rts.BLOCK epochs a call (their covariances in memory);
+    `smoothed`: the smoother's matrices kept, on disk."""
+    m, n, block = b - a + 1, es.N_STATES, rts.BLOCK
+    seg = _Segment(np.zeros((m, n)), np.zeros((m, n)), np.zeros((m, 3, 3)), StoredInterval(n) if smoothed else None,
                    np.zeros((m, es.N_NAV)), np.zeros((m, es.N_CAL)), np.zeros(m, np.int32), fixes.epoch - a,
                    fixes.gate, np.full(fixes.epoch.size, np.nan))
-    seg.p_post[0], seg.p_pred[0], seg.phi[0] = p, p, np.eye(es.N_STATES)
-    seg.nav[0], seg.cal[0] = nav, cal
-    kf.run_filter(0, m - 1, prep.steps, mech.t, mech.phi_b, mech.dv_b, prep.odo[a:b + 1], prep.mode[a:b + 1],
-                  seg.fix_row, fixes.llh, fixes.r, fixes.gate, q_psd, params, nav, cal, p, nominal, seg.nav, seg.cal,
-                  seg.x_post, seg.p_post, seg.p_pred, seg.phi, seg.flags, seg.nis, np.full((m, 3), np.nan))
+    seg.nav[0], seg.cal[0], seg.sd[0], seg.p_dp[0] = nav, cal, _sd(p), p[es.DP, es.DP]
+    p_post = np.zeros((block, n, n))
+    p_pred, phi = np.zeros((block if smoothed else 1, n, n)), np.zeros((block if smoothed else 1, n, n))
+    if smoothed:
+        seg.stored.append(p[None], p[None], np.eye(n)[None])
+    vel_innov = np.full((m, 3), np.nan)
+    for j0 in range(0, m - 1, block):
+        j1 = min(j0 + block, m - 1)
+        kf.run_filter(j0, j1, j0 + 1, prep.steps, mech.t, mech.phi_b, mech.dv_b, prep.odo[a:b + 1],
+                      prep.mode[a:b + 1], seg.fix_row, fixes.llh, fixes.r, fixes.gate, q_psd, params, nav, cal, p,
+                      nominal, seg.nav, seg.cal, seg.x_post, p_post, p_pred, phi, seg.flags, seg.nis, vel_innov)
+        r = j1 - j0
+        seg.sd[j0 + 1:j1 + 1], seg.p_dp[j0 + 1:j1 + 1] = _sd(p_post[:r]), p_post[:r, es.DP, es.DP]
+        if smoothed:
+            seg.stored.append(p_post[:r], p_pred[:r], phi[:r])
+    if smoothed:
+        seg.stored.close()
     return seg
 
 
@@ -169,7 +176,7 @@ def _checked_segment(prep: Prepared, cfg: Config, a: int, b: int, fixes: Fixes, 
     mech = prep.mech(a, b)
     seg, kept = run_checked(lambda keep: _run_segment(prep, mech, a, b, fixes.take(keep), q_psd, params, *state,
                                                       smoothed),
-                            lambda s: filter_lost(prep.t_kf[a:b + 1], s.nav, _sd(s.p_post), cfg)
+                            lambda s: filter_lost(prep.t_kf[a:b + 1], s.nav, s.sd, cfg)
                             | innovations_inconsistent(s.nis, s.gate, s.fix_row, b - a + 1),
                             lambda: restore(state, saved),
                             np.ones(fixes.epoch.size, bool), fix_fallbacks(fixes), prep.t_kf[a:b + 1], notes)
@@ -218,20 +225,18 @@ class KfPasses:
         self.n_gated += int(np.sum(~(seg.nis <= fixes.gate)))
         if self.keep is not None:
             self.keep(a, seg)
-        out = KfPass(seg.nav, seg.cal, _sd(seg.p_post), seg.flags, None, None)
+        out = KfPass(seg.nav, seg.cal, seg.sd, seg.flags, None, None)
         if not self.smooth:
             if self.cpoem:
-                self.points = segment_points(prep, cfg, a, b, seg.nav, seg.p_post[:, es.DP, es.DP])
+                self.points = segment_points(prep, cfg, a, b, seg.nav, seg.p_dp)
             return out
-        x_s = np.empty_like(seg.x_post)
-        p_s = seg.p_post  # smoothed in place (the backward pass reads row k before it writes it)
-        seg.x_post[0] = 0.0  # the segment starts from the previous posterior
-        rts_backward(seg.x_post, seg.p_post, np.zeros_like(seg.x_post), seg.p_pred, seg.phi, x_s, p_s)
+        # Row 0's update is zero: the segment starts from the previous posterior.
+        x_s, sd_s, p_dp_s, _ = rts_stored(seg.stored, seg.x_post, keep=es.DP)
         nav_s, cal_s = seg.nav.copy(), seg.cal.copy()
         _apply_rows(nav_s, cal_s, x_s - seg.x_post)
         if self.cpoem:
-            self.points = segment_points(prep, cfg, a, b, nav_s, p_s[:, es.DP, es.DP])
-        return out._replace(nav_s=nav_s, sd_s=_sd(p_s))
+            self.points = segment_points(prep, cfg, a, b, nav_s, p_dp_s)
+        return out._replace(nav_s=nav_s, sd_s=sd_s)
 
     def first_row(self, prep: Prepared) -> Solution:
         """Epoch 0's row as run_kf gives it, before any pass has run: the start state and covariance, no calibration
@@ -279,13 +284,14 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool, sto
 
 
 class PassStore:
-    """A forward run kept on disk for rts_offline, a file a pass (KfPasses' `keep`): the smoother's per-epoch
-    matrices and the forward rows. `smoothed` runs the offline smoother over them; a pass's arrays are in memory
-    one at a time, so its memory does not grow with the run."""
+    """A forward run kept on disk for rts_offline (KfPasses' `keep`): each pass's smoother matrices (its
+    StoredInterval) and its forward rows, a file each in `folder`. `smoothed` runs the offline smoother over them; a
+    block of a pass is in memory at a time, so its memory does not grow with the run or the pass."""
 
     def __init__(self, folder: Path):
         self.folder = folder
         self.saved: list[tuple[int, int]] = []  # the passes kept: epochs a..b
+        self.matrices: dict[int, StoredInterval] = {}  # each kept pass's, by its first epoch a
         self.first: dict[str, np.ndarray] | None = None  # epoch 0's forward row
 
     def start(self, passes: KfPasses) -> None:
@@ -294,9 +300,9 @@ class PassStore:
                       "flags": np.zeros(1, np.int32)}
 
     def keep(self, a: int, seg: _Segment) -> None:
-        self._save(a, "forward", {"x_post": seg.x_post, "p_post": seg.p_post, "p_pred": seg.p_pred, "phi": seg.phi,
-                                  "nav": seg.nav[1:], "cal": seg.cal[1:], "sd": _sd(seg.p_post[1:]),
+        self._save(a, "forward", {"x_post": seg.x_post, "nav": seg.nav[1:], "cal": seg.cal[1:], "sd": seg.sd[1:],
                                   "flags": seg.flags[1:]})
+        self.matrices[a] = seg.stored
         self.saved.append((a, a + seg.x_post.shape[0] - 1))
 
     def _save(self, a: int, kind: str, arrays: dict[str, np.ndarray]) -> None:
@@ -334,8 +340,7 @@ class PassStore:
             own = self._rows(a)
             start = self.first if i == 0 else {k: v[-1:] for k, v in self._rows(self.saved[i - 1][0]).items()}
             rows = {k: np.concatenate([start[k], own[k][:-1]]) for k in ROW_KEYS}  # epochs a..b-1
-            # The pass's matrices, read fresh from the files (changed in place), are let go when the pass is done.
-            known = _smooth_stored(self._load(a, ("x_post", "p_post", "p_pred", "phi")),
+            known = _smooth_stored(self.matrices.pop(a), self._load(a, ("x_post",))["x_post"],
                                    last_update.get(a, np.zeros(es.N_STATES)), known, rows)
             self._save(a, "smoothed", rows)
         for i, (a, b) in enumerate(self.saved):
@@ -359,19 +364,15 @@ def rts_offline(prep: Prepared, cfg: Config, store: PassStore, notes: list[str])
     return sol
 
 
-def _smooth_stored(data, x_first: np.ndarray, known: tuple[np.ndarray, np.ndarray] | None,
-                   rows: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """The offline smoother's backward pass over one stored pass (`data`: its matrices; its row 0's update x_first;
-    `known` the smoothed state and covariance at its last epoch, from the later pass), applied to the forward
-    `rows` of its epochs but the last (nav, cal, sd) in place; returns the smoothed state and covariance at its
-    first epoch."""
-    x_post, p_pred, phi, p_post = data["x_post"], data["p_pred"], data["phi"], data["p_post"]
+def _smooth_stored(stored: StoredInterval, x_post: np.ndarray, x_first: np.ndarray,
+                   known: tuple[np.ndarray, np.ndarray] | None, rows: dict[str, np.ndarray]
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The offline smoother's backward pass over one stored pass (its matrices `stored` and updates `x_post`; its
+    row 0's update x_first; `known` the smoothed state and covariance at its last epoch, from the later pass),
+    applied to the forward `rows` of its epochs but the last (nav, cal, sd) in place; returns the smoothed state
+    and covariance at its first epoch."""
     x_post[0] = x_first
-    x_run = x_post.copy()
-    if known is not None:
-        x_run[-1], p_post[-1] = known
-    x_s, p_s = np.empty_like(x_post), p_post  # p smoothed in place, as in run_kf
-    rts_backward(x_run, p_post, np.zeros_like(x_post), p_pred, phi, x_s, p_s)
+    x_s, sd_s, _, p_s0 = rts_stored(stored, x_post, known)
     _apply_rows(rows["nav"], rows["cal"], x_s[:-1] - x_post[:-1])
-    rows["sd"][:] = _sd(p_s[:-1])
-    return x_s[0].copy(), p_s[0].copy()
+    rows["sd"][:] = sd_s[:-1]
+    return x_s[0].copy(), p_s0

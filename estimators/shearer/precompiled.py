@@ -40,7 +40,7 @@ listed after the EKF, run_filter waited for the callees the EKF shares.)
 IntegerLiteral: N_STATES, a global constant, which numba types as a literal."""
 
 RUN_FILTER = Kernel("estimators.shearer.odometer_filter", "run_filter",
-                    "i8, i8, i8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], i1[::1], i8[::1], f8[:, ::1], "
+                    "i8, i8, i8, i8, f8[::1], f8[:, ::1], f8[:, ::1], f8[::1], i1[::1], i8[::1], f8[:, ::1], "
                     "f8[:, :, ::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[::1], f8[:, ::1], f8[::1], f8[:, ::1], "
                     "f8[:, ::1], f8[:, ::1], f8[:, :, ::1], f8[:, :, ::1], f8[:, :, ::1], i4[::1], f8[::1], f8[:, ::1]")
 """001's filter (estimators.shearer.odometer_filter), the longest compile of a first run."""

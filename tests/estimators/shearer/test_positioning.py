@@ -1,6 +1,7 @@
 """The 001 shearer positioning: the filter kernel on a standing IMU, and the whole chain on a simulated face."""
 
 import dataclasses
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -8,6 +9,7 @@ import pytest
 from estimators.io.log import ImuArrays, log_from_columns
 from estimators.io.logformat import FLAG_SKIPPED, FLAG_VELOCITY, FLAG_ZUPT
 from estimators.kalman import error_state as es
+from estimators.kalman import rts
 from estimators.nav import earth
 from estimators.nav.rotations import (
     euler_to_quat,
@@ -56,7 +58,7 @@ def test_standing_filter_finds_the_gyro_bias_and_leaves_the_heading_alone():
     store = [z((n_kf + 1, kf.N_STATES))] + [z((n_kf + 1, kf.N_STATES, kf.N_STATES)) for _ in range(3)]
     flags = np.zeros(n_kf + 1, np.int32)
     cal = z(es.N_CAL)
-    kf.run_filter(0, n_kf, steps, t_mech, phi_b, dv_b, z(n_kf + 1), np.zeros(n_kf + 1, np.int8),
+    kf.run_filter(0, n_kf, 0, steps, t_mech, phi_b, dv_b, z(n_kf + 1), np.zeros(n_kf + 1, np.int8),
                   np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), z(0), np.full(kf.N_STATES, 1e-12), params, nav, cal, p, z(es.N_NOMINAL),
                   out_nav, out_cal, *store, flags, z(0), z((n_kf + 1, 3)))
     assert np.all(flags[1:] & FLAG_ZUPT)
@@ -92,7 +94,7 @@ def test_standing_machine_tone_locked_to_the_epochs_does_not_move_the_position()
     z = np.zeros
     out_nav = z((n_kf + 1, es.N_NAV))
     store = [z((n_kf + 1, kf.N_STATES))] + [z((n_kf + 1, kf.N_STATES, kf.N_STATES)) for _ in range(3)]
-    kf.run_filter(0, n_kf, steps, t_mech, phi_b, dv_b, z(n_kf + 1), np.zeros(n_kf + 1, np.int8),
+    kf.run_filter(0, n_kf, 0, steps, t_mech, phi_b, dv_b, z(n_kf + 1), np.zeros(n_kf + 1, np.int8),
                   np.zeros(0, np.int64), z((0, 3)), z((0, 3, 3)), z(0), np.full(kf.N_STATES, 1e-12), params, nav,
                   z(es.N_CAL), np.diag(sd ** 2), z(es.N_NOMINAL), out_nav, z((n_kf + 1, es.N_CAL)), *store,
                   np.zeros(n_kf + 1, np.int32), z(0), z((n_kf + 1, 3)))
@@ -253,3 +255,24 @@ def test_a_pass_gives_the_same_estimate_whether_or_not_it_keeps_the_smoothers_ro
     assert none is None and smoothed is not None
     for key in ("llh", "v_n", "q_nb", "sd", "flags", "cal"):
         assert np.array_equal(getattr(plain, key), getattr(kept, key)), key
+
+
+def test_a_smoothed_pass_holds_its_covariances_a_block_at_a_time(default_log, monkeypatch):
+    """The smoother's matrices go to disk a block at a time (estimators.kalman.rts.StoredInterval): a run in blocks
+    of 40 epochs gives the run in whole passes bit for bit, and holds far less than a pass's matrices."""
+    scn, log = default_log
+    cfg = positioning_config(scn)
+    prep = prepare(log, cfg)
+    longest = max(b - a for a, b in prep.segments)
+    whole = run_kf(log, cfg, prep, cpoem=True, smooth=True)
+    monkeypatch.setattr(rts, "BLOCK", 40)
+    assert longest > 10 * rts.BLOCK
+    tracemalloc.start()
+    blocks = run_kf(log, cfg, prep, cpoem=True, smooth=True)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    for one, other in zip(whole, blocks):
+        for key in ("llh", "v_n", "q_nb", "sd", "flags", "cal"):
+            assert np.array_equal(getattr(one, key), getattr(other, key)), key
+    pass_matrices = 3 * longest * es.N_STATES ** 2 * 8
+    assert peak < pass_matrices / 2, (peak, pass_matrices)
