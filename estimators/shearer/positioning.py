@@ -30,8 +30,7 @@ import numpy as np
 from estimators.io.log import Log
 from estimators.io.logformat import FLAG_SKIPPED, FLAG_SMOOTHED
 from estimators.kalman import error_state as es
-from estimators.kalman import rts
-from estimators.kalman.rts import StoredInterval, one_sigma as _sd, rts_stored
+from estimators.kalman.rts import StoredInterval, matrix_blocks, one_sigma as _sd, rts_stored
 from estimators.nav import earth
 from estimators.nav.rotations import quat_to_mat
 from estimators.shearer import odometer_filter as kf
@@ -138,19 +137,21 @@ class _Segment(NamedTuple):
 
 
 def _run_segment(prep: Prepared, mech: Mech, a: int, b: int, fixes: Fixes, q_psd: np.ndarray, params: np.ndarray,
-                 nav: np.ndarray, cal: np.ndarray, p: np.ndarray, nominal: np.ndarray, smoothed: bool) -> _Segment:
+                 nav: np.ndarray, cal: np.ndarray, p: np.ndarray, nominal: np.ndarray, stored: StoredInterval | None,
+                 blocks: tuple[np.ndarray, ...]) -> _Segment:
     """The filter kernel (odometer_filter.run_filter) over epochs (a, b] (their increments `mech`) with `fixes`,
-    from (nav, cal, p, nominal), which it leaves at epoch b, rts.BLOCK epochs a call (their covariances in memory);
-    `smoothed`: the smoother's matrices kept, on disk."""
-    m, n, block = b - a + 1, es.N_STATES, rts.BLOCK
-    seg = _Segment(np.zeros((m, n)), np.zeros((m, n)), np.zeros((m, 3, 3)), StoredInterval(n) if smoothed else None,
-                   np.zeros((m, es.N_NAV)), np.zeros((m, es.N_CAL)), np.zeros(m, np.int32), fixes.epoch - a,
-                   fixes.gate, np.full(fixes.epoch.size, np.nan))
+    from (nav, cal, p, nominal), which it leaves at epoch b, a block of rts.BLOCK epochs a call, its covariances in
+    `blocks` (rts.matrix_blocks); `stored`: where the smoother's matrices go (restarted; None: not kept)."""
+    m, n, block = b - a + 1, es.N_STATES, blocks[0].shape[0] - 1
+    seg = _Segment(np.zeros((m, n)), np.zeros((m, n)), np.zeros((m, 3, 3)), stored, np.zeros((m, es.N_NAV)),
+                   np.zeros((m, es.N_CAL)), np.zeros(m, np.int32), fixes.epoch - a, fixes.gate,
+                   np.full(fixes.epoch.size, np.nan))
     seg.nav[0], seg.cal[0], seg.sd[0], seg.p_dp[0] = nav, cal, _sd(p), p[es.DP, es.DP]
-    p_post = np.zeros((block, n, n))
-    p_pred, phi = np.zeros((block if smoothed else 1, n, n)), np.zeros((block if smoothed else 1, n, n))
+    smoothed = stored is not None
+    p_post, p_pred, phi = blocks[0], blocks[1][:None if smoothed else 1], blocks[2][:None if smoothed else 1]
     if smoothed:
-        seg.stored.append(p[None], p[None], np.eye(n)[None])
+        stored.restart()
+        stored.append(p[None], p[None], np.eye(n)[None])
     vel_innov = np.full((m, 3), np.nan)
     for j0 in range(0, m - 1, block):
         j1 = min(j0 + block, m - 1)
@@ -161,21 +162,19 @@ def _run_segment(prep: Prepared, mech: Mech, a: int, b: int, fixes: Fixes, q_psd
         seg.sd[j0 + 1:j1 + 1], seg.p_dp[j0 + 1:j1 + 1] = _sd(p_post[:r]), p_post[:r, es.DP, es.DP]
         if smoothed:
             seg.stored.append(p_post[:r], p_pred[:r], phi[:r])
-    if smoothed:
-        seg.stored.close()
     return seg
 
 
 def _checked_segment(prep: Prepared, cfg: Config, a: int, b: int, fixes: Fixes, q_psd: np.ndarray,
                      params: np.ndarray, state: tuple[np.ndarray, ...], notes: list[str],
-                     smoothed: bool) -> tuple[_Segment, Fixes]:
+                     stored: StoredInterval | None, blocks: tuple[np.ndarray, ...]) -> tuple[_Segment, Fixes]:
     """_run_segment from state = (nav, cal, p, nominal) under the health monitor (health.run_checked): a pass that
     loses track runs again from its start with fewer fixes; the epochs of the fixes it left out are flagged
     FLAG_SKIPPED. Returns the segment kept and its fixes."""
     saved = snapshot(state)
     mech = prep.mech(a, b)
     seg, kept = run_checked(lambda keep: _run_segment(prep, mech, a, b, fixes.take(keep), q_psd, params, *state,
-                                                      smoothed),
+                                                      stored, blocks),
                             lambda s: filter_lost(prep.t_kf[a:b + 1], s.nav, s.sd, cfg)
                             | innovations_inconsistent(s.nis, s.gate, s.fix_row, b - a + 1),
                             lambda: restore(state, saved),
@@ -200,8 +199,8 @@ class KfPasses:
     """The SINS/odometer filter of 001 a pass at a time, its state carried from pass to pass: `run(prep, log, a, b)`
     filters epochs (a, b] (a the end of the last pass run) with CPOEM fixes from the last pass's points (`cpoem`) and
     with `smooth` runs the online RTS over the pass at its end (001 Fig. 4), whose points the next pass's fixes
-    come from. `keep`, if given, takes each pass's forward segment (with the smoother's per-epoch matrices) before it
-    is smoothed (rts_offline's store). run_kf runs it over a whole log; an online run pass by pass as the passes end
+    come from. `keep`, if given, takes each pass's forward segment (with the smoother's per-epoch matrices, on disk)
+    once the online RTS has read them (rts_offline's store). run_kf runs it over a whole log; an online run pass by pass as the passes end
     (estimators.shearer.online)."""
 
     def __init__(self, log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
@@ -214,29 +213,31 @@ class KfPasses:
         self.points: Points | None = Points.empty() if cpoem else None
         self.notes = list(prep.notes)
         self.n_fixes = self.n_gated = 0
+        self._blocks = matrix_blocks(es.N_STATES)
+        self._scratch = StoredInterval(es.N_STATES) if smooth and keep is None else None
+        """The smoother's matrices of each pass in turn, when no pass is kept."""
 
     def run(self, prep: Prepared, log: Log, a: int, b: int) -> KfPass:
         cfg = self.cfg
         fixes = fixes_for(prep, cfg, log, a, b, self.points, self.notes) if self.cpoem else Fixes.empty()
+        stored = StoredInterval(es.N_STATES) if self.keep is not None else self._scratch
         seg, fixes = _checked_segment(prep, cfg, a, b, fixes, self.q_psd, self.params,
-                                      (self.nav, self.cal, self.p, self.nominal), self.notes,
-                                      self.smooth or self.keep is not None)
+                                      (self.nav, self.cal, self.p, self.nominal), self.notes, stored, self._blocks)
         self.n_fixes += fixes.epoch.size
         self.n_gated += int(np.sum(~(seg.nis <= fixes.gate)))
+        out = KfPass(seg.nav, seg.cal, seg.sd, seg.flags, None, None)
+        nav, p_dp = seg.nav, seg.p_dp
+        if self.smooth:
+            # Row 0's update is zero: the segment starts from the previous posterior.
+            x_s, sd_s, p_dp, _ = rts_stored(seg.stored, seg.x_post, self._blocks, keep=es.DP)
+            nav, cal_s = seg.nav.copy(), seg.cal.copy()
+            _apply_rows(nav, cal_s, x_s - seg.x_post)
+            out = out._replace(nav_s=nav, sd_s=sd_s)
         if self.keep is not None:
             self.keep(a, seg)
-        out = KfPass(seg.nav, seg.cal, seg.sd, seg.flags, None, None)
-        if not self.smooth:
-            if self.cpoem:
-                self.points = segment_points(prep, cfg, a, b, seg.nav, seg.p_dp)
-            return out
-        # Row 0's update is zero: the segment starts from the previous posterior.
-        x_s, sd_s, p_dp_s, _ = rts_stored(seg.stored, seg.x_post, keep=es.DP)
-        nav_s, cal_s = seg.nav.copy(), seg.cal.copy()
-        _apply_rows(nav_s, cal_s, x_s - seg.x_post)
         if self.cpoem:
-            self.points = segment_points(prep, cfg, a, b, nav_s, p_dp_s)
-        return out._replace(nav_s=nav_s, sd_s=sd_s)
+            self.points = segment_points(prep, cfg, a, b, nav, p_dp)
+        return out
 
     def first_row(self, prep: Prepared) -> Solution:
         """Epoch 0's row as run_kf gives it, before any pass has run: the start state and covariance, no calibration
@@ -302,6 +303,7 @@ class PassStore:
     def keep(self, a: int, seg: _Segment) -> None:
         self._save(a, "forward", {"x_post": seg.x_post, "nav": seg.nav[1:], "cal": seg.cal[1:], "sd": seg.sd[1:],
                                   "flags": seg.flags[1:]})
+        seg.stored.close()  # its files stay; a long run keeps many
         self.matrices[a] = seg.stored
         self.saved.append((a, a + seg.x_post.shape[0] - 1))
 
@@ -334,14 +336,14 @@ class PassStore:
         last_update = {}
         for a, b in self.saved:
             last_update[b] = np.load(self._file(a, "x_post"), mmap_mode="r")[-1].copy()
-        known = None
+        known, blocks = None, matrix_blocks(es.N_STATES)
         for i in range(len(self.saved) - 1, -1, -1):
             a, b = self.saved[i]
             own = self._rows(a)
             start = self.first if i == 0 else {k: v[-1:] for k, v in self._rows(self.saved[i - 1][0]).items()}
             rows = {k: np.concatenate([start[k], own[k][:-1]]) for k in ROW_KEYS}  # epochs a..b-1
             known = _smooth_stored(self.matrices.pop(a), self._load(a, ("x_post",))["x_post"],
-                                   last_update.get(a, np.zeros(es.N_STATES)), known, rows)
+                                   last_update.get(a, np.zeros(es.N_STATES)), known, rows, blocks)
             self._save(a, "smoothed", rows)
         for i, (a, b) in enumerate(self.saved):
             rows = self._rows(a, "smoothed")
@@ -365,14 +367,14 @@ def rts_offline(prep: Prepared, cfg: Config, store: PassStore, notes: list[str])
 
 
 def _smooth_stored(stored: StoredInterval, x_post: np.ndarray, x_first: np.ndarray,
-                   known: tuple[np.ndarray, np.ndarray] | None, rows: dict[str, np.ndarray]
-                   ) -> tuple[np.ndarray, np.ndarray]:
+                   known: tuple[np.ndarray, np.ndarray] | None, rows: dict[str, np.ndarray],
+                   blocks: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
     """The offline smoother's backward pass over one stored pass (its matrices `stored` and updates `x_post`; its
     row 0's update x_first; `known` the smoothed state and covariance at its last epoch, from the later pass),
-    applied to the forward `rows` of its epochs but the last (nav, cal, sd) in place; returns the smoothed state
-    and covariance at its first epoch."""
+    applied to the forward `rows` of its epochs but the last (nav, cal, sd) in place (`blocks`: rts.matrix_blocks);
+    returns the smoothed state and covariance at its first epoch."""
     x_post[0] = x_first
-    x_s, sd_s, _, p_s0 = rts_stored(stored, x_post, known)
+    x_s, sd_s, _, p_s0 = rts_stored(stored, x_post, blocks, known)
     _apply_rows(rows["nav"], rows["cal"], x_s[:-1] - x_post[:-1])
     rows["sd"][:] = sd_s[:-1]
     return x_s[0].copy(), p_s0
