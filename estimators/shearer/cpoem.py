@@ -59,6 +59,25 @@ class Points:
         return Points(self.u[keep], self.t[keep], self.llh[keep], self.cov[keep], self.c_nb[keep])
 
 
+def at_spacing(points: Points, spacing: float) -> Points:
+    """The points at the face coordinates that are multiples of `spacing` within their span, each interpolated
+    linearly in u between its two neighbours (position, time and covariance; the nearer one's attitude): a line
+    surveyed at one spacing (the face survey, a point per chute) as the CPOEM points of another. At a spacing near
+    the survey's, each surveyed point enters about one fix."""
+    if points.u.size < 2:
+        return points
+    p = points.take(np.argsort(points.u, kind="stable"))
+    u = np.arange(np.ceil(p.u[0] / spacing), np.floor(p.u[-1] / spacing) + 1) * spacing
+    k = np.clip(np.searchsorted(p.u, u, side="right") - 1, 0, p.u.size - 2)
+    w = (u - p.u[k]) / (p.u[k + 1] - p.u[k])
+
+    def lerp(a: np.ndarray) -> np.ndarray:
+        wk = w.reshape(-1, *([1] * (a.ndim - 1)))
+        return a[k] + wk * (a[k + 1] - a[k])
+
+    return Points(u, lerp(p.t), lerp(p.llh), lerp(p.cov), p.c_nb[np.where(w < 0.5, k, k + 1)])
+
+
 def crossings(u: np.ndarray, spacing: float, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
     """Epochs j in (lo, hi] where the face coordinate crosses a multiple of `spacing`: (j, crossed u_i).
 

@@ -12,7 +12,8 @@ Methods (estimators.shearer.methods runs them by name, each an estimates/NAME st
 * ``kf_rts``        the same with the online RTS smoother run at each face end over the pass just finished (the
                     path between the face ends' survey fixes, each pass on its own: what face alignment wants,
                     twin.pipeline.alignment_loop);
-* ``kf_cpoem``      plus CPOEM fixes whose points come from the forward filter;
+* ``kf_cpoem``      plus CPOEM fixes whose points come from the forward filter (the first cut's from the face
+                    survey, when the log has one: Config.cpoem_face_survey);
 * ``kf_cpoem_rts``  plus the online RTS smoother run at each face end over the pass just finished; the smoothed
                     points feed the next cycle's fixes, the output is the smoothed pass;
 * ``rts_offline``   one RTS pass over the whole run of ``kf_cpoem_rts``'s forward filter.
@@ -35,7 +36,7 @@ from estimators.nav import earth
 from estimators.nav.rotations import quat_to_mat
 from estimators.shearer import odometer_filter as kf
 from estimators.shearer.config import Config
-from estimators.shearer.cpoem import Points
+from estimators.shearer.cpoem import Points, at_spacing
 from estimators.shearer.health import (
     filter_lost,
     fix_fallbacks,
@@ -44,7 +45,7 @@ from estimators.shearer.health import (
     run_checked,
     snapshot,
 )
-from estimators.shearer.position_fixes import Fixes, fixes_for, segment_points
+from estimators.shearer.position_fixes import Fixes, face_survey_points, fixes_for, segment_points
 from estimators.shearer.prepare import Mech, Prepared
 from estimators.shearer.solution import Solution, join_rows, make_solution
 
@@ -210,7 +211,10 @@ class KfPasses:
         self.p = initial_covariance(cfg, log, prep.nav0[es.QUAT])
         self.q_psd, self.params = process_noise_psd(cfg), kf_params(cfg)
         self.nominal = np.zeros(es.N_NOMINAL)
-        self.points: Points | None = Points.empty() if cpoem else None
+        self.points: Points | None = None  # the last pass's CPOEM points (the first cut's: the face survey's)
+        if cpoem:
+            self.points = (at_spacing(face_survey_points(log, prep), cfg.cpoem_spacing_m) if cfg.cpoem_face_survey
+                           else Points.empty())
         self.notes = list(prep.notes)
         self.n_fixes = self.n_gated = 0
         self._blocks = matrix_blocks(es.N_STATES)

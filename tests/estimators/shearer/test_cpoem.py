@@ -6,7 +6,15 @@ import pytest
 
 from estimators.nav import earth
 from estimators.nav.rotations import quat_to_mat, rotvec_to_quat
-from estimators.shearer.cpoem import Points, RamLog, advance_direction, crossings, predict_fixes, ram_stroke
+from estimators.shearer.cpoem import (
+    Points,
+    RamLog,
+    advance_direction,
+    at_spacing,
+    crossings,
+    predict_fixes,
+    ram_stroke,
+)
 
 
 def test_crossings_find_each_point_once_in_either_direction():
@@ -153,3 +161,20 @@ def test_predicted_fixes_follow_the_floor(dip_deg):
     off_plane = (after - before) @ normal  # the plane passes through every point
     assert np.all(np.abs(off_plane) < d * _slope_tolerance(dip) + 1e-6), np.abs(off_plane).max()
     assert np.allclose(np.linalg.norm(after - before, axis=1), d, atol=1e-6)
+
+
+def test_points_at_another_spacing_are_interpolated_along_the_line():
+    """cpoem.at_spacing: a line surveyed every 1.75 m (u descending, as a first cut run towards the start gives it)
+    read every 2 m: positions on the chord between the neighbours, the nearer neighbour's attitude."""
+    u = -np.arange(0.0, 35.0, 1.75)
+    llh = np.column_stack([1e-7 * u, 2e-7 * u, 0.01 * u ** 2])
+    frames = np.repeat(np.eye(3)[None], u.size, axis=0) * np.arange(1, u.size + 1)[:, None, None]
+    cov = np.repeat(np.eye(3)[None], u.size, axis=0) * (1 - u)[:, None, None]
+    pts = at_spacing(Points(u, 100.0 - u, llh, cov, frames), 2.0)
+    assert np.array_equal(pts.u, np.arange(-16, 1) * 2.0)
+    assert np.allclose(pts.llh[:, :2], np.column_stack([1e-7 * pts.u, 2e-7 * pts.u]), rtol=0, atol=1e-18)
+    at_2 = np.flatnonzero(pts.u == -2.0)[0]  # between -3.5 and -1.75
+    assert np.isclose(pts.llh[at_2, 2], 0.1225 + 1.5 / 1.75 * (0.030625 - 0.1225))
+    assert np.allclose(pts.t, 100.0 - pts.u) and np.allclose(pts.cov[:, 0, 0], 1 - pts.u)
+    nearest = np.argmin(np.abs(u[None, :] - pts.u[:, None]), axis=1)
+    assert np.array_equal(pts.c_nb, frames[nearest])

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from estimators.io.log import ImuArrays, log_from_columns
-from estimators.io.logformat import FLAG_SKIPPED, FLAG_VELOCITY, FLAG_ZUPT
+from estimators.io.logformat import FLAG_POSITION, FLAG_SKIPPED, FLAG_VELOCITY, FLAG_ZUPT
 from estimators.kalman import error_state as es
 from estimators.kalman import rts
 from estimators.nav import earth
@@ -276,3 +276,27 @@ def test_a_smoothed_pass_holds_its_covariances_a_block_at_a_time(default_log, mo
             assert np.array_equal(getattr(one, key), getattr(other, key)), key
     pass_matrices = 3 * longest * es.N_STATES ** 2 * 8
     assert peak < pass_matrices / 2, (peak, pass_matrices)
+
+
+@pytest.mark.parametrize("from_survey", [True, False])
+def test_the_first_cut_is_fixed_by_the_face_survey_at_the_cpoem_spacing(from_survey):
+    """Config.cpoem_face_survey: the first pass's CPOEM fixes are the installed face line's surveyed points (at the
+    CPOEM spacing); without them, as in 001, the first pass has none."""
+    scn, result = simulated("default")
+    streams = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), 0)
+    log = log_from_columns(streams["imu"], streams["odometer"], streams["survey"], streams["pushram"],
+                           face_survey=streams["face_survey"])
+    cfg = dataclasses.replace(positioning_config(scn), cpoem_face_survey=from_survey)
+    prep = prepare(log, cfg)
+    assert log.face_u.size
+    fwd, _ = run_kf(log, cfg, prep, cpoem=True, smooth=False)
+    a, b = prep.segments[0]
+    fixed = np.flatnonzero(fwd.flags[a + 1:b + 1] & FLAG_POSITION) + a + 1
+    cpoem_fixed = np.setdiff1d(fixed, prep.survey_epochs)
+    first, last = prep.cuts[0]
+    cut_length = abs(prep.odo[last] - prep.odo[first - 1])
+    if from_survey:  # a fix every CPOEM spacing of the straight cut that the supports' strokes cover
+        assert cpoem_fixed.size >= 0.7 * cut_length / cfg.cpoem_spacing_m, (cpoem_fixed.size, cut_length)
+        assert np.all((cpoem_fixed >= first) & (cpoem_fixed <= last))
+    else:
+        assert cpoem_fixed.size == 0
