@@ -90,7 +90,7 @@ class OnlinePositioning:
                 self.passes = DeadReckoningPasses(self.cfg, prep, log.survey_llh[0], self.cal)
             else:
                 self.passes = KfPasses(log, self.cfg, prep, cpoem=self.method.startswith("kf_cpoem"),
-                                       smooth=self.method.endswith("_rts"), keep=self.store and self.store.keep)
+                                       smooth=self.method.endswith("_rts"), keep=self.store)
                 self.initial = self.passes.first_row(prep)
                 self.initial.flags |= FLAG_SMOOTHED if self.method.endswith("_rts") else 0
                 if self.store is not None:

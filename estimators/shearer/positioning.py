@@ -21,7 +21,7 @@ Methods (estimators.shearer.methods runs them by name, each an estimates/NAME st
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 from typing import NamedTuple
 
@@ -200,12 +200,12 @@ class KfPasses:
     """The SINS/odometer filter of 001 a pass at a time, its state carried from pass to pass: `run(prep, log, a, b)`
     filters epochs (a, b] (a the end of the last pass run) with CPOEM fixes from the last pass's points (`cpoem`) and
     with `smooth` runs the online RTS over the pass at its end (001 Fig. 4), whose points the next pass's fixes
-    come from. `keep`, if given, takes each pass's forward segment (with the smoother's per-epoch matrices, on disk)
-    once the online RTS has read them (rts_offline's store). run_kf runs it over a whole log; an online run pass by pass as the passes end
+    come from. `keep`, if given, keeps each pass's forward segment (with the smoother's per-epoch matrices, on disk)
+    for rts_offline once the online RTS has read them. run_kf runs it over a whole log; an online run pass by pass as the passes end
     (estimators.shearer.online)."""
 
     def __init__(self, log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool,
-                 keep: Callable[[int, _Segment], None] | None = None):
+                 keep: PassStore | None = None):
         self.cfg, self.cpoem, self.smooth, self.keep = cfg, cpoem, smooth, keep
         self.nav, self.cal = prep.nav0.copy(), prep.cal0.copy()
         self.p = initial_covariance(cfg, log, prep.nav0[es.QUAT])
@@ -224,7 +224,7 @@ class KfPasses:
     def run(self, prep: Prepared, log: Log, a: int, b: int) -> KfPass:
         cfg = self.cfg
         fixes = fixes_for(prep, cfg, log, a, b, self.points, self.notes) if self.cpoem else Fixes.empty()
-        stored = StoredInterval(es.N_STATES) if self.keep is not None else self._scratch
+        stored = StoredInterval(es.N_STATES, self.keep.folder) if self.keep is not None else self._scratch
         seg, fixes = _checked_segment(prep, cfg, a, b, fixes, self.q_psd, self.params,
                                       (self.nav, self.cal, self.p, self.nominal), self.notes, stored, self._blocks)
         self.n_fixes += fixes.epoch.size
@@ -238,7 +238,7 @@ class KfPasses:
             _apply_rows(nav, cal_s, x_s - seg.x_post)
             out = out._replace(nav_s=nav, sd_s=sd_s)
         if self.keep is not None:
-            self.keep(a, seg)
+            self.keep.keep(a, seg)
         if self.cpoem:
             self.points = segment_points(prep, cfg, a, b, nav, p_dp)
         return out
@@ -267,7 +267,7 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool, sto
     and CPOEM points); with `store`, each pass kept for rts_offline."""
     n = prep.t_kf.size - 1
     fwd = _Forward(n)
-    passes = KfPasses(log, cfg, prep, cpoem, smooth, None if store is None else store.keep)
+    passes = KfPasses(log, cfg, prep, cpoem, smooth, store)
     fwd.nav[0], fwd.sd[0] = passes.nav, _sd(passes.p)
     if store is not None:
         store.start(passes)

@@ -88,13 +88,20 @@ def test_stored_interval_smoothed_in_blocks_equals_the_whole_backward_pass_bit_f
     assert np.trace(p_ref[0]) < np.trace(p_post[0]) - 1e-3  # the smoother changed something
 
 
-def test_stored_interval_removes_its_files_and_refuses_a_mismatched_interval():
-    stored = StoredInterval(3)
+def test_stored_interval_removes_its_files_and_refuses_a_mismatched_interval(tmp_path):
+    stored = StoredInterval(3, tmp_path)
     stored.append(*(np.zeros((4, 3, 3)),) * 3)
     stored.close()
     with pytest.raises(ValueError, match="4 stored epochs for 5 updates"):
         rts_stored(stored, np.zeros((5, 3)), tuple(np.zeros((9, 3, 3)) for _ in range(3)))
-    paths = list(stored.paths)
-    assert all(os.path.exists(path) for path in paths)
+    assert sorted(os.listdir(tmp_path)) == sorted(os.path.basename(p) for p in stored.paths) and len(stored.paths) == 3
     del stored
-    assert not any(os.path.exists(path) for path in paths)
+    assert os.listdir(tmp_path) == []
+
+
+def test_an_unnamed_stored_interval_leaves_no_file_however_the_process_ends():
+    stored = StoredInterval(3)
+    stored.append(*(np.ones((2, 3, 3)),) * 3)
+    assert stored.paths is None
+    assert all(os.fstat(fd).st_nlink == 0 for fd in stored._fds)  # unlinked while open
+    assert np.array_equal(stored.read_into(0, 2, tuple(np.zeros((2, 3, 3)) for _ in range(3)))[2], np.ones((2, 3, 3)))
