@@ -74,10 +74,11 @@ cycle of 4,600 s between 5 and 20 cycles), and each batch method's solution and 
 methods of a group and of the other workers at once; the streamed methods hold none and are scored a row group at a
 time: estimators.shearer.config.STREAMED, twin.pipeline.estimate.EstimateWriter; seed004 with five batch methods and
 234 000 epochs: 3.16 GB, streamed: 2.11 GB)."""
-PASS_BYTES_PER_EPOCH = 45e3
-"""A streamed filter's peak memory per filter epoch of its pass [bytes]: the pass's error states, covariances,
-predicted covariances and transitions for the smoother, its IMU rows (panel_100 over 5 cycles: 2.57 GB with two
-methods on two workers, 23 000 epochs a pass)."""
+PASS_BYTES_PER_EPOCH = 20e3
+"""A streamed filter's peak memory per filter epoch of its pass [bytes]: the pass's rows (states, sigmas, navigation),
+its IMU rows and increments, the forward pass's and the smoother's outputs; the smoother's per-epoch matrices are on
+disk (estimators.kalman.rts.StoredInterval). panel_100 over 5 cycles: 1.35 GB with two methods on two workers,
+23 000 epochs a pass (2.57 GB with the matrices in memory)."""
 BATCH_LOG_STREAMS = ("odometer", "mag", "pushram")
 """The streams a batch method's log holds whole (estimators.io.log.load_log; the IMU stays on disk)."""
 FLOOR_BYTES_PER_CELL = 120.0
