@@ -94,8 +94,8 @@ class Config:
     cpoem_face_survey: bool = True
     """The first cut's CPOEM points from the installed face line's survey when the log has one (the face survey
     stream, estimators.shearer.position_fixes.face_survey_points, as 004's rail model takes its first cut's),
-    interpolated to the CPOEM spacing (estimators.shearer.cpoem.at_spacing); False: none, as in 001, whose first pass
-    is the filter's alone. Without them the first pass's height follows the filter's tilt along the face, which it
+    at the survey's own step (estimators.shearer.cpoem.at_spacing); False: none, as in 001, whose first pass is the
+    filter's alone. Without them the first pass's height follows the filter's tilt along the face, which it
     cannot part from the accelerometer's bias along it (seed004: +115 mm at the far end, 0.3 mrad, 30 ug over g),
     and the chain of passes keeps that profile for good: the face ends' 5 cm surveys do not pull it back against a
     pass of tight chained fixes (seed004, kf_cpoem_rts: height error +60 to +100 mm over the far half of the face in

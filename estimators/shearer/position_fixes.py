@@ -60,7 +60,7 @@ def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Poi
             if first > b or last <= a:
                 continue
             lo, hi = max(first - 1, a), min(last, b)
-            epochs, marks = crossings(u, cfg.cpoem_spacing_m, lo, hi)
+            epochs, marks = crossings(u, points.spacing or cfg.cpoem_spacing_m, lo, hi)
             fj, fllh, fr, skipped, fadv = predict_fixes(points, u, prep.t_kf, epochs, marks, prep.rams,
                                                         cfg.advance_sd, cfg.path_sd)
             j += list(fj)

@@ -213,8 +213,7 @@ class KfPasses:
         self.nominal = np.zeros(es.N_NOMINAL)
         self.points: Points | None = None  # the last pass's CPOEM points (the first cut's: the face survey's)
         if cpoem:
-            self.points = (at_spacing(face_survey_points(log, prep), cfg.cpoem_spacing_m) if cfg.cpoem_face_survey
-                           else Points.empty())
+            self.points = at_spacing(face_survey_points(log, prep)) if cfg.cpoem_face_survey else Points.empty()
         self.notes = list(prep.notes)
         self.n_fixes = self.n_gated = 0
         self._blocks = matrix_blocks(es.N_STATES)

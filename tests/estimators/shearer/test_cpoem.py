@@ -178,3 +178,6 @@ def test_points_at_another_spacing_are_interpolated_along_the_line():
     assert np.allclose(pts.t, 100.0 - pts.u) and np.allclose(pts.cov[:, 0, 0], 1 - pts.u)
     nearest = np.argmin(np.abs(u[None, :] - pts.u[:, None]), axis=1)
     assert np.array_equal(pts.c_nb, frames[nearest])
+    assert pts.spacing == 2.0
+    own = at_spacing(Points(u, 100.0 - u, llh, cov, frames))  # at the survey's own step: its own points
+    assert own.spacing == 1.75 and np.array_equal(own.llh, llh[::-1]) and np.array_equal(own.c_nb, frames[::-1])

@@ -280,8 +280,8 @@ def test_a_smoothed_pass_holds_its_covariances_a_block_at_a_time(default_log, mo
 
 @pytest.mark.parametrize("from_survey", [True, False])
 def test_the_first_cut_is_fixed_by_the_face_survey_at_the_cpoem_spacing(from_survey):
-    """Config.cpoem_face_survey: the first pass's CPOEM fixes are the installed face line's surveyed points (at the
-    CPOEM spacing); without them, as in 001, the first pass has none."""
+    """Config.cpoem_face_survey: the first pass's CPOEM fixes are the installed face line's surveyed points (at their
+    own step); without them, as in 001, the first pass has none."""
     scn, result = simulated("default")
     streams = sensor_streams(scn, result.tables, imu_truth(scn, result.tables["truth_shearer"]), 0)
     log = log_from_columns(streams["imu"], streams["odometer"], streams["survey"], streams["pushram"],
@@ -295,8 +295,8 @@ def test_the_first_cut_is_fixed_by_the_face_survey_at_the_cpoem_spacing(from_sur
     cpoem_fixed = np.setdiff1d(fixed, prep.survey_epochs)
     first, last = prep.cuts[0]
     cut_length = abs(prep.odo[last] - prep.odo[first - 1])
-    if from_survey:  # a fix every CPOEM spacing of the straight cut that the supports' strokes cover
-        assert cpoem_fixed.size >= 0.7 * cut_length / cfg.cpoem_spacing_m, (cpoem_fixed.size, cut_length)
+    if from_survey:  # a fix every surveyed point of the straight cut that the supports' strokes cover
+        assert cpoem_fixed.size >= 0.7 * cut_length / np.median(np.diff(log.face_u)), (cpoem_fixed.size, cut_length)
         assert np.all((cpoem_fixed >= first) & (cpoem_fixed <= last))
     else:
         assert cpoem_fixed.size == 0
