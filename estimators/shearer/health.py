@@ -230,7 +230,7 @@ def run_checked(run: Callable[[Arg], Run], lost: Callable[[Run], np.ndarray], re
     t_lost, span = t[np.argmax(bad)], f"(t {t[0]:.0f}-{t[-1]:.0f} s)"
     for label, arg in fallbacks:
         restore()
-        del result  # the lost run's arrays go before the next run makes its own (a pass's P, P_pred, Phi: 0.5 GB)
+        del result  # the lost run's arrays go before the next run makes its own (a pass's rows: 30 MB on seed004)
         result = run(arg)
         if not lost(result).any():
             notes.append(f"health: lost track at t {t_lost:.1f} s; the pass {span} was run again from its start "
