@@ -15,7 +15,7 @@ import multiprocessing
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from estimators.workers import forking_workers, leave_signals_to_parent
+from estimators.workers import leave_signals_to_parent, worker_pool
 
 
 F8_1D, F8_2D = "f8[::1]", "f8[:, ::1]"
@@ -80,13 +80,10 @@ class Precompiler:
     in the cache; leaving the context (or `close`) stops what is still running."""
 
     def __init__(self, kernels: Sequence[Kernel], processes: int):
-        ctx = multiprocessing.get_context("fork")
-        self._compiled = ctx.Value("b", 0, lock=False)
+        self._compiled = multiprocessing.get_context("fork").Value("b", 0, lock=False)
         self._pool = None
         if kernels and processes > 0:
-            with forking_workers():
-                self._pool = ctx.Pool(min(processes, len(kernels)), initializer=_worker_start,
-                                      initargs=(self._compiled,))
+            self._pool = worker_pool(min(processes, len(kernels)), _worker_start, (self._compiled,))
             self._done = self._pool.map_async(_compile, kernels, chunksize=1)
             self._pool.close()
 

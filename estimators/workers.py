@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+import multiprocessing
 import signal
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
 
@@ -29,3 +30,10 @@ def forking_workers() -> Iterator[None]:
         yield
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, held)
+
+
+def worker_pool(processes: int, initializer: Callable[..., None] = leave_signals_to_parent, initargs: tuple = ()):
+    """A pool of `processes` forked workers, forked with SIGTERM held (`forking_workers`); `initializer` (with
+    `initargs`) starts each and calls leave_signals_to_parent."""
+    with forking_workers():
+        return multiprocessing.get_context("fork").Pool(processes, initializer=initializer, initargs=initargs)

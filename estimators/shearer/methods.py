@@ -25,7 +25,7 @@ from estimators.shearer.positioning import PassStore, rts_offline, run_kf
 from estimators.shearer.prepare import Prepared, prepare
 from estimators.shearer.rail_kinematics import run_rail
 from estimators.shearer.solution import Solution, join_rows
-from estimators.workers import forking_workers, leave_signals_to_parent
+from estimators.workers import worker_pool
 
 METHODS = ("dr", "dr_compensated", "kf", "kf_rts", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag", "afkf",
            "fkf_rail")
@@ -150,8 +150,7 @@ def _run_task(task: Task) -> dict:
 def _run_tasks(tasks: list[Task], workers: int) -> list[dict]:
     """The tasks on `workers` forked processes, which share the parent's log and prepared increments (copy on
     write) and its compiled kernels; results in the order of `tasks`. An exception in a task is raised here."""
-    with forking_workers():
-        pool = multiprocessing.get_context("fork").Pool(min(workers, len(tasks)), initializer=leave_signals_to_parent)
+    pool = worker_pool(min(workers, len(tasks)))
     try:
         pending = [pool.apply_async(_run_task, (task,)) for task in tasks]
         results = [p.get() for p in pending]
