@@ -1,6 +1,7 @@
 """A run directory checked before the estimators work on it: metrics.json readable, and the log's own layout the one
 its scenario describes (sample rates, the supports whose push rams and canopy units report, the odometer's pulse
-length), so an edited or foreign scenario.toml is refused instead of changing the results silently."""
+length), so an edited or foreign scenario.toml is refused instead of changing the results silently. The streams are
+read a row group at a time: the check's memory does not grow with the log."""
 
 from __future__ import annotations
 
@@ -16,8 +17,9 @@ from estimators.io.logformat import (
     STREAMS,
     SUPPORT_IMU,
     LogError,
-    read_stream,
+    StreamBlocks,
 )
+from estimators.io.stream_median import StreamMedian
 
 METRICS_FILE = "metrics.json"
 RATE_TOLERANCE = 0.02
@@ -84,12 +86,17 @@ def check_layout(run_dir: Path, layout: LogLayout) -> None:
 
 
 def _check_rate(run_dir: Path, name: str, rate: Expected, source: str) -> None:
-    t = read_stream(run_dir, STREAMS[name], ("t",)).column("t").to_numpy()
-    steps = np.diff(t)
-    steps = steps[steps > 0]
-    if steps.size == 0:
+    """The stream's median positive sample interval against `rate`, read a row group at a time (the exact median in
+    bounded memory: estimators.io.stream_median)."""
+    steps, last = StreamMedian(), None
+    for block in StreamBlocks(run_dir, STREAMS[name], ("t",)):
+        t = block.column("t").to_numpy()
+        dt = np.diff(t, prepend=t[:0] if last is None else last)
+        steps.push(dt[dt > 0])
+        last = t[-1:] if t.size else last
+    if steps.count == 0:
         return
-    median = float(np.median(steps))
+    median = steps.median()
     if abs(median * float(rate.value) - 1.0) > RATE_TOLERANCE:
         raise LogError(f"{run_dir / STREAMS[name].filename}: samples every {median:.6g} s ({1 / median:.6g} Hz), "
                        f"but {source} {rate.key} = {rate.value:g}; set {rate.key} = {1 / median:.6g}, or give this "
@@ -98,7 +105,8 @@ def _check_rate(run_dir: Path, name: str, rate: Expected, source: str) -> None:
 
 def _check_supports(run_dir: Path, name: str, expected: tuple[int, ...], what: str, source: str) -> None:
     path = run_dir / STREAMS[name].filename
-    ids = np.unique(read_stream(run_dir, STREAMS[name], ("t", "support")).column("support").to_numpy())
+    ids = np.unique(np.concatenate([np.unique(block.column("support").to_numpy())
+                                    for block in StreamBlocks(run_dir, STREAMS[name], ("t", "support"))]))
     extra = sorted(set(ids.tolist()) - set(expected))
     missing = sorted(set(expected) - set(ids.tolist()))
     if extra or missing:
@@ -108,17 +116,18 @@ def _check_supports(run_dir: Path, name: str, expected: tuple[int, ...], what: s
 
 
 def _check_pulses(run_dir: Path, mpp: Expected, source: str) -> None:
-    odo = read_stream(run_dir, ODOMETER, ("t", "distance", "pulses"))
-    distance, pulses = odo.column("distance").to_numpy(), odo.column("pulses").to_numpy().astype(float)
-    nominal = float(mpp.value)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        off = np.abs(distance - pulses * nominal) / (np.abs(pulses) * nominal)
-    bad = np.flatnonzero((pulses != 0) & ~(off <= PULSE_TOLERANCE))
-    if bad.size:
-        i = int(bad[0])
-        raise LogError(f"{run_dir / ODOMETER.filename}: row {i}: distance {distance[i]:.6g} m for {pulses[i]:.0f} "
-                       f"pulses is {distance[i] / pulses[i]:.6g} m per pulse, but {source} {mpp.key} = {nominal:g}; "
-                       f"set {mpp.key} to the odometer's pulse length")
+    nominal, first_row = float(mpp.value), 0
+    for odo in StreamBlocks(run_dir, ODOMETER, ("t", "distance", "pulses")):
+        distance, pulses = odo.column("distance").to_numpy(), odo.column("pulses").to_numpy().astype(float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            off = np.abs(distance - pulses * nominal) / (np.abs(pulses) * nominal)
+        bad = np.flatnonzero((pulses != 0) & ~(off <= PULSE_TOLERANCE))
+        if bad.size:
+            i = int(bad[0])
+            raise LogError(f"{run_dir / ODOMETER.filename}: row {first_row + i}: distance {distance[i]:.6g} m for "
+                           f"{pulses[i]:.0f} pulses is {distance[i] / pulses[i]:.6g} m per pulse, but {source} "
+                           f"{mpp.key} = {nominal:g}; set {mpp.key} to the odometer's pulse length")
+        first_row += odo.num_rows
 
 
 def _ranges(ids: list[int]) -> str:

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import tracemalloc
 
 import numpy as np
 import pyarrow as pa
@@ -23,6 +24,7 @@ from estimators.io.logformat import (
     read_estimate,
     read_schema,
     read_stream,
+    stream_writer,
     write_estimate,
     write_stream,
 )
@@ -102,6 +104,51 @@ def test_pulse_length_disagreeing_with_the_odometer(log_dir):
     layout = _layout(metres_per_pulse=Expected(0.001, "[sensors.odometer] metres_per_pulse"))
     _refused(lambda: check_layout(log_dir, layout), "odometer.parquet", "row 1", "0.002 m per pulse",
              "metres_per_pulse = 0.001")
+
+
+def _in_row_groups(path, stream, columns, rows_per_group):
+    """Write `columns` to `path` as `stream`'s file in row groups of `rows_per_group`."""
+    table = make_table(stream, columns)
+    with stream_writer(path, table.schema) as writer:
+        writer.write_table(table, row_group_size=rows_per_group)
+
+
+def _odometer(n, bad_row=None):
+    """n odometer rows at 50 Hz with steps of 0.0198 and 0.0202 s; the pulse length off by 1e-5 at `bad_row`."""
+    t = np.arange(1, n + 1) * 0.02
+    t[::2] += 0.0002
+    pulses = np.arange(n) * 10
+    distance = pulses * MPP
+    if bad_row is not None:
+        distance[bad_row] *= 1.00001
+    return _zeros(ODOMETER, n, t=t, pulses=pulses, distance=distance, direction=np.ones(n))
+
+
+def test_checks_read_the_log_a_row_group_at_a_time(log_dir, monkeypatch):
+    """A log in many row groups: the interval's median across the groups' joins, a support seen only in a later group
+    and a bad pulse count in one are found as in one group (the pulse by its row in the file), and the check's
+    traced memory does not grow with the log (the whole-file check held the time column and its differences)."""
+    monkeypatch.setattr("estimators.io.stream_median.IN_MEMORY", 1_000)
+    monkeypatch.setattr("estimators.io.stream_median.READ_VALUES", 1_000)
+    peaks = []
+    for n in (50_000, 200_000):
+        _in_row_groups(log_dir / ODOMETER.filename, ODOMETER, _odometer(n), 1_000)
+        tracemalloc.start()
+        check_layout(log_dir, _layout())
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+    assert peaks[1] < peaks[0] + 100_000, peaks  # 150,000 more rows: 1.2 MB a whole column
+    median = np.median(np.diff(_odometer(n)["t"]))
+    _refused(lambda: check_layout(log_dir, _layout(rates_hz={"odometer": Expected(40.0, "[sensors.odometer] rate_hz")})),
+             f"samples every {median:.6g} s")
+    sup = np.repeat(np.arange(5), 3)  # supports 0-4, support 4 only in the last of five groups
+    _in_row_groups(log_dir / PUSHRAM.filename, PUSHRAM,
+                   _zeros(PUSHRAM, sup.size, t=np.arange(sup.size, dtype=float), support=sup,
+                          extension=np.ones(sup.size), valid=np.ones(sup.size)), 3)
+    _refused(lambda: check_layout(log_dir, _layout(ram_supports=Expected(4, "[face] pan_count"))),
+             "rows for supports 4")
+    _in_row_groups(log_dir / ODOMETER.filename, ODOMETER, _odometer(n, bad_row=150_001), 1_000)
+    _refused(lambda: check_layout(log_dir, _layout()), "odometer.parquet", "row 150001: distance")
 
 
 # ------------------------------------------------------------------------------------------ damaged files
