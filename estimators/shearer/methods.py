@@ -15,6 +15,7 @@ from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any, Protocol
 
+from estimators.heap import release_free_memory
 from estimators.io.log import Log
 from estimators.shearer.adaptive_federated_mag import run_mag
 from estimators.shearer.config import DEAD_RECKONING, STREAMED, Config, PositioningError
@@ -102,6 +103,7 @@ def _online(cfg: Config, pieces: Pieces, sink: Sink | None, name: str, **kwargs
             if sink is not None:
                 sink.rows(name, sol)
             last = sol
+            release_free_memory()  # what the pass freed, back to the system (a long run's memory stays flat)
     if last is None:
         raise PositioningError(f"{name}: the log holds no pass to filter (no odometer travel after the start)")
     return online, health, last

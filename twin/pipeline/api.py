@@ -43,7 +43,7 @@ from twin.config.scenario import (
 from twin.config.turntable import Turntable
 from twin.face.export_target import DEFAULT_WIDTH_PX
 from twin.pipeline.face_model import write_face_model
-from twin.pipeline.malloc import hold_mmap_threshold
+from estimators.heap import hold_mmap_threshold
 from twin.pipeline.rundir import (
     TIMING,
     RunDirError,
@@ -225,7 +225,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
     from twin.view.recording import BLOCK_STREAMS, ESTIMATES_RRD, RUN_RRD, STREAM_COLUMNS, write_recording
     from twin.view.summary import format_summary, twin_summary
 
-    hold_mmap_threshold()  # memory flat over a long run (twin.pipeline.malloc)
+    hold_mmap_threshold()  # memory flat over a long run (estimators.heap)
     try:
         check_faults_in_run(scn, Timeline(scn).duration)
     except ScenarioError as err:
