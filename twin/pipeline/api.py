@@ -43,7 +43,7 @@ from twin.config.scenario import (
 from twin.config.turntable import Turntable
 from twin.face.export_target import DEFAULT_WIDTH_PX
 from twin.pipeline.face_model import write_face_model
-from estimators.heap import hold_mmap_threshold
+from estimators.heap import hold_mmap_threshold, release_free_memory
 from twin.pipeline.rundir import (
     TIMING,
     RunDirError,
@@ -318,7 +318,7 @@ def _run_face(scn: Scenario, source: str, out: Path, force: bool, quiet: bool, t
         # The estimators read the log from the run directory: the run's tables go before they start, so that
         # their peak memory is not added to the twin's.
         del tables, result
-        pa.default_memory_pool().release_unused()
+        release_free_memory()  # and the free pages they leave (estimators.heap), before the workers fork
         wall_s = time.perf_counter() - start
         write_timing(staging, wall_s=wall_s, real_time_factor=summary["simulated_s"] / wall_s)
         (staging / "metrics.json").write_text(json.dumps({"twin": summary, "estimators": {}}, indent=2) + "\n")
