@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING
 import pyarrow as pa
 from tqdm import tqdm
 
+from estimators.heap import hold_mmap_threshold, release_free_memory
 from estimators.io.logformat import (
     ESTIMATE,
     ESTIMATES_DIR,
@@ -43,7 +44,6 @@ from twin.config.scenario import (
 from twin.config.turntable import Turntable
 from twin.face.export_target import DEFAULT_WIDTH_PX
 from twin.pipeline.face_model import write_face_model
-from estimators.heap import hold_mmap_threshold, release_free_memory
 from twin.pipeline.rundir import (
     TIMING,
     RunDirError,
