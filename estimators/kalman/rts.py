@@ -168,7 +168,7 @@ def rts_stored(stored: StoredInterval, x_post: np.ndarray, blocks: tuple[np.ndar
         raise ValueError(f"rts_stored: {stored.rows} stored epochs for {n_rows} updates")
     block = blocks[0].shape[0] - 1
     x_s, sd = np.empty_like(x_post), np.empty_like(x_post)
-    kept = np.arange(n)[keep].size
+    kept = len(range(n)[keep])
     p_keep = np.empty((n_rows, kept, kept))
     r1 = n_rows - 1
     x_s[r1], p_last = known if known is not None else (x_post[r1], stored.read_into(r1, r1 + 1, blocks)[0][0].copy())
