@@ -42,11 +42,11 @@ class DeadReckoningPasses:
                                  first_row).q_nb[::prep.steps]
         except ValueError as err:
             raise PositioningError(f"imu: {err}") from None
-        dd = np.diff(prep.odo[a:b + 1]) / (1 + self.scale)
+        dd = np.diff(prep.odo[prep.span(a, b)]) / (1 + self.scale)
         step_n = quat_rotate(q_nb[:-1], np.broadcast_to(self.y_m_b, (dd.size, 3))) * dd[:, None]
         enu = np.cumsum(np.concatenate([self.enu, step_n]), axis=0)
         self.enu = enu[-1:]
-        t_kf = prep.t_kf[a:b + 1]
+        t_kf = prep.t_kf[prep.span(a, b)]
         v_n = np.concatenate([np.zeros((1, 3)), step_n / np.diff(t_kf)[:, None]])
         return Solution(t_kf, np.column_stack(earth.enu_to_lla(enu, *self.body0)), v_n, q_nb,
                         np.full((t_kf.size, N_SD), np.nan), np.zeros(t_kf.size, np.int32))

@@ -63,7 +63,7 @@ class FederatedRun:
         self.p0 = initial_covariance(cfg, log, prep.nav0[es.QUAT])
         self.last = _epoch_output(1, params_m[fk.M_R_YAW])  # the last pass's last row (its row 0 for the next)
         self.last.nav[0], self.last.cal[0], self.last.sd[0] = prep.nav0, prep.cal0, np.sqrt(np.diag(self.p0))
-        self.out = _epoch_output(prep.t_kf.size, params_m[fk.M_R_YAW]) if whole else None
+        self.out = _epoch_output(prep.n_kf + 1, params_m[fk.M_R_YAW]) if whole else None
         if self.out is not None:
             self.out.nav[0], self.out.cal[0] = prep.nav0, prep.cal0
         self.fixes: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []  # epoch, llh, stats, applied
@@ -84,7 +84,7 @@ class FederatedRun:
         (estimators.shearer.health.run_checked: a pass that loses track runs again from its start with fewer
         fixes, then without the magnetometer); returns the fixes' detector statistics (F, 3) (NaN for a fix not
         tested or left out) and the kernel's output over epochs a..b (row 0 the last pass's last)."""
-        prep, m = self.prep, b - a + 1
+        prep, m, span = self.prep, b - a + 1, self.prep.span(a, b)
         fixes, var_floor = rail if rail is not None else (Fixes.empty(), np.zeros(0))
         self.state.det.counts[rf.COUNT_TESTED] = 0  # rail fixes tested in this pass (rail_kinematics.ARM_FIXES)
         start = snapshot(self.state)
@@ -98,7 +98,7 @@ class FederatedRun:
         for field, last in zip(out, self.last):
             field[0] = last[0]
         mech = prep.mech(a, b)
-        sensors = fk.Sensors(prep.steps, 0, mech.t, mech.phi_b, mech.dv_b, prep.odo[a:b + 1], prep.mode[a:b + 1],
+        sensors = fk.Sensors(prep.steps, 0, mech.t, mech.phi_b, mech.dv_b, prep.odo[span], prep.mode[span],
                              mag_b)
 
         def run(arg):
@@ -112,10 +112,10 @@ class FederatedRun:
             return results
 
         def lost(_results):
-            return filter_lost(prep.t_kf[a:b + 1], out.nav, out.sd, self.cfg)
+            return filter_lost(prep.t_kf[span], out.nav, out.sd, self.cfg)
 
         results, (keep, _) = run_checked(run, lost, lambda: restore(self.state, start), (everything, True),
-                                         fallbacks, prep.t_kf[a:b + 1], self.health_notes)
+                                         fallbacks, prep.t_kf[span], self.health_notes)
         out.flags[fixes.epoch[~keep] - a] |= FLAG_SKIPPED
         stats = np.full((fixes.epoch.size, 3), np.nan)
         applied = np.zeros(fixes.epoch.size, np.int8)
@@ -124,7 +124,7 @@ class FederatedRun:
         self.pass_fixes = (fixes.epoch, fixes.llh, stats, applied)
         disturbed = out.mag_flags[1:] & fk.MAG_DISTURBED > 0
         if disturbed.any() and not self.n_disturbed:
-            self.t_disturbed = prep.t_kf[a + 1 + np.argmax(disturbed)]
+            self.t_disturbed = prep.t_kf[span][1 + np.argmax(disturbed)]
         self.n_disturbed += int(disturbed.sum())
         self.n_invalid += int(np.sum(out.mag_flags[1:] & fk.SUB_INVALID > 0))
         if self.out is not None:

@@ -63,7 +63,7 @@ def _run_group(log: Log, cfg: Config, prep: Prepared, sink: Sink | None, group: 
             if "kf_cpoem_rts" in group:
                 out["kf_cpoem_rts"] = smoothed
             if "rts_offline" in group:
-                out["rts_offline"] = rts_offline(prep, cfg, store, smoothed.notes)
+                out["rts_offline"] = rts_offline(cfg, store, smoothed.notes)
         if "dr_compensated" in group:
             out["dr_compensated"] = dead_reckoning(log, cfg, prep, smoothed.cal[-1])
     elif group[0] in ("kf", "kf_cpoem"):
@@ -125,7 +125,7 @@ def _run_online(cfg: Config, pieces: Pieces, sink: Sink, group: tuple[str, ...])
             out[lead] = sink.done(lead, notes + health.notes())
         if store is not None:
             health = Assessment(cfg, "rts_offline", covariance=True)
-            for sol in store.smoothed(online.preparer.prep.t_kf, cfg):
+            for sol in store.smoothed(cfg):
                 health.check(sol)
                 sink.rows("rts_offline", sol)
             out["rts_offline"] = sink.done("rts_offline", notes + health.notes())

@@ -92,21 +92,32 @@ class TravelRuns:
 
 
 class Growing:
-    """A 1-D array appended at its end (its storage doubles as it fills)."""
+    """A 1-D array of numbered elements appended at its end (its storage doubles as it fills); `drop_before` lets the
+    elements before a given number go, so that it holds a window of what was appended."""
 
     def __init__(self, dtype):
         self._a = np.zeros(1024, dtype)
-        self.n = 0
+        self.first = 0  # the number of the first element held
+        self.n = 0  # the number of elements appended
 
     def extend(self, x: np.ndarray) -> None:
-        need = self.n + x.size
+        held, need = self.n - self.first, self.n - self.first + x.size
         if need > self._a.size:
             grown = np.zeros(max(need, 2 * self._a.size), self._a.dtype)
-            grown[:self.n] = self._a[:self.n]
+            grown[:held] = self._a[:held]
             self._a = grown
-        self._a[self.n:need] = x
-        self.n = need
+        self._a[held:need] = x
+        self.n += x.size
+
+    def drop_before(self, k: int) -> None:
+        """Let elements 0..k-1 go. The kept ones move to new storage: views of `data` taken before stay as they were."""
+        k = min(max(k, self.first), self.n)
+        kept = self.data[k - self.first:]
+        self._a = np.zeros(max(1024, 2 * kept.size), self._a.dtype)
+        self._a[:kept.size] = kept
+        self.first = k
 
     @property
     def data(self) -> np.ndarray:
-        return self._a[:self.n]
+        """Elements first..n-1."""
+        return self._a[:self.n - self.first]

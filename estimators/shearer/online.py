@@ -8,7 +8,7 @@ reaches them (a pass ends a second after its straight cut, once the travel has t
 estimators.shearer.positioning.KfPasses filters them. A pass's rows are the batch method's rows over it, bit for bit
 (tests/estimators/shearer/test_online.py), so a log fed in pieces gives what the whole log gives. What is held: the IMU
 rows of the pass under way, the odometer from the last known epoch, the push-ram readings since the last pass's points,
-and the epochs' times, distance and channel (17 bytes an epoch).
+and the epochs' times, distance and channel from the last pass's first: a run's memory does not grow with the log.
 
 Methods: ``kf_cpoem_rts`` and ``kf_rts`` (each pass smoothed at its end, the output; with a PassStore each pass kept for
 rts_offline), ``kf_cpoem`` and ``kf`` (the forward filter), ``dr`` and ``dr_compensated`` (the dead reckoning, the
@@ -94,11 +94,11 @@ class OnlinePositioning:
                 self.initial = self.passes.first_row(prep)
                 self.initial.flags |= FLAG_SMOOTHED if self.method.endswith("_rts") else 0
                 if self.store is not None:
-                    self.store.start(self.passes)
+                    self.store.start(self.passes, prep)
         out = []
         per_epoch = prep.steps * prep.n_samples
         for a, b in prep.segments[self.done:]:
-            t = prep.t_kf[a + 1:b + 1]
+            t = prep.t_kf[prep.span(a + 1, b)]
             if isinstance(self.passes, DeadReckoningPasses):
                 rows = self.passes.run(prep, a, b)
                 if self.initial is None:

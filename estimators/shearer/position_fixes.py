@@ -55,22 +55,22 @@ def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Poi
     gate = [np.inf] * len(j)
     advance = [np.zeros(3)] * len(j)
     if points is not None and points.u.size and prep.rams is not None:
-        u = prep.odo - prep.odo[0]
+        u = prep.odo - prep.odo0  # of the epochs held
         for first, last in prep.cuts:
             if first > b or last <= a:
                 continue
             lo, hi = max(first - 1, a), min(last, b)
-            epochs, marks = crossings(u, points.spacing or cfg.cpoem_spacing_m, lo, hi)
+            epochs, marks = crossings(u, points.spacing or cfg.cpoem_spacing_m, prep.held(lo), prep.held(hi))
             fj, fllh, fr, skipped, fadv = predict_fixes(points, u, prep.t_kf, epochs, marks, prep.rams,
                                                         cfg.advance_sd, cfg.path_sd)
-            j += list(fj)
+            j += list(fj + prep.first_epoch)
             llh += list(fllh)
             r += list(fr)
             gate += [cfg.fix_gate] * fj.size
             advance += list(fadv)
             if skipped.size:
                 notes.append(f"CPOEM: no push-ram stroke at u = {', '.join(f'{v:.1f}' for v in skipped)} m "
-                             f"(t {prep.t_kf[lo]:.0f}-{prep.t_kf[hi]:.0f} s): points skipped")
+                             f"(t {prep.t_kf[prep.held(lo)]:.0f}-{prep.t_kf[prep.held(hi)]:.0f} s): points skipped")
     if not j:
         return Fixes.empty()
     order = np.argsort(j, kind="stable")
@@ -86,7 +86,7 @@ def face_survey_points(log: Log, prep: Prepared) -> Points:
     if log.face_u.size == 0 or not prep.cuts:
         return Points.empty()
     first, last = prep.cuts[0]
-    sign = 1.0 if prep.odo[last] >= prep.odo[first - 1] else -1.0  # the odometer counts the first cut this way
+    sign = 1.0 if prep.odo[prep.held(last)] >= prep.odo[prep.held(first - 1)] else -1.0  # the odometer counts the first cut this way
     order = np.argsort(log.face_u, kind="stable")
     u = sign * log.face_u[order]
     line = fit_face_line(log.face_llh[order], log.face_u[order], log.face_sd[order])
@@ -94,7 +94,7 @@ def face_survey_points(log: Log, prep: Prepared) -> Points:
     sd_h, sd_v = log.face_sd[order, 0], log.face_sd[order, 1]
     cov = np.zeros((u.size, 3, 3))
     cov[:, [0, 1, 2], [0, 1, 2]] = line.gain[:, None] * np.column_stack([sd_h ** 2, sd_h ** 2, sd_v ** 2])
-    return Points(u, np.full(u.size, prep.t_kf[0]), line.llh(), cov, c_nb)
+    return Points(u, np.full(u.size, prep.t_kf[prep.held(0)]), line.llh(), cov, c_nb)
 
 
 def line_frames(direction: np.ndarray, x_n: np.ndarray) -> np.ndarray:
@@ -112,9 +112,9 @@ def line_frames(direction: np.ndarray, x_n: np.ndarray) -> np.ndarray:
 def segment_points(prep: Prepared, cfg: Config, a: int, b: int, nav: np.ndarray, cov_enu: np.ndarray) -> Points:
     """CPOEM points of the straight cut inside epochs [a, b] from navigation rows nav and position covariances
     cov_enu (3, 3) (epochs a..b), from the pass's rows alone."""
-    u = prep.odo[a:b + 1] - prep.odo[0]
+    u = prep.odo[prep.span(a, b)] - prep.odo0
     for first, last in prep.cuts:
         if first > a and last <= b:
-            return record(u, prep.t_kf[a:b + 1], body_llh(nav, np.asarray(cfg.lever_arm_m, float)), cov_enu,
+            return record(u, prep.t_kf[prep.span(a, b)], body_llh(nav, np.asarray(cfg.lever_arm_m, float)), cov_enu,
                           quat_to_mat(nav[:, es.QUAT]), cfg.cpoem_spacing_m, first - 1 - a, last - a)
     return Points.empty()

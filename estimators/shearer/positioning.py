@@ -156,8 +156,8 @@ def _run_segment(prep: Prepared, mech: Mech, a: int, b: int, fixes: Fixes, q_psd
     vel_innov = np.full((m, 3), np.nan)
     for j0 in range(0, m - 1, block):
         j1 = min(j0 + block, m - 1)
-        kf.run_filter(j0, j1, j0 + 1, prep.steps, mech.t, mech.phi_b, mech.dv_b, prep.odo[a:b + 1],
-                      prep.mode[a:b + 1], seg.fix_row, fixes.llh, fixes.r, fixes.gate, q_psd, params, nav, cal, p,
+        kf.run_filter(j0, j1, j0 + 1, prep.steps, mech.t, mech.phi_b, mech.dv_b, prep.odo[prep.span(a, b)],
+                      prep.mode[prep.span(a, b)], seg.fix_row, fixes.llh, fixes.r, fixes.gate, q_psd, params, nav, cal, p,
                       nominal, seg.nav, seg.cal, seg.x_post, p_post, p_pred, phi, seg.flags, seg.nis, vel_innov)
         r = j1 - j0
         seg.sd[j0 + 1:j1 + 1], seg.p_dp[j0 + 1:j1 + 1] = _sd(p_post[:r]), p_post[:r, es.DP, es.DP]
@@ -176,10 +176,10 @@ def _checked_segment(prep: Prepared, cfg: Config, a: int, b: int, fixes: Fixes, 
     mech = prep.mech(a, b)
     seg, kept = run_checked(lambda keep: _run_segment(prep, mech, a, b, fixes.take(keep), q_psd, params, *state,
                                                       stored, blocks),
-                            lambda s: filter_lost(prep.t_kf[a:b + 1], s.nav, s.sd, cfg)
+                            lambda s: filter_lost(prep.t_kf[prep.span(a, b)], s.nav, s.sd, cfg)
                             | innovations_inconsistent(s.nis, s.gate, s.fix_row, b - a + 1),
                             lambda: restore(state, saved),
-                            np.ones(fixes.epoch.size, bool), fix_fallbacks(fixes), prep.t_kf[a:b + 1], notes)
+                            np.ones(fixes.epoch.size, bool), fix_fallbacks(fixes), prep.t_kf[prep.span(a, b)], notes)
     seg.flags[fixes.epoch[~kept] - a] |= FLAG_SKIPPED
     return seg, fixes.take(kept)
 
@@ -237,7 +237,7 @@ class KfPasses:
             _apply_rows(nav, cal_s, x_s - seg.x_post)
             out = out._replace(nav_s=nav, sd_s=sd_s)
         if self.keep is not None:
-            self.keep.keep(a, seg)
+            self.keep.keep(a, seg, prep.t_kf[prep.span(a + 1, b)])
         if self.cpoem:
             self.points = segment_points(prep, cfg, a, b, nav, p_dp)
         return out
@@ -245,7 +245,7 @@ class KfPasses:
     def first_row(self, prep: Prepared) -> Solution:
         """Epoch 0's row as run_kf gives it, before any pass has run: the start state and covariance, no calibration
         (smoothed methods add FLAG_SMOOTHED)."""
-        return make_solution(prep.t_kf[:1], self.cfg, self.nav[None], _sd(self.p)[None], np.zeros(1, np.int32),
+        return make_solution(prep.t_kf[prep.span(0, 0)], self.cfg, self.nav[None], _sd(self.p)[None], np.zeros(1, np.int32),
                              np.zeros((1, es.N_CAL)), [])
 
     def finish(self, prep: Prepared) -> list[str]:
@@ -253,10 +253,9 @@ class KfPasses:
         cfg, notes = self.cfg, self.notes
         if self.n_gated:
             notes.append(f"{self.n_gated} of {self.n_fixes} position fixes rejected by the innovation gate")
-        missing = np.flatnonzero(prep.mode[1:] < 0) + 1
-        if missing.size:
-            notes.append(f"odometer: no data over {missing.size} filter steps ({missing.size / cfg.filter_rate_hz:.1f} "
-                         f"s, first at t = {prep.t_kf[missing[0]]:.1f} s): velocity updates skipped")
+        if prep.odo_gaps:
+            notes.append(f"odometer: no data over {prep.odo_gaps} filter steps ({prep.odo_gaps / cfg.filter_rate_hz:.1f} "
+                         f"s, first at t = {prep.t_first_gap:.1f} s): velocity updates skipped")
         return notes
 
 
@@ -264,12 +263,11 @@ def run_kf(log: Log, cfg: Config, prep: Prepared, cpoem: bool, smooth: bool, sto
            ) -> tuple[Solution, Solution | None]:
     """One forward run (KfPasses over the log's passes); with `smooth`, the online RTS at each pass end (its output
     and CPOEM points); with `store`, each pass kept for rts_offline."""
-    n = prep.t_kf.size - 1
-    fwd = _Forward(n)
+    fwd = _Forward(prep.n_kf)
     passes = KfPasses(log, cfg, prep, cpoem, smooth, store)
     fwd.nav[0], fwd.sd[0] = passes.nav, _sd(passes.p)
     if store is not None:
-        store.start(passes)
+        store.start(passes, prep)
     smooth_nav = fwd.nav.copy() if smooth else None
     smooth_sd = fwd.sd.copy() if smooth else None
     for a, b in prep.segments:
@@ -298,14 +296,15 @@ class PassStore:
         self.matrices: dict[int, StoredInterval] = {}  # each kept pass's, by its first epoch a
         self.first: dict[str, np.ndarray] | None = None  # epoch 0's forward row
 
-    def start(self, passes: KfPasses) -> None:
+    def start(self, passes: KfPasses, prep: Prepared) -> None:
         """Epoch 0's forward row: the start state and its sigmas, no calibration, no flag."""
-        self.first = {"nav": passes.nav[None].copy(), "cal": np.zeros((1, es.N_CAL)), "sd": _sd(passes.p)[None],
-                      "flags": np.zeros(1, np.int32)}
+        self.first = {"t": prep.t_kf[prep.span(0, 0)].copy(), "nav": passes.nav[None].copy(),
+                      "cal": np.zeros((1, es.N_CAL)), "sd": _sd(passes.p)[None], "flags": np.zeros(1, np.int32)}
 
-    def keep(self, a: int, seg: _Segment) -> None:
-        self._save(a, "forward", {"x_post": seg.x_post, "nav": seg.nav[1:], "cal": seg.cal[1:], "sd": seg.sd[1:],
-                                  "flags": seg.flags[1:]})
+    def keep(self, a: int, seg: _Segment, t: np.ndarray) -> None:
+        """Pass a's segment, epochs a + 1.. at times t."""
+        self._save(a, "forward", {"x_post": seg.x_post, "t": t, "nav": seg.nav[1:], "cal": seg.cal[1:],
+                                  "sd": seg.sd[1:], "flags": seg.flags[1:]})
         seg.stored.close()  # its files stay; a long run keeps many
         self.matrices[a] = seg.stored
         self.saved.append((a, a + seg.x_post.shape[0] - 1))
@@ -325,7 +324,7 @@ class PassStore:
     def _rows(self, a: int, kind: str = "forward") -> dict[str, np.ndarray]:
         return self._load(a, ROW_KEYS, kind)
 
-    def smoothed(self, t_kf: np.ndarray, cfg: Config) -> Iterator[Solution]:
+    def smoothed(self, cfg: Config) -> Iterator[Solution]:
         """rts_offline's rows (001 eqs. 29-31: one backward pass over the whole forward run, pass by pass from the
         end), a pass at a time in time order, epoch 0's row with the first.
 
@@ -333,7 +332,7 @@ class PassStore:
         value at a pass's last epoch is the one the later pass's smoother computed; the run's last epoch keeps its
         forward value. Each pass's smoothed rows go to a file of their own on the way back."""
         if not self.saved:  # no pass: the start
-            yield make_solution(t_kf[:1], cfg, self.first["nav"], self.first["sd"], self.first["flags"] | FLAG_SMOOTHED,
+            yield make_solution(self.first["t"], cfg, self.first["nav"], self.first["sd"], self.first["flags"] | FLAG_SMOOTHED,
                                 self.first["cal"], [])
             return
         last_update = {}
@@ -353,18 +352,18 @@ class PassStore:
             end = self._rows(self.saved[i + 1][0], "smoothed") if i + 1 < len(self.saved) else self._rows(a)
             rows = {k: np.concatenate([v if i == 0 else v[1:], end[k][:1] if i + 1 < len(self.saved) else end[k][-1:]])
                     for k, v in rows.items()}
-            yield make_solution(t_kf[a if i == 0 else a + 1:b + 1], cfg, rows["nav"], rows["sd"],
+            yield make_solution(rows["t"], cfg, rows["nav"], rows["sd"],
                                 rows["flags"] | FLAG_SMOOTHED, rows["cal"], [])
 
 
-ROW_KEYS = ("nav", "cal", "sd", "flags")
+ROW_KEYS = ("t", "nav", "cal", "sd", "flags")
 """The forward rows PassStore keeps of each pass."""
 
 
-def rts_offline(prep: Prepared, cfg: Config, store: PassStore, notes: list[str]) -> Solution:
+def rts_offline(cfg: Config, store: PassStore, notes: list[str]) -> Solution:
     """The offline smoother (PassStore.smoothed) over a whole forward run kept in `store` (`notes`: the forward
     run's)."""
-    sol = join_rows(list(store.smoothed(prep.t_kf, cfg)))
+    sol = join_rows(list(store.smoothed(cfg)))
     sol.notes = list(notes)
     return sol
 

@@ -106,7 +106,12 @@ class Mech:
 @dataclass
 class Prepared:
     """The log resampled for the filters: filter epochs, odometer, cuts, segments, start state, and the IMU
-    increments of any epochs on demand (`mech`, `increments`)."""
+    increments of any epochs on demand (`mech`, `increments`).
+
+    Epochs are numbered from the log's start (cuts, segments, fixes). t_kf, odo and mode hold epochs first_epoch..n_kf:
+    an online run lets the epochs before the last pass go (Preparer.forget_before), a whole log holds them all
+    (first_epoch 0). Read epochs a..b as t_kf[prep.span(a, b)], and epochs by number through `held`. What the
+    whole run says of them is kept as it comes: odo0, odo_min, odo_max and the odometer's gaps."""
 
     imu: ImuRows
     mat_bs: np.ndarray
@@ -123,11 +128,32 @@ class Prepared:
     nav0: np.ndarray
     cal0: np.ndarray
     notes: list[str]
+    first_epoch: int = 0
+    """The epoch of t_kf[0], odo[0] and mode[0]."""
+    odo0: float = np.nan
+    """The odometer's distance at epoch 0: the face coordinate u of an epoch is odo - odo0."""
+    odo_min: float = np.nan
+    odo_max: float = np.nan
+    """The odometer's extremes over the epochs known."""
+    odo_gaps: int = 0
+    """Epochs after the start without odometer data (mode < 0)."""
+    t_first_gap: float = np.nan
 
     @property
     def n_kf(self) -> int:
         """The last filter epoch (epochs 0..n_kf)."""
-        return self.t_kf.size - 1
+        return self.first_epoch + self.t_kf.size - 1
+
+    def held(self, epochs: int | np.ndarray) -> int | np.ndarray:
+        """Where epochs (a number or an array of them) are in t_kf, odo and mode; ValueError for one let go."""
+        if np.size(epochs) and np.min(epochs) < self.first_epoch:
+            raise ValueError(f"filter epoch {np.min(epochs)} was let go (Preparer.forget_before); epochs from "
+                             f"{self.first_epoch} are held")
+        return epochs - self.first_epoch
+
+    def span(self, a: int, b: int) -> slice:
+        """The slice of t_kf, odo and mode holding epochs a..b."""
+        return slice(self.held(a), b + 1 - self.first_epoch)
 
     @property
     def mech_dt(self) -> float:
@@ -177,8 +203,8 @@ class Preparer:
     pass (a segment) once its straight cut has ended: the travel turned (a sump at the face end) and the pass's
     second of stand after it is known; the last pass ends with the log (`final`). Fed a whole log at once with
     final=True it is `prepare`. The odometer rows are kept from the last known epoch on, and `forget_before` lets an
-    online run drop the IMU and push-ram rows its next passes do not read, so that its memory does not grow with
-    the log (the epochs' times, distance and channel do: 17 bytes an epoch)."""
+    online run drop the epochs and push-ram rows its next passes do not read, so that its memory does not grow with
+    the log."""
 
     def __init__(self, cfg: Config, imu: ImuRows):
         self.cfg, self.imu = cfg, imu
@@ -228,16 +254,16 @@ class Preparer:
         n_imu = self.imu.size // per_epoch  # epochs the IMU has reached
         if n_imu > self._t_kf.n - 1:
             self._t_kf.extend(self.imu.times_at(np.arange(self._t_kf.n, n_imu + 1) * per_epoch - 1))
-        t_kf = self._t_kf.data
+        t_kf, first = self._t_kf.data, self._t_kf.first
         if final:
             n_known = n_imu
         elif log.odo_t.size:
-            n_known = int(np.searchsorted(t_kf, log.odo_t[-1] - cfg.stand_settle_s, side="right")) - 1
+            n_known = first + int(np.searchsorted(t_kf, log.odo_t[-1] - cfg.stand_settle_s, side="right")) - 1
         else:
             n_known = -1
         if n_known > self._odo.n - 1 and log.odo_t.size and (final or not np.isnan(self._odo_period)):
-            self._odometer(t_kf[max(self._odo.n - 1, 0):n_known + 1], final)
-        prep.t_kf, prep.odo, prep.mode = t_kf[:self._odo.n], self._odo.data, self._mode.data
+            self._odometer(t_kf[max(self._odo.n - 1, 0) - first:n_known + 1 - first], final)
+        self._hold()
         if prep.t_kf.size == 0:
             return prep
         if not self.started and not self._initial(final):
@@ -245,7 +271,8 @@ class Preparer:
         passes = len(prep.segments)
         self._segments(final)
         n_kf = prep.n_kf
-        epochs = np.searchsorted(prep.t_kf, log.survey_t[1:])
+        # A face end surveyed before the epochs held maps to the first held: no later pass has it.
+        epochs = prep.first_epoch + np.searchsorted(prep.t_kf, log.survey_t[1:])
         prep.survey_epochs = np.minimum(epochs, n_kf) if final else epochs
         # The push-ram log is read by the passes just found (their fixes): made when there are some.
         if log.ram_t.size and len(cfg.support_u_m) >= 2 and len(prep.segments) > passes:
@@ -278,19 +305,33 @@ class Preparer:
         self._t_kf.extend(self.prep.increments(0, 1)[0][:1])
         return True
 
+    def _hold(self) -> None:
+        """The Prepared's epochs: those known, from the first held."""
+        prep = self.prep
+        prep.first_epoch = self._odo.first
+        prep.t_kf, prep.odo, prep.mode = self._t_kf.data[:self._odo.n - self._odo.first], self._odo.data, self._mode.data
+
     def _odometer(self, t_kf: np.ndarray, final: bool) -> None:
         """Distance and channel of the epochs t_kf (the first already known, unless it is epoch 0), then the kept
         odometer rows cut to those from the last at or before the last known epoch."""
-        log = self.log
+        log, prep = self.log, self.prep
         dist, mode = odometer_at(log.odo_t, log.odo_distance, log.odo_direction, self._prev_distance,
                                   self._active_before, t_kf, self.cfg.stand_settle_s, self._odo_period,
                                   self._odo_first, float(log.odo_t[-1]))
         first = self._odo.n == 0
+        if first:
+            prep.odo0 = prep.odo_min = prep.odo_max = float(dist[0])
         j0 = max(self._odo.n, 1)
         self._odo.extend(dist if first else dist[1:])
         self._mode.extend(np.concatenate([[MODE_STANDING], mode]) if first else mode)
+        prep.odo_min, prep.odo_max = min(prep.odo_min, float(dist.min())), max(prep.odo_max, float(dist.max()))
+        gaps = np.flatnonzero(mode < 0)
+        if gaps.size and not prep.odo_gaps:
+            prep.t_first_gap = float(t_kf[1 + gaps[0]])
+        prep.odo_gaps += gaps.size
+        k0 = j0 - self._odo.first
         u = self._odo.data
-        self._runs.add(j0, u[j0:] - u[j0 - 1:-1], self._mode.data[j0:])
+        self._runs.add(j0, u[k0:] - u[k0 - 1:-1], self._mode.data[k0:])
         if final:
             self._runs.finish()
         keep = max(int(np.searchsorted(log.odo_t, t_kf[-1], side="right")) - 1, 0)
@@ -323,13 +364,13 @@ class Preparer:
                 d = earth.lla_to_enu(*log.survey_llh[1], *log.survey_llh[0])
                 self._face_travel = float(np.hypot(d[0], d[1]))
             elif final:
-                self._face_travel = float(np.ptp(prep.odo))
+                self._face_travel = prep.odo_max - prep.odo_min
                 prep.notes.append("survey has no far face end: face length taken from the odometer")
             else:
                 return  # the runs wait for the face's length
         u = prep.odo
         for first, last in self._runs.closed[self._cuts_seen:]:
-            if abs(u[last] - u[first - 1]) > STRAIGHT_CUT_FRACTION * self._face_travel:
+            if abs(u[prep.held(last)] - u[prep.held(first - 1)]) > STRAIGHT_CUT_FRACTION * self._face_travel:
                 prep.cuts.append((first, last))
         self._cuts_seen = len(self._runs.closed)
         settle = round(self.cfg.filter_rate_hz)
@@ -346,12 +387,16 @@ class Preparer:
             prep.segments.append((start, n_kf))
 
     def forget_before(self, epoch: int) -> None:
-        """Drop the push-ram readings at or before epoch `epoch`: the CPOEM fixes of the passes from it on read
-        strokes since their last pass's points (an online run, after each pass)."""
+        """Drop the epochs before `epoch` and the push-ram readings at or before it: the passes from it on read their
+        own epochs and the travel run since it, and their CPOEM fixes strokes since their last pass's points (an
+        online run, after each pass, with the last pass's first epoch)."""
         log = self.log
-        keep = log.ram_t > self.prep.t_kf[epoch]
+        keep = log.ram_t > self.prep.t_kf[self.prep.held(epoch)]
         self.log = dataclasses.replace(log, ram_t=log.ram_t[keep], ram_support=log.ram_support[keep],
                                        ram_extension=log.ram_extension[keep], ram_valid=log.ram_valid[keep])
+        for epochs in (self._t_kf, self._odo, self._mode):
+            epochs.drop_before(epoch)
+        self._hold()
 
 
 def prepare(log: Log, cfg: Config) -> Prepared:

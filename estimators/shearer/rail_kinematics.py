@@ -95,22 +95,24 @@ class RailPasses:
         stats, out = self.filter.run_pass(a, b, (fixes, var_floor))
         cov = np.zeros((b - a + 1, 3, 3))
         cov[:, [0, 1, 2], [0, 1, 2]] = out.sd[:, es.DP] ** 2
-        self.points = next_pass_points(segment_points(prep, self.rail_cfg, a, b, out.nav, cov), prep.t_kf[a:b + 1],
-                                       out.flags, prep.t_kf[fixes.epoch[np.isfinite(stats[:, rf.DET_FSPRT])]])
+        self.points = next_pass_points(segment_points(prep, self.rail_cfg, a, b, out.nav, cov),
+                                       prep.t_kf[prep.span(a, b)], out.flags,
+                                       prep.t_kf[prep.held(fixes.epoch[np.isfinite(stats[:, rf.DET_FSPRT])])])
         self.surveyed = False
         return out
 
     def pass_solution(self, prep: Prepared, a: int, out: fk.EpochOutput) -> Solution:
         """The Solution rows of the pass just run over epochs (a, b] (its output `out`), with their fusion columns
         and the pass's rail fixes as detector rows: run_rail's rows over the pass."""
-        sol = self.filter.rows(prep.t_kf[a + 1:a + out.nav.shape[0]], fk.EpochOutput(*(f[1:] for f in out)), [])
+        sol = self.filter.rows(prep.t_kf[prep.span(a + 1, a + out.nav.shape[0] - 1)],
+                               fk.EpochOutput(*(f[1:] for f in out)), [])
         epoch, llh, stats, applied = self.filter.pass_fixes
         sol.detectors = detector_rows(prep, epoch, llh, stats, applied, out.flags[epoch - a])
         return sol
 
     def first_row(self, prep: Prepared) -> Solution:
         """Epoch 0's row as run_rail gives it (no rail fix at it)."""
-        sol = self.filter.rows(prep.t_kf[:1], self.filter.first_row(), [])
+        sol = self.filter.rows(prep.t_kf[prep.span(0, 0)], self.filter.first_row(), [])
         sol.detectors = detector_rows(prep, np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros((0, 3)),
                                       np.zeros(0, np.int8), np.zeros(0, np.int32))
         return sol
@@ -156,16 +158,17 @@ def _rail_fixes(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: P
     cannot see it; the along-face information it seemed to give was that registration noise, which walked the
     filter 13 cm along the face over the first cut at an along-face sigma of 0.44 m."""
     fixes = fixes_for(prep, cfg, log, a, b, points, notes)
-    u = prep.odo - prep.odo[0]
-    lo, hi = u.min() + cfg.end_zone_m, u.max() - cfg.end_zone_m
-    keep = ((u[fixes.epoch] >= lo) & (u[fixes.epoch] <= hi)) | ~np.isfinite(fixes.gate) | surveyed
+    u = prep.odo[prep.held(fixes.epoch)] - prep.odo0  # at each fix
+    lo, hi = prep.odo_min - prep.odo0 + cfg.end_zone_m, prep.odo_max - prep.odo0 - cfg.end_zone_m
+    keep = ((u >= lo) & (u <= hi)) | ~np.isfinite(fixes.gate) | surveyed
+    u = u[keep]
     fixes = fixes.take(keep)
     rail = np.isfinite(fixes.gate)
     var_floor = np.where(rail, (STROKE_SD_PER_NOISE * cfg.ram_noise_sd) ** 2, 0.0)
     if surveyed and points.u.size >= 2 and rail.any():
         # The direction comes from the survey itself: the fixes carry the ram strokes, and a faulty one bends them.
         order = np.argsort(points.u)
-        u_fix = u[fixes.epoch[rail]]
+        u_fix = u[rail]
         across = advance_direction(points)  # as cpoem.predict_fixes moves the points
         var_point = np.einsum("i,kij,j->k", across, points.cov[order], across)
         var_floor[rail] = np.maximum(var_floor[rail], np.interp(u_fix, points.u[order], var_point))
@@ -184,7 +187,7 @@ def detector_rows(prep: Prepared, epoch: np.ndarray, llh: np.ndarray, stats: np.
     """ESTIMATE_DETECTORS columns: per rail-model fix (at `epoch`) its time, predicted point, the three detector
     statistics and whether it was applied; with the isolation flag of its epoch (its filter `flags`)."""
     llh, stats = np.reshape(llh, (-1, 3)), np.reshape(stats, (-1, 3))
-    return {"t": prep.t_kf[epoch], "lat": llh[:, 0], "lon": llh[:, 1], "h": llh[:, 2],
+    return {"t": prep.t_kf[prep.held(epoch)], "lat": llh[:, 0], "lon": llh[:, 1], "h": llh[:, 2],
             **{f"{name}": stats[:, i] for i, name in enumerate(DETECTORS)},
             "applied": np.asarray(applied).astype(np.int32),
             "isolated": ((flags & FLAG_ISOLATED) > 0).astype(np.int32)}

@@ -10,6 +10,8 @@ from estimators.io.log import ImuBuffer, log_from_columns
 from estimators.shearer.config import PositioningError
 from estimators.shearer.methods import estimate
 from estimators.shearer.online import OnlinePositioning
+from estimators.shearer.positioning import run_kf
+from estimators.shearer.prepare import prepare
 from tests.conftest import simulated
 from twin.pipeline.estimate import positioning_config
 from twin.sensors.streams import imu_truth, sensor_streams
@@ -65,20 +67,55 @@ def test_a_log_fed_in_pieces_gives_the_batch_rows_pass_by_pass(default_streams, 
             assert online.imu.base > 0  # and their IMU rows went
 
 
-def test_a_straight_cut_is_the_passes_run_across_the_face(default_streams):
+def _log(streams):
+    return log_from_columns(*(streams[k] for k in STREAMS[:3]), pushram=streams["pushram"],
+                            face_survey=streams["face_survey"])
+
+
+def test_a_straight_cut_is_the_passes_run_across_the_face_and_the_epochs_before_the_last_pass_go(default_streams):
     """Each pass's cut rows run from one face end to the other: the odometer's travel over them is more than
-    STRAIGHT_CUT_FRACTION of the face."""
+    STRAIGHT_CUT_FRACTION of the face. The online run finds the whole log's cuts and passes holding the epochs from
+    its last pass's first on, and keeps what the whole run says of them (the odometer's start and extremes)."""
     scn, streams = default_streams
-    online = OnlinePositioning(positioning_config(scn))
+    cfg = positioning_config(scn)
+    online = OnlinePositioning(cfg)
     passes = online.feed(streams, final=True)
     face = scn.face.pan_count * scn.face.pan_length_m
     for p in passes:
         if p.cut is not None:
             llh = p.solution.llh[p.cut]
             assert llh.shape[0] > 10
-    lengths = [online.preparer.prep.odo[last] - online.preparer.prep.odo[first - 1]
-               for first, last in online.preparer.prep.cuts]
+    whole, held = prepare(_log(streams), cfg), online.preparer.prep
+    assert held.cuts == whole.cuts and held.segments == whole.segments and held.n_kf == whole.n_kf
+    assert held.first_epoch == whole.segments[-1][0] > 0
+    for key in ("t_kf", "odo", "mode"):
+        assert np.array_equal(getattr(held, key), getattr(whole, key)[held.first_epoch:]), key
+    assert (held.odo0, held.odo_min, held.odo_max) == (whole.odo[0], whole.odo.min(), whole.odo.max())
+    with pytest.raises(ValueError, match=f"filter epoch 0 was let go .* epochs from {held.first_epoch} are held"):
+        held.span(0, 1)
+    lengths = [whole.odo[last] - whole.odo[first - 1] for first, last in whole.cuts]
     assert all(abs(d) > 0.8 * (face - scn.shearer.length_m) for d in lengths)
+
+
+def test_the_odometer_gaps_are_counted_over_the_whole_run(default_streams):
+    """The odometer silent for 4 s in the first pass and 3 s in the last: fed in pieces, the online run (which lets
+    the first pass's epochs go) names the gaps as the batch run does, their filter steps and the first's time."""
+    scn, streams = default_streams
+    cfg = positioning_config(scn)
+    odo = streams["odometer"]
+    t_end = odo["t"][-1]
+    silent = ((odo["t"] > 300.0) & (odo["t"] < 304.0)) | ((odo["t"] > t_end - 200.0) & (odo["t"] < t_end - 197.0))
+    streams = {**streams, "odometer": {k: v[~silent] for k, v in odo.items()}}
+    whole = prepare(_log(streams), cfg)
+    batch = run_kf(_log(streams), cfg, whole, cpoem=False, smooth=False)[0].notes
+    online = OnlinePositioning(cfg, "kf")
+    pieces = list(_pieces(streams, [1000.0, 1800.0, t_end - 100.0]))
+    for k, piece in enumerate(pieces):
+        online.feed(piece, final=k == len(pieces) - 1)
+    gap = [n for n in batch if n.startswith("odometer: no data")]
+    assert len(gap) == 1 and int(gap[0].split()[4]) == np.sum(whole.mode[1:] < 0) >= 60
+    assert online.preparer.prep.first_epoch > np.flatnonzero(whole.mode < 0)[0] > 0  # the first gap was let go
+    assert [n for n in online.finish() if n.startswith("odometer: no data")] == gap
 
 
 def test_a_method_that_cannot_run_online_and_a_forgotten_row_are_refused(default_streams):
