@@ -15,7 +15,7 @@ import multiprocessing
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from estimators.workers import leave_signals_to_parent, worker_pool
+from estimators.workers import ForkedTasks, leave_signals_to_parent
 
 
 F8_1D, F8_2D = "f8[::1]", "f8[:, ::1]"
@@ -48,13 +48,15 @@ class Kernel:
 
 _compiled = None
 """In a worker: the flag it raises when numba compiles (multiprocessing.Value shared with the parent)."""
+_next = None
+"""In a worker: the index of the next kernel no process has taken up (multiprocessing.Value shared among them)."""
 
 
-def _worker_start(compiled) -> None:
+def _worker_start(compiled, next_kernel) -> None:
     from numba.core import event
 
-    global _compiled
-    _compiled = compiled
+    global _compiled, _next
+    _compiled, _next = compiled, next_kernel
     leave_signals_to_parent()
 
     class Raise(event.Listener):
@@ -67,42 +69,50 @@ def _worker_start(compiled) -> None:
     event.register("numba:compile", Raise())
 
 
-def _compile(kernel: Kernel) -> None:
-    try:
-        kernel.compile()
-    except Exception:  # noqa: BLE001 - the call itself compiles, and raises what is wrong, as without this
-        pass
+def _compile_in_turn(kernels: Sequence[Kernel]) -> None:
+    """Compile the kernels no other process has taken up, the next in order each time, until none is left."""
+    while True:
+        with _next.get_lock():
+            k = _next.value
+            _next.value += 1
+        if k >= len(kernels):
+            return
+        try:
+            kernels[k].compile()
+        except Exception:  # noqa: BLE001 - the call itself compiles, and raises what is wrong, as without this
+            pass
 
 
 class Precompiler:
     """Compiles `kernels` (the ones to call first, or the longest, first) on up to `processes` forked processes,
-    from construction on. `compiling` tells whether numba compiles there now; `wait` returns when every kernel is
-    in the cache; leaving the context (or `close`) stops what is still running."""
+    each taking up the next kernel in order, from construction on. `compiling` tells whether numba compiles there
+    now; `wait` returns when every kernel is in the cache; leaving the context (or `close`) stops what is still
+    running."""
 
     def __init__(self, kernels: Sequence[Kernel], processes: int):
-        self._compiled = multiprocessing.get_context("fork").Value("b", 0, lock=False)
-        self._pool = None
+        ctx = multiprocessing.get_context("fork")
+        self._compiled = ctx.Value("b", 0, lock=False)
+        self._tasks = None
         if kernels and processes > 0:
-            self._pool = worker_pool(min(processes, len(kernels)), _worker_start, (self._compiled,))
-            self._done = self._pool.map_async(_compile, kernels, chunksize=1)
-            self._pool.close()
+            n = min(processes, len(kernels))
+            self._tasks = ForkedTasks(_compile_in_turn, [tuple(kernels)] * n, n, _worker_start,
+                                      (self._compiled, ctx.Value("i", 0)))
 
     @property
     def compiling(self) -> bool:
         """numba compiles a kernel on the processes (it found one not in the cache) and they have not finished."""
-        return self._pool is not None and bool(self._compiled.value) and not self._done.ready()
+        return self._tasks is not None and bool(self._compiled.value) and not self._tasks.done
 
     def wait(self) -> None:
         """Until every kernel is compiled (or failed to: its call compiles it again and raises the error)."""
-        if self._pool is not None:
-            self._done.wait()
+        if self._tasks is not None:
+            self._tasks.results()
             self.close()
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.terminate()
-            self._pool.join()
-            self._pool = None
+        if self._tasks is not None:
+            self._tasks.stop()
+            self._tasks = None
 
     def __enter__(self) -> Precompiler:
         return self

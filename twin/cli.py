@@ -2,7 +2,8 @@
 
 Errors are one line on stderr ("longwall: error: ...") with exit code 2; no tracebacks for bad input, and a usage
 error is one line too. SIGTERM is handled as Ctrl-C: one line, exit 143 (130 for SIGINT); a run directory is
-written only when complete (twin.pipeline.rundir), so an interrupted run leaves none.
+written only when complete (twin.pipeline.rundir), so an interrupted run leaves none. A worker process the system
+killed (estimators.workers.WorkerLost: out of memory) is one line too, exit 1.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from estimators.io.csv_import import import_csv
 from estimators.io.csvio import export_csv
 from estimators.io.logformat import LogError
 from estimators.shearer.config import PositioningError
+from estimators.workers import WorkerLost
 from twin.config.scenario import ScenarioError
 from twin.face.export_target import DEFAULT_WIDTH_PX, ExportError, check_width
 from estimators.shearer.online import ONLINE_METHODS
@@ -221,6 +223,9 @@ def main(argv: list[str] | None = None) -> int:
             ServeError, ExportError) as err:
         print(f"longwall: error: {err}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except WorkerLost as err:  # not the input's fault: the system's
+        print(f"longwall: error: {err}; a run directory is only written when complete", file=sys.stderr)
+        return 1
     except KeyboardInterrupt as err:
         term = isinstance(err, Terminated)
         print(f"longwall: stopped by {'SIGTERM' if term else 'Ctrl-C (SIGINT)'}; a run directory is only "

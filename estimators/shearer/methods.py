@@ -26,7 +26,7 @@ from estimators.shearer.positioning import PassStore, rts_offline, run_kf
 from estimators.shearer.prepare import Prepared, prepare
 from estimators.shearer.rail_kinematics import run_rail
 from estimators.shearer.solution import Solution, join_rows
-from estimators.workers import worker_pool
+from estimators.workers import ForkedTasks
 
 METHODS = ("dr", "dr_compensated", "kf", "kf_rts", "kf_cpoem", "kf_cpoem_rts", "rts_offline", "ckf_mag", "afkf",
            "fkf_rail")
@@ -53,11 +53,13 @@ class Sink(Protocol):
     def done(self, name: str, notes: list[str]) -> Any: ...
 
 
-def _run_group(log: Log, cfg: Config, prep: Prepared, sink: Sink | None, group: tuple[str, ...]) -> dict:
-    """One task of TASKS, restricted to the requested methods of its group, each solution given to `sink`."""
+def _run_group(log: Log, cfg: Config, prep: Prepared, sink: Sink | None, group: tuple[str, ...], scratch: Path
+               ) -> dict:
+    """One task of TASKS, restricted to the requested methods of its group, each solution given to `sink`; what it
+    keeps on disk in a folder of its own under `scratch`."""
     out: dict[str, Solution] = {}
     if set(group) <= set(TASKS[0]):
-        with tempfile.TemporaryDirectory(prefix="longwall-rts-") as tmp:
+        with tempfile.TemporaryDirectory(dir=scratch) as tmp:
             store = PassStore(Path(tmp)) if "rts_offline" in group else None
             _, smoothed = run_kf(log, cfg, prep, cpoem=True, smooth=True, store=store)
             if "kf_cpoem_rts" in group:
@@ -109,15 +111,16 @@ def _online(cfg: Config, pieces: Pieces, sink: Sink | None, name: str, **kwargs
     return online, health, last
 
 
-def _run_online(cfg: Config, pieces: Pieces, sink: Sink, group: tuple[str, ...]) -> dict:
+def _run_online(cfg: Config, pieces: Pieces, sink: Sink, group: tuple[str, ...], scratch: Path) -> dict:
     """A group of TASKS run online over the log's pieces: each method's rows and notes those of the batch group's,
-    to `sink` a pass at a time. The smoother's group reads the log twice: kf_cpoem_rts keeps its passes on disk for
-    rts_offline (run backward over them, then written forward), and its final calibration drives dr_compensated."""
+    to `sink` a pass at a time. The smoother's group reads the log twice: kf_cpoem_rts keeps its passes on disk (in
+    a folder of its own under `scratch`) for rts_offline (run backward over them, then written forward), and its
+    final calibration drives dr_compensated."""
     if not set(group) <= set(TASKS[0]):
         online, health, _ = _online(cfg, pieces, sink, group[0])
         return {group[0]: sink.done(group[0], online.finish() + health.notes())}
     out, lead = {}, "kf_cpoem_rts"
-    with tempfile.TemporaryDirectory(prefix="longwall-rts-") as tmp:
+    with tempfile.TemporaryDirectory(dir=scratch) as tmp:
         store = PassStore(Path(tmp)) if "rts_offline" in group else None
         online, health, last = _online(cfg, pieces, sink if lead in group else None, lead, store=store)
         notes = online.finish()
@@ -138,29 +141,24 @@ def _run_online(cfg: Config, pieces: Pieces, sink: Sink, group: tuple[str, ...])
 Task = tuple[str, tuple[str, ...]]
 """("batch", a group of TASKS) or ("online", (a method of STREAMED,))."""
 
-_SHARED: tuple[Log | None, Config, Prepared | None, Sink | None, Pieces | None] | None = None
+_SHARED: tuple[Log | None, Config, Prepared | None, Sink | None, Pieces | None, Path] | None = None
 """What a forked worker inherits from its parent (never pickled): the log, configuration, prepared log (batch
-groups), sink and the log's pieces (online methods)."""
+groups), sink, the log's pieces (online methods) and the parent's scratch folder."""
 
 
 def _run_task(task: Task) -> dict:
-    log, cfg, prep, sink, pieces = _SHARED
+    log, cfg, prep, sink, pieces, scratch = _SHARED
     kind, group = task
-    return _run_group(log, cfg, prep, sink, group) if kind == "batch" else _run_online(cfg, pieces, sink, group)
+    if kind == "batch":
+        return _run_group(log, cfg, prep, sink, group, scratch)
+    return _run_online(cfg, pieces, sink, group, scratch)
 
 
 def _run_tasks(tasks: list[Task], workers: int) -> list[dict]:
     """The tasks on `workers` forked processes, which share the parent's log and prepared increments (copy on
     write) and its compiled kernels; results in the order of `tasks`. An exception in a task is raised here."""
-    pool = worker_pool(min(workers, len(tasks)))
-    try:
-        pending = [pool.apply_async(_run_task, (task,)) for task in tasks]
-        results = [p.get() for p in pending]
-        pool.close()
-        return results
-    finally:
-        pool.terminate()
-        pool.join()
+    with ForkedTasks(_run_task, tasks, workers) as running:
+        return running.results()
 
 
 def estimate(log: Log | None, cfg: Config, methods: tuple[str, ...] = METHODS, workers: int = 1,
@@ -184,13 +182,16 @@ def estimate(log: Log | None, cfg: Config, methods: tuple[str, ...] = METHODS, w
             online = sink is not None and pieces is not None and set(group) <= set(STREAMED)
             tasks.append(("online" if online else "batch", group))
     prep = prepare(log, cfg) if any(kind == "batch" for kind, _ in tasks) else None
-    _SHARED = (log, cfg, prep, sink, pieces)
-    try:
-        if workers > 1 and len(tasks) > 1 and "fork" in multiprocessing.get_all_start_methods():
-            results = _run_tasks(tasks, workers)
-        else:
-            results = [_run_task(task) for task in tasks]
-    finally:
-        _SHARED = None
+    # The tasks' files go under a folder of this process's: a worker stopped by a signal leaves its own, and this
+    # process removes them when it ends (stopped too: the CLI raises SIGTERM as an exception), after the workers.
+    with tempfile.TemporaryDirectory(prefix="longwall-rts-") as scratch:
+        _SHARED = (log, cfg, prep, sink, pieces, Path(scratch))
+        try:
+            if workers > 1 and len(tasks) > 1 and "fork" in multiprocessing.get_all_start_methods():
+                results = _run_tasks(tasks, workers)
+            else:
+                results = [_run_task(task) for task in tasks]
+        finally:
+            _SHARED = None
     out = {name: sol for res in results for name, sol in res.items()}
     return {m: out[m] for m in methods}

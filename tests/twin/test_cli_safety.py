@@ -90,6 +90,46 @@ def test_sigterm_stops_a_run_with_one_line_exit_143_and_no_directory(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["short.toml"]
 
 
+def test_sigterm_to_estimate_and_its_workers_at_once_leaves_no_scratch_files(short_default_run, tmp_path):
+    """`longwall estimate` stopped while the smoother keeps its passes on disk, SIGTERM sent to the command and its
+    worker processes at once (as `pkill` or a stopped job does): exit 143, and nothing of the estimators is left in
+    the temporary directory (a worker killed before its own cleanup leaves its folder to the command's)."""
+    import shutil
+
+    run, tmp = tmp_path / "run", tmp_path / "tmp"
+    shutil.copytree(short_default_run, run)
+    tmp.mkdir()
+    proc = subprocess.Popen([sys.executable, "-m", "twin.cli", "estimate", str(run)], stderr=subprocess.PIPE,
+                            text=True, env={**os.environ, "TMPDIR": str(tmp)}, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not list(tmp.rglob("forward_*")) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert proc.poll() is None, proc.stderr.read()
+    os.killpg(proc.pid, signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == EXIT_SIGTERM, err
+    assert list(tmp.glob("longwall-rts-*")) == []
+
+
+def test_a_worker_the_system_killed_is_one_line_exit_1(short_default_run, tmp_path, monkeypatch, capsys):
+    import shutil
+
+    import twin.pipeline.estimate as estimate_module
+    from estimators.workers import WorkerLost
+
+    run = tmp_path / "run"
+    shutil.copytree(short_default_run, run)
+
+    def killed(run_dir, scn, **settings):
+        raise WorkerLost("a worker process (task 1 of 4) ended without its result (SIGKILL: the system may have run "
+                         "out of memory)")
+
+    monkeypatch.setattr(estimate_module, "run_estimators", killed)
+    assert main(["estimate", str(run)]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("longwall: error: a worker process (task 1 of 4)"), err
+
+
 def _tree(path):
     """Every file under `path` (relative path -> bytes)."""
     return {str(p.relative_to(path)): p.read_bytes() for p in sorted(path.rglob("*")) if p.is_file()}
