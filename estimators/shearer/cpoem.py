@@ -49,11 +49,11 @@ class Points:
     llh: np.ndarray  # (P, 3) body-point latitude, longitude, height
     cov: np.ndarray  # (P, 3, 3) ENU covariance of the point [m^2]
     c_nb: np.ndarray  # (P, 3, 3) attitude C_b^n at the point (body z: the normal of the floor under it)
-    spacing: float = 0.0  # the step of u, whose multiples the points sit at [m]; 0: Config.cpoem_spacing_m
+    spacing: float  # the step of u, whose multiples the points sit at and a pass's crossings are found at [m]
 
     @classmethod
     def empty(cls) -> Points:
-        return cls(np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3, 3)))
+        return cls(np.zeros(0), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3, 3)), np.zeros((0, 3, 3)), np.nan)
 
     def take(self, keep: np.ndarray) -> Points:
         """The points selected by `keep` (a mask or indices)."""
@@ -61,7 +61,7 @@ class Points:
 
 
 def at_spacing(points: Points, spacing: float | None = None) -> Points:
-    """The points at the face coordinates that are multiples of `spacing` (None: the points' median step) within
+    """The points at the face coordinates that are multiples of `spacing` (None: their own, Points.spacing) within
     their span, each interpolated linearly in u between its two neighbours (position, time and covariance; the
     nearer one's attitude), as CPOEM points of that spacing (Points.spacing). A line surveyed on a regular grid (the
     face survey, a point per chute) read at its own step gives its own points; read at another step, the chords of a
@@ -71,7 +71,7 @@ def at_spacing(points: Points, spacing: float | None = None) -> Points:
     if points.u.size < 2:
         return points
     p = points.take(np.argsort(points.u, kind="stable"))
-    spacing = float(np.median(np.diff(p.u))) if spacing is None else spacing
+    spacing = p.spacing if spacing is None else spacing
     u = np.arange(np.ceil(p.u[0] / spacing), np.floor(p.u[-1] / spacing) + 1) * spacing
     k = np.clip(np.searchsorted(p.u, u, side="right") - 1, 0, p.u.size - 2)
     w = (u - p.u[k]) / (p.u[k + 1] - p.u[k])
@@ -112,7 +112,7 @@ def record(u: np.ndarray, t: np.ndarray, llh: np.ndarray, cov_enu: np.ndarray, c
     du = u[j] - u[j - 1]
     w = np.where(np.abs(du) > 0, (marks - u[j - 1]) / np.where(du == 0, 1, du), 1.0)[:, None]
     return Points(marks, t[j - 1] + w[:, 0] * (t[j] - t[j - 1]), llh[j - 1] + w * (llh[j] - llh[j - 1]),
-                  cov_enu[j], c_nb[j])
+                  cov_enu[j], c_nb[j], spacing)
 
 
 ALONG_FACE_SD = 1e3

@@ -60,7 +60,7 @@ def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Poi
             if first > b or last <= a:
                 continue
             lo, hi = max(first - 1, a), min(last, b)
-            epochs, marks = crossings(u, points.spacing or cfg.cpoem_spacing_m, prep.held(lo), prep.held(hi))
+            epochs, marks = crossings(u, points.spacing, prep.held(lo), prep.held(hi))
             fj, fllh, fr, skipped, fadv = predict_fixes(points, u, prep.t_kf, epochs, marks, prep.rams,
                                                         cfg.advance_sd, cfg.path_sd)
             j += list(fj + prep.first_epoch)
@@ -77,8 +77,9 @@ def fixes_for(prep: Prepared, cfg: Config, log: Log, a: int, b: int, points: Poi
     return Fixes(np.array(j, np.int64), np.array(llh), np.array(r), np.array(gate), np.array(advance)).take(order)
 
 
-def face_survey_points(log: Log, prep: Prepared) -> Points:
-    """The installed face line (FACE_SURVEY) as CPOEM points of the first cut, smoothed by a local quadratic fit
+def face_survey_points(log: Log, prep: Prepared, spacing: float | None = None) -> Points:
+    """The installed face line (FACE_SURVEY) as CPOEM points of the first cut at the survey's step (`spacing`; None:
+    the median step of its face coordinates), smoothed by a local quadratic fit
     along the face (estimators.shearer.face_line: the survey's independent point errors averaged over a window its
     noise and the line's undulation choose, with tricube weights), with the fit's covariance, and the line's own
     frame at each point (`line_frames`: y along the fitted line, x level and square to it), in which a fix's
@@ -94,7 +95,9 @@ def face_survey_points(log: Log, prep: Prepared) -> Points:
     sd_h, sd_v = log.face_sd[order, 0], log.face_sd[order, 1]
     cov = np.zeros((u.size, 3, 3))
     cov[:, [0, 1, 2], [0, 1, 2]] = line.gain[:, None] * np.column_stack([sd_h ** 2, sd_h ** 2, sd_v ** 2])
-    return Points(u, np.full(u.size, prep.t_kf[prep.held(0)]), line.llh(), cov, c_nb)
+    if spacing is None:  # the survey's own step (one point has none, and gives no crossing)
+        spacing = float(np.median(np.diff(log.face_u[order]))) if u.size >= 2 else np.nan
+    return Points(u, np.full(u.size, prep.t_kf[prep.held(0)]), line.llh(), cov, c_nb, spacing)
 
 
 def line_frames(direction: np.ndarray, x_n: np.ndarray) -> np.ndarray:

@@ -88,7 +88,7 @@ class RailPasses:
                                             advance_sd=cfg.rail_advance_sd or cfg.advance_sd)
         self.notes = list(prep.notes)
         self.filter = FederatedRun(log, cfg, prep, True, det_params=det_params, whole=whole)
-        self.points, self.surveyed = face_survey_points(log, prep), True
+        self.points, self.surveyed = face_survey_points(log, prep, self.rail_cfg.cpoem_spacing_m), True
 
     def run(self, prep: Prepared, log: Log, a: int, b: int) -> fk.EpochOutput:
         fixes, var_floor = _rail_fixes(prep, self.rail_cfg, log, a, b, self.points, self.surveyed, self.notes)

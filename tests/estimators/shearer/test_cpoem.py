@@ -111,7 +111,7 @@ def _floor_points(dip: float, roll_sd: float, n: int = 60) -> tuple[Points, np.n
     turn = np.column_stack([np.zeros(n), np.random.default_rng(5).normal(0.0, roll_sd, n), np.where(u < 15, 0.1, 0.0)])
     c_nb = c_plane @ quat_to_mat(rotvec_to_quat(turn))
     llh = np.column_stack(earth.enu_to_lla(enu, *ORIGIN))
-    return Points(u, np.zeros(n), llh, np.zeros((n, 3, 3)), c_nb), normal
+    return Points(u, np.zeros(n), llh, np.zeros((n, 3, 3)), c_nb, 1.0), normal
 
 
 def _slope_tolerance(dip: float, n: int = 60) -> float:
@@ -170,7 +170,7 @@ def test_points_at_another_spacing_are_interpolated_along_the_line():
     llh = np.column_stack([1e-7 * u, 2e-7 * u, 0.01 * u ** 2])
     frames = np.repeat(np.eye(3)[None], u.size, axis=0) * np.arange(1, u.size + 1)[:, None, None]
     cov = np.repeat(np.eye(3)[None], u.size, axis=0) * (1 - u)[:, None, None]
-    pts = at_spacing(Points(u, 100.0 - u, llh, cov, frames), 2.0)
+    pts = at_spacing(Points(u, 100.0 - u, llh, cov, frames, 1.75), 2.0)
     assert np.array_equal(pts.u, np.arange(-16, 1) * 2.0)
     assert np.allclose(pts.llh[:, :2], np.column_stack([1e-7 * pts.u, 2e-7 * pts.u]), rtol=0, atol=1e-18)
     at_2 = np.flatnonzero(pts.u == -2.0)[0]  # between -3.5 and -1.75
@@ -179,5 +179,5 @@ def test_points_at_another_spacing_are_interpolated_along_the_line():
     nearest = np.argmin(np.abs(u[None, :] - pts.u[:, None]), axis=1)
     assert np.array_equal(pts.c_nb, frames[nearest])
     assert pts.spacing == 2.0
-    own = at_spacing(Points(u, 100.0 - u, llh, cov, frames))  # at the survey's own step: its own points
+    own = at_spacing(Points(u, 100.0 - u, llh, cov, frames, 1.75))  # at the survey's own step: its own points
     assert own.spacing == 1.75 and np.array_equal(own.llh, llh[::-1]) and np.array_equal(own.c_nb, frames[::-1])

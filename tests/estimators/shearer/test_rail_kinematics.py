@@ -226,7 +226,7 @@ def test_the_next_pass_takes_no_fix_from_points_recorded_while_settling_or_isola
     flags[(t >= 50.0) & (t < 70.0)] = FLAG_ISOLATED
     t_pts = np.arange(2.5, 100.0, 5.0)
     n = t_pts.size
-    points = Points(t_pts * 0.1, t_pts, np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3)))
+    points = Points(t_pts * 0.1, t_pts, np.zeros((n, 3)), np.zeros((n, 3, 3)), np.zeros((n, 3, 3)), 0.5)
     t_tested = np.arange(5.0, 100.0, 10.0)
     kept = rk.next_pass_points(points, t, flags, t_tested)
     assert np.all(kept.t >= t_tested[rk.ARM_FIXES])
@@ -243,7 +243,7 @@ def test_a_rail_fix_is_floored_at_its_strokes_own_spread(face):
     measures anew), a face-survey fix's also at least its smoothed point's; a surveyed face end has none."""
     _, _, log, cfg, prep = face
     cfg = dataclasses.replace(cfg, end_zone_m=0.0, cpoem_spacing_m=cfg.chute_length_m, ram_noise_sd=0.02)
-    points = face_survey_points(log, prep)
+    points = face_survey_points(log, prep, cfg.cpoem_spacing_m)
     a, b = prep.segments[0]
     earlier, floor = rk._rail_fixes(prep, cfg, log, a, b, points, False, [])
     rail = np.isfinite(earlier.gate)
@@ -298,7 +298,7 @@ def test_a_fix_from_a_point_says_nothing_along_the_face(face):
     (cpoem.ALONG_FACE_SD), its one loose axis along the face line."""
     _, _, log, cfg, prep = face
     cfg = dataclasses.replace(cfg, end_zone_m=0.0, cpoem_spacing_m=cfg.chute_length_m)  # as run_rail; 68 m face
-    points = face_survey_points(log, prep)
+    points = face_survey_points(log, prep, cfg.cpoem_spacing_m)
     a, b = prep.segments[0]
     along = points.c_nb[0][:, 1]
     for surveyed in (True, False):
