@@ -87,7 +87,8 @@ def face_survey_points(log: Log, prep: Prepared, spacing: float | None = None) -
     if log.face_u.size == 0 or not prep.cuts:
         return Points.empty()
     first, last = prep.cuts[0]
-    sign = 1.0 if prep.odo[prep.held(last)] >= prep.odo[prep.held(first - 1)] else -1.0  # the odometer counts the first cut this way
+    # The odometer counts the first cut this way:
+    sign = 1.0 if prep.odo[prep.held(last)] >= prep.odo[prep.held(first - 1)] else -1.0
     order = np.argsort(log.face_u, kind="stable")
     u = sign * log.face_u[order]
     line = fit_face_line(log.face_llh[order], log.face_u[order], log.face_sd[order])

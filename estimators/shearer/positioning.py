@@ -154,11 +154,12 @@ def _run_segment(prep: Prepared, mech: Mech, a: int, b: int, fixes: Fixes, q_psd
         stored.restart()
         stored.append(p[None], p[None], np.eye(n)[None])
     vel_innov = np.full((m, 3), np.nan)
+    span = prep.span(a, b)
     for j0 in range(0, m - 1, block):
         j1 = min(j0 + block, m - 1)
-        kf.run_filter(j0, j1, j0 + 1, prep.steps, mech.t, mech.phi_b, mech.dv_b, prep.odo[prep.span(a, b)],
-                      prep.mode[prep.span(a, b)], seg.fix_row, fixes.llh, fixes.r, fixes.gate, q_psd, params, nav, cal, p,
-                      nominal, seg.nav, seg.cal, seg.x_post, p_post, p_pred, phi, seg.flags, seg.nis, vel_innov)
+        kf.run_filter(j0, j1, j0 + 1, prep.steps, mech.t, mech.phi_b, mech.dv_b, prep.odo[span], prep.mode[span],
+                      seg.fix_row, fixes.llh, fixes.r, fixes.gate, q_psd, params, nav, cal, p, nominal, seg.nav,
+                      seg.cal, seg.x_post, p_post, p_pred, phi, seg.flags, seg.nis, vel_innov)
         r = j1 - j0
         seg.sd[j0 + 1:j1 + 1], seg.p_dp[j0 + 1:j1 + 1] = _sd(p_post[:r]), p_post[:r, es.DP, es.DP]
         if smoothed:
@@ -245,8 +246,8 @@ class KfPasses:
     def first_row(self, prep: Prepared) -> Solution:
         """Epoch 0's row as run_kf gives it, before any pass has run: the start state and covariance, no calibration
         (smoothed methods add FLAG_SMOOTHED)."""
-        return make_solution(prep.t_kf[prep.span(0, 0)], self.cfg, self.nav[None], _sd(self.p)[None], np.zeros(1, np.int32),
-                             np.zeros((1, es.N_CAL)), [])
+        return make_solution(prep.t_kf[prep.span(0, 0)], self.cfg, self.nav[None], _sd(self.p)[None],
+                             np.zeros(1, np.int32), np.zeros((1, es.N_CAL)), [])
 
     def finish(self, prep: Prepared) -> list[str]:
         """The run's notes, with the fixes gated and the odometer's gaps."""
@@ -254,8 +255,9 @@ class KfPasses:
         if self.n_gated:
             notes.append(f"{self.n_gated} of {self.n_fixes} position fixes rejected by the innovation gate")
         if prep.odo_gaps:
-            notes.append(f"odometer: no data over {prep.odo_gaps} filter steps ({prep.odo_gaps / cfg.filter_rate_hz:.1f} "
-                         f"s, first at t = {prep.t_first_gap:.1f} s): velocity updates skipped")
+            gaps = prep.odo_gaps
+            notes.append(f"odometer: no data over {gaps} filter steps ({gaps / cfg.filter_rate_hz:.1f} s, first at "
+                         f"t = {prep.t_first_gap:.1f} s): velocity updates skipped")
         return notes
 
 

@@ -255,7 +255,8 @@ class Preparer:
         """The Prepared's epochs: those known, from the first held."""
         prep = self.prep
         prep.first_epoch = self._odo.first
-        prep.t_kf, prep.odo, prep.mode = self._t_kf.data[:self._odo.n - self._odo.first], self._odo.data, self._mode.data
+        known = self._odo.n - self._odo.first
+        prep.t_kf, prep.odo, prep.mode = self._t_kf.data[:known], self._odo.data, self._mode.data
 
     def _odometer(self, t_kf: np.ndarray, final: bool) -> None:
         """Distance and channel of the epochs t_kf (the first already known, unless it is epoch 0), then the kept
