@@ -80,11 +80,12 @@ class ForkedTasks:
             try:
                 ok, value = reader.recv()
             except EOFError:  # it ended without sending
-                process.join()
-                ok, value = False, WorkerLost(f"a worker process (task {k + 1} of {self._n}) ended without its "
-                                              f"result ({_exit_text(process)})")
+                ok, value = False, None
             reader.close()
             process.join()
+            if value is None and not ok:
+                value = WorkerLost(f"a worker process (task {k + 1} of {self._n}) ended without its result "
+                                   f"({_exit_text(process)})")
             if ok:
                 self._results[k] = value
             elif self._error is None:
