@@ -155,8 +155,9 @@ def _run_task(task: Task) -> dict:
 
 
 def _run_tasks(tasks: list[Task], workers: int) -> list[dict]:
-    """The tasks on `workers` forked processes, which share the parent's log and prepared increments (copy on
-    write) and its compiled kernels; results in the order of `tasks`. An exception in a task is raised here."""
+    """The tasks on forked processes, a process each and `workers` at once (estimators.workers.ForkedTasks), which
+    share the parent's log and prepared increments (copy on write) and its compiled kernels; results in the order of
+    `tasks`. An exception in a task is raised here."""
     with ForkedTasks(_run_task, tasks, workers) as running:
         return running.results()
 

@@ -174,13 +174,13 @@ def _checked_segment(prep: Prepared, cfg: Config, a: int, b: int, fixes: Fixes, 
     loses track runs again from its start with fewer fixes; the epochs of the fixes it left out are flagged
     FLAG_SKIPPED. Returns the segment kept and its fixes."""
     saved = snapshot(state)
-    mech = prep.mech(a, b)
+    mech, t = prep.mech(a, b), prep.t_kf[prep.span(a, b)]
     seg, kept = run_checked(lambda keep: _run_segment(prep, mech, a, b, fixes.take(keep), q_psd, params, *state,
                                                       stored, blocks),
-                            lambda s: filter_lost(prep.t_kf[prep.span(a, b)], s.nav, s.sd, cfg)
+                            lambda s: filter_lost(t, s.nav, s.sd, cfg)
                             | innovations_inconsistent(s.nis, s.gate, s.fix_row, b - a + 1),
                             lambda: restore(state, saved),
-                            np.ones(fixes.epoch.size, bool), fix_fallbacks(fixes), prep.t_kf[prep.span(a, b)], notes)
+                            np.ones(fixes.epoch.size, bool), fix_fallbacks(fixes), t, notes)
     seg.flags[fixes.epoch[~kept] - a] |= FLAG_SKIPPED
     return seg, fixes.take(kept)
 
@@ -334,8 +334,9 @@ class PassStore:
         value at a pass's last epoch is the one the later pass's smoother computed; the run's last epoch keeps its
         forward value. Each pass's smoothed rows go to a file of their own on the way back."""
         if not self.saved:  # no pass: the start
-            yield make_solution(self.first["t"], cfg, self.first["nav"], self.first["sd"], self.first["flags"] | FLAG_SMOOTHED,
-                                self.first["cal"], [])
+            first = self.first
+            yield make_solution(first["t"], cfg, first["nav"], first["sd"], first["flags"] | FLAG_SMOOTHED,
+                                first["cal"], [])
             return
         last_update = {}
         for a, b in self.saved:
